@@ -1,0 +1,180 @@
+#include "render.h"
+
+#include <glm/geometric.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+namespace hemibake::client {
+namespace {
+
+struct ScreenVertex {
+  double x, y, inv_z;
+  glm::dvec3 colour;
+};
+
+uint32_t crc32(const uint8_t* data, size_t n, uint32_t crc = 0xffffffffu) {
+  for (size_t i = 0; i < n; ++i) {
+    crc ^= data[i];
+    for (int k = 0; k < 8; ++k) crc = (crc >> 1) ^ (0xedb88320u & (0u - (crc & 1u)));
+  }
+  return crc;
+}
+
+void put_u32(std::vector<uint8_t>& out, uint32_t v) {
+  for (int s = 24; s >= 0; s -= 8) out.push_back(static_cast<uint8_t>(v >> s));
+}
+
+}  // namespace
+
+std::vector<uint8_t> render(const solver::Mesh& mesh, const Camera& cam, const RenderOptions& opt) {
+  const uint32_t w = opt.width, h = opt.height;
+  const glm::dvec3 fwd = glm::normalize(cam.target - cam.position);
+  const glm::dvec3 right = glm::normalize(glm::cross(fwd, cam.up));
+  const glm::dvec3 up = glm::cross(right, fwd);
+  const double focal = 0.5 * h / std::tan(0.5 * cam.fov_y_degrees * 3.14159265358979 / 180.0);
+  const double near = 1e-3;
+
+  std::vector<glm::dvec3> hdr(static_cast<size_t>(w) * h, glm::dvec3(0.0));
+  std::vector<double> zbuf(static_cast<size_t>(w) * h, 0.0);  // stores 1/z, larger is nearer
+  std::vector<uint8_t> edge(static_cast<size_t>(w) * h, 0);
+
+  auto to_screen = [&](const glm::dvec3& p, const glm::dvec3& c, ScreenVertex& out) {
+    const glm::dvec3 d = p - cam.position;
+    const double z = glm::dot(d, fwd);
+    if (z < near) return false;
+    out.x = 0.5 * w + focal * glm::dot(d, right) / z;
+    out.y = 0.5 * h - focal * glm::dot(d, up) / z;
+    out.inv_z = 1.0 / z;
+    out.colour = c;
+    return true;
+  };
+
+  auto draw_triangle = [&](const ScreenVertex& a, const ScreenVertex& b, const ScreenVertex& c) {
+    const double area = (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
+    if (std::abs(area) < 1e-12) return;
+    const int x0 = std::max(0, static_cast<int>(std::floor(std::min({a.x, b.x, c.x}))));
+    const int x1 = std::min(static_cast<int>(w) - 1, static_cast<int>(std::ceil(std::max({a.x, b.x, c.x}))));
+    const int y0 = std::max(0, static_cast<int>(std::floor(std::min({a.y, b.y, c.y}))));
+    const int y1 = std::min(static_cast<int>(h) - 1, static_cast<int>(std::ceil(std::max({a.y, b.y, c.y}))));
+    for (int y = y0; y <= y1; ++y) {
+      for (int x = x0; x <= x1; ++x) {
+        const double px = x + 0.5, py = y + 0.5;
+        const double w0 = ((b.x - px) * (c.y - py) - (b.y - py) * (c.x - px)) / area;
+        const double w1 = ((c.x - px) * (a.y - py) - (c.y - py) * (a.x - px)) / area;
+        const double w2 = 1.0 - w0 - w1;
+        if (w0 < -1e-9 || w1 < -1e-9 || w2 < -1e-9) continue;
+        const double iz = w0 * a.inv_z + w1 * b.inv_z + w2 * c.inv_z;
+        const size_t i = static_cast<size_t>(y) * w + x;
+        if (iz <= zbuf[i]) continue;
+        zbuf[i] = iz;
+        // Perspective-correct interpolation.
+        hdr[i] = (w0 * a.inv_z * a.colour + w1 * b.inv_z * b.colour + w2 * c.inv_z * c.colour) / iz;
+        edge[i] = 0;
+        if (opt.wireframe) {
+          // Distance to the element's outer edges is not known per triangle here; the fan's outer
+          // edge is b-c, so mark pixels close to it.
+          const double len = std::hypot(c.x - b.x, c.y - b.y);
+          if (len > 0 && std::abs(w0 * area) / len < 0.6) edge[i] = 1;
+        }
+      }
+    }
+  };
+
+  for (const auto& el : mesh.elements) {
+    // Fan from the element's centre over its boundary loop (which includes hanging vertices).
+    glm::dvec3 centre(0.0), centre_colour(0.0);
+    const uint32_t nb = el.boundary_end - el.boundary_begin;
+    for (uint32_t i = el.boundary_begin; i < el.boundary_end; ++i) {
+      centre += mesh.positions[mesh.boundary[i]];
+      centre_colour += mesh.radiosity[mesh.boundary[i]];
+    }
+    centre /= nb;
+    centre_colour /= nb;
+    ScreenVertex sc;
+    if (!to_screen(centre, opt.gouraud ? centre_colour : el.radiosity, sc)) continue;
+    for (uint32_t i = 0; i < nb; ++i) {
+      const uint32_t va = mesh.boundary[el.boundary_begin + i];
+      const uint32_t vb = mesh.boundary[el.boundary_begin + (i + 1) % nb];
+      ScreenVertex sa, sb;
+      if (!to_screen(mesh.positions[va], opt.gouraud ? mesh.radiosity[va] : el.radiosity, sa)) continue;
+      if (!to_screen(mesh.positions[vb], opt.gouraud ? mesh.radiosity[vb] : el.radiosity, sb)) continue;
+      draw_triangle(sc, sa, sb);
+    }
+  }
+
+  double exposure = opt.exposure;
+  if (exposure <= 0.0) {
+    std::vector<double> lum;
+    for (size_t i = 0; i < hdr.size(); ++i)
+      if (zbuf[i] > 0.0) lum.push_back((hdr[i].x + hdr[i].y + hdr[i].z) / 3.0);
+    if (!lum.empty()) {
+      const size_t k = lum.size() * 95 / 100;
+      std::nth_element(lum.begin(), lum.begin() + k, lum.end());
+      exposure = lum[k] > 0.0 ? 0.8 / lum[k] : 1.0;
+    } else {
+      exposure = 1.0;
+    }
+  }
+  std::vector<uint8_t> rgb(static_cast<size_t>(w) * h * 3);
+  for (size_t i = 0; i < hdr.size(); ++i) {
+    for (int c = 0; c < 3; ++c) {
+      double v = std::clamp(hdr[i][c] * exposure, 0.0, 1.0);
+      v = v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1.0 / 2.4) - 0.055;  // sRGB
+      rgb[i * 3 + c] = edge[i] ? 0 : static_cast<uint8_t>(std::lround(v * 255.0));
+    }
+  }
+  return rgb;
+}
+
+bool write_png(const std::string& path, const std::vector<uint8_t>& rgb, uint32_t w, uint32_t h) {
+  // Raw scanlines (filter byte 0) wrapped in stored (uncompressed) deflate blocks.
+  std::vector<uint8_t> raw;
+  raw.reserve((static_cast<size_t>(w) * 3 + 1) * h);
+  for (uint32_t y = 0; y < h; ++y) {
+    raw.push_back(0);
+    raw.insert(raw.end(), rgb.begin() + static_cast<size_t>(y) * w * 3, rgb.begin() + static_cast<size_t>(y + 1) * w * 3);
+  }
+  std::vector<uint8_t> z{0x78, 0x01};
+  uint32_t a = 1, b = 0;
+  for (uint8_t v : raw) {
+    a = (a + v) % 65521;
+    b = (b + a) % 65521;
+  }
+  for (size_t off = 0; off < raw.size() || off == 0; off += 65535) {
+    const size_t len = std::min<size_t>(65535, raw.size() - off);
+    z.push_back(off + len >= raw.size() ? 1 : 0);
+    z.push_back(static_cast<uint8_t>(len));
+    z.push_back(static_cast<uint8_t>(len >> 8));
+    z.push_back(static_cast<uint8_t>(~len));
+    z.push_back(static_cast<uint8_t>(~len >> 8));
+    z.insert(z.end(), raw.begin() + off, raw.begin() + off + len);
+    if (raw.empty()) break;
+  }
+  put_u32(z, (b << 16) | a);
+
+  std::vector<uint8_t> png{0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  auto chunk = [&](const char* type, const std::vector<uint8_t>& data) {
+    put_u32(png, static_cast<uint32_t>(data.size()));
+    const size_t start = png.size();
+    png.insert(png.end(), type, type + 4);
+    png.insert(png.end(), data.begin(), data.end());
+    put_u32(png, crc32(png.data() + start, png.size() - start) ^ 0xffffffffu);
+  };
+  std::vector<uint8_t> ihdr;
+  put_u32(ihdr, w);
+  put_u32(ihdr, h);
+  ihdr.insert(ihdr.end(), {8, 2, 0, 0, 0});
+  chunk("IHDR", ihdr);
+  chunk("IDAT", z);
+  chunk("IEND", {});
+  FILE* f = std::fopen(path.c_str(), "wb");
+  if (!f) return false;
+  const bool ok = std::fwrite(png.data(), 1, png.size(), f) == png.size();
+  return std::fclose(f) == 0 && ok;
+}
+
+}  // namespace hemibake::client

@@ -1,0 +1,38 @@
+// Solid-area scan conversion: the fractional pixel coverage of a polygon (the paper's Figure 4).
+#pragma once
+
+#include <glm/vec2.hpp>
+
+#include <span>
+#include <vector>
+
+namespace hemibake::solver {
+
+/// A window of pixels with unit size: pixel (col, row) spans [x0 + col, x0 + col + 1] x
+/// [y0 + row, y0 + row + 1]. Row 0 is the bottom row.
+struct PixelWindow {
+  int x0 = 0;      ///< x of the window's left edge, in pixels
+  int y0 = 0;      ///< y of the window's bottom edge, in pixels
+  int width = 0;   ///< columns
+  int height = 0;  ///< rows
+};
+
+/// Scratch space for scan_convert_area, reusable across calls so that hot loops allocate nothing.
+struct ScanScratch {
+  std::vector<double> carry;      ///< the paper's C array
+  std::vector<double> crossings;  ///< edge parameters where an edge crosses a pixel border
+};
+
+/// Writes into `area` (width * height values, row-major from the bottom row) the area of every
+/// pixel of `window` that lies inside `polygon`, in units of pixel area (0 to 1, exact to rounding).
+/// The polygon is a closed loop of at least three points in either orientation, convex or not,
+/// simple or not (areas of a self-overlapping loop add with the winding number's sign); it must lie
+/// inside the window. `area` must hold window.width * window.height values; they are overwritten.
+/// Implements the signed-edge trapezoids plus column carry of Figure 4.
+void scan_convert_area(std::span<const glm::dvec2> polygon, const PixelWindow& window,
+                       std::span<double> area, ScanScratch& scratch);
+
+/// The signed area of a closed polygon (positive for counter-clockwise loops).
+double signed_area(std::span<const glm::dvec2> polygon);
+
+}  // namespace hemibake::solver

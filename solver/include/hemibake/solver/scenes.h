@@ -1,0 +1,31 @@
+// Built-in scenes: the Cornell box and analytic test boxes.
+#pragma once
+
+#include "hemibake/solver/solver.h"
+
+#include <glm/vec3.hpp>
+
+namespace hemibake::solver {
+
+/// Material ids used by make_cornell_box().
+enum CornellMaterial : uint32_t { kCornellWhite = 0, kCornellRed = 1, kCornellGreen = 2, kCornellLight = 3 };
+
+/// The Cornell box from the Cornell University Program of Computer Graphics' published
+/// measurements (millimetres, RGB reduction of the measured spectra), open at the front (z = 0).
+/// The ceiling is cut into eight quads around the light so that nothing overlaps; the slightly
+/// twisted walls are split into two triangles each.
+Scene make_cornell_box();
+
+/// An axis-aligned closed box [0, size]^3 seen from inside, each wall a grid of `cells` x `cells`
+/// quads, every patch with the same reflectance and emission. With `block`, a smaller closed box
+/// (faces outward, same material) floats in the middle. Radiosity is E / (1 - rho) everywhere.
+Scene make_closed_box(double size, uint32_t cells, const glm::dvec3& reflectance,
+                      const glm::dvec3& emission, bool block);
+
+/// Appends a quad (counter-clockwise seen from the front) as one patch, or as two triangles when
+/// its corners are not coplanar.
+void add_quad(Scene& scene, const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c,
+              const glm::dvec3& d, const glm::dvec3& reflectance, const glm::dvec3& emission,
+              uint32_t material);
+
+}  // namespace hemibake::solver

@@ -1,0 +1,161 @@
+// Progressive refinement radiosity with adaptive substructuring, with form factors from the
+// anti-aliased hemicube ("Anti-aliased hemicubes for performance improvement in radiosity
+// solutions") or from the classical point-sampled hemicube.
+//
+// The library does no I/O: scenes come in as patches, results go out as a mesh with per-vertex
+// radiosity. Inputs are checked by validate(); the solver itself assumes valid input.
+#pragma once
+
+#include <glm/vec3.hpp>
+
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace hemibake::solver {
+
+inline constexpr uint32_t kNone = 0xffffffffu;
+
+/// A planar input polygon: a triangle or a convex quad, front side where the corners run
+/// counter-clockwise. The patch is the unit of shooting; it refines into elements (a quadtree).
+struct Patch {
+  std::array<glm::dvec3, 4> corners{};  ///< the first corner_count are used
+  uint32_t corner_count = 4;            ///< 3 or 4
+  glm::dvec3 reflectance{0.5};          ///< diffuse reflectance per RGB channel, in [0, 1)
+  glm::dvec3 emission{0.0};             ///< emitted radiosity per channel, >= 0
+  uint32_t material = 0;                ///< vertex radiosity is never averaged across materials
+};
+
+/// The input: a list of patches. Patches that share corners and a plane form one smooth surface.
+struct Scene {
+  std::vector<Patch> patches;
+};
+
+/// How form factors are computed.
+enum class Method : uint8_t {
+  kClassical,    ///< one element per pixel, sampled at the pixel centre, z-buffered (the baseline)
+  kAntiAliased,  ///< fractional pixel coverage with depth-ordered visible shares (the paper's)
+};
+
+/// Solver parameters; names follow the paper where it has them.
+struct Params {
+  Method method = Method::kAntiAliased;
+  uint32_t resolution = 100;    ///< hemicube top face is resolution x resolution pixels (even, 4..4096)
+  double feps = 1e-3;           ///< form-factor tolerance: split when F(shooter->element) * shooter's
+                                ///< share of emitted power exceeds it
+  double aeps = 1e-4;           ///< minimum element area, as a fraction of the scene's total area
+  double beps = 0.05;           ///< radiosity tolerance: split when a shot's radiosity differs across
+                                ///< an element's corners (or its hidden part) by more than beps times
+                                ///< the scene's mean emitted radiosity per unit area
+  double convergence = 1e-3;    ///< stop when unshot power < convergence * emitted power
+  uint64_t max_shots = 1'000'000;     ///< stop after this many shots
+  uint64_t max_elements = 2'000'000;  ///< no splits past this many leaf elements
+  uint32_t threads = 0;         ///< worker threads within a shot; 0 = hardware concurrency
+  double shooter_size = 0.5;    ///< a patch shoots from sub-areas no wider than this fraction of the
+                                ///< scene's diagonal (large shooters near receivers are not points)
+  bool reuse_visibility = true; ///< children take visibility from their parent's pixels; false
+                                ///< re-projects the whole scene after every split (for comparison)
+};
+
+/// Returns an empty string when the parameters are usable, else a message naming the bad one.
+std::string validate(const Params& params);
+
+/// Returns an empty string when the scene is usable, else a message naming the first bad patch
+/// and what is wrong with it (non-finite or degenerate corners, non-planar or non-convex quads,
+/// reflectance outside [0, 1), negative emission).
+std::string validate(const Scene& scene);
+
+/// Reported between shots.
+struct Progress {
+  uint64_t shots = 0;            ///< shots done (Southwell steps)
+  double unshot_fraction = 1.0;  ///< unshot power / emitted power
+  uint64_t elements = 0;         ///< leaf elements
+  double elapsed_seconds = 0.0;
+};
+using ProgressFn = std::function<void(const Progress&)>;
+
+/// Cancels a running solve from any thread; the solver checks it between shots.
+class CancelToken {
+ public:
+  void cancel() { cancelled_.store(true, std::memory_order_relaxed); }
+  bool cancelled() const { return cancelled_.load(std::memory_order_relaxed); }
+
+ private:
+  std::atomic<bool> cancelled_{false};
+};
+
+/// Counters and timings of a solve.
+struct Stats {
+  uint64_t shots = 0;            ///< patch shots (Southwell steps)
+  uint64_t hemicubes = 0;        ///< hemicubes placed (a patch shoots from one or more sub-areas)
+  uint64_t projections = 0;      ///< whole-scene projections onto a hemicube
+  uint64_t rounds = 0;           ///< repeated shots after splits (the paper's cancelled shots)
+  uint64_t splits = 0;           ///< elements split
+  uint64_t splits_form_factor = 0;  ///< ... of which for their form factor (FEPS)
+  uint64_t splits_visibility = 0;   ///< ... for partial visibility
+  uint64_t splits_gradient = 0;     ///< ... for a radiosity jump at a corner
+  uint64_t reused_children = 0;  ///< children whose form factor came from their parent's pixels
+  uint64_t elements = 0;         ///< leaf elements now
+  uint64_t patches = 0;          ///< input patches
+  uint64_t peak_fragments = 0;   ///< most pixel fragments held at once
+  double seconds = 0.0;          ///< wall time in run()/step()
+  double seconds_projecting = 0.0;  ///< in whole-scene projections (incl. resolving pixel lists)
+  double seconds_reusing = 0.0;     ///< in evaluating children from their parent's pixels
+  double unshot_fraction = 1.0;     ///< unshot power / emitted power
+  double emitted_power = 0.0;       ///< sum over patches of emission (RGB summed) times area
+  bool converged = false;
+  bool cancelled = false;
+  bool shot_limit = false;
+  bool element_limit = false;
+};
+
+/// The radiosity mesh: leaf elements with shared vertices.
+struct Mesh {
+  struct Element {
+    uint32_t patch = 0;                ///< index of the input patch it refines
+    uint32_t corner_count = 4;         ///< 3 or 4
+    std::array<uint32_t, 4> corners{};  ///< vertex indices, counter-clockwise
+    glm::dvec3 radiosity{0.0};         ///< element radiosity (constant over the element)
+    double area = 0.0;
+    uint32_t boundary_begin = 0;       ///< its loop in `boundary`: corners and the vertices of
+    uint32_t boundary_end = 0;         ///< finer neighbours on its edges, counter-clockwise
+  };
+  std::vector<glm::dvec3> positions;   ///< per vertex
+  std::vector<glm::dvec3> radiosity;   ///< per vertex: area-weighted mean of the elements around
+                                       ///< it on the same surface and material
+  std::vector<Element> elements;       ///< ordered by patch
+  std::vector<uint32_t> boundary;      ///< element boundary loops (see Element)
+};
+
+/// A progressive radiosity solution that can be advanced shot by shot and read at any time.
+class Solver {
+ public:
+  /// Precondition: validate(scene) and validate(params) return empty strings.
+  Solver(const Scene& scene, const Params& params);
+  ~Solver();
+  Solver(const Solver&) = delete;
+  Solver& operator=(const Solver&) = delete;
+
+  /// Performs one shot (with its repeats after splits). Returns false, doing nothing, when the
+  /// solution has converged or the shot limit is reached.
+  bool step();
+
+  /// Shoots until converged, a limit, or cancellation; calls `progress` after every shot.
+  const Stats& run(const ProgressFn& progress = {}, const CancelToken* cancel = nullptr);
+
+  /// The current mesh. With `ambient`, adds the ambient term of Cohen et al. 1988 (the unshot
+  /// power spread evenly), which makes unconverged states displayable; it vanishes at convergence.
+  Mesh mesh(bool ambient = false) const;
+
+  const Stats& stats() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace hemibake::solver

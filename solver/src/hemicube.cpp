@@ -1,0 +1,441 @@
+// The hemicube of Cohen and Greenberg (1985) with the anti-aliasing of "Anti-aliased hemicubes for
+// performance improvement in radiosity solutions": polygons are clipped to the five faces and
+// scan-converted with fractional coverage (Figure 4); each pixel's fragments are ordered by depth
+// and share the pixel as E_0 = A_0, E_k = A_k (1 - f_{k-1}) (section 2.2.1).
+#include "hemicube_engine.h"
+
+#include "hemibake/solver/hemicube.h"
+
+#include <glm/geometric.hpp>
+
+#include <algorithm>
+#include <cassert>
+#include <cmath>
+#include <numbers>
+
+namespace hemibake::solver {
+namespace detail {
+namespace {
+
+// Axes of the five faces in the hemicube's own frame (x, y tangent, z the normal).
+struct LocalFace {
+  glm::dvec3 right, up, forward;
+  bool top;
+};
+constexpr std::array<LocalFace, 5> kLocalFaces{{
+    {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}, true},
+    {{0, 1, 0}, {0, 0, 1}, {1, 0, 0}, false},
+    {{0, -1, 0}, {0, 0, 1}, {-1, 0, 0}, false},
+    {{-1, 0, 0}, {0, 0, 1}, {0, 1, 0}, false},
+    {{1, 0, 0}, {0, 0, 1}, {0, -1, 0}, false},
+}};
+
+// Keeps the part of `in` where dist(q) >= 0 (Sutherland-Hodgman against one plane).
+template <typename Dist>
+void clip_plane(const std::vector<glm::dvec3>& in, std::vector<glm::dvec3>& out, Dist dist) {
+  out.clear();
+  const size_t n = in.size();
+  if (n == 0) return;
+  glm::dvec3 prev = in[n - 1];
+  double dprev = dist(prev);
+  for (size_t i = 0; i < n; ++i) {
+    const glm::dvec3& cur = in[i];
+    const double dcur = dist(cur);
+    if ((dprev >= 0.0) != (dcur >= 0.0)) {
+      const double t = dprev / (dprev - dcur);
+      out.push_back(prev + (cur - prev) * t);
+    }
+    if (dcur >= 0.0) out.push_back(cur);
+    prev = cur;
+    dprev = dcur;
+  }
+  if (out.size() < 3) out.clear();
+}
+
+glm::dvec3 newell_normal(std::span<const glm::dvec3> p) {
+  glm::dvec3 n(0.0);
+  for (size_t i = 0; i < p.size(); ++i) {
+    const glm::dvec3& a = p[i];
+    const glm::dvec3& b = p[(i + 1) % p.size()];
+    n.x += (a.y - b.y) * (a.z + b.z);
+    n.y += (a.z - b.z) * (a.x + b.x);
+    n.z += (a.x - b.x) * (a.y + b.y);
+  }
+  return n;
+}
+
+}  // namespace
+
+void GroupAdjacency::add(uint32_t a, uint32_t b) {
+  if (a == b) return;
+  if (a > b) std::swap(a, b);
+  keys_.push_back((static_cast<uint64_t>(a) << 32) | b);
+}
+
+void GroupAdjacency::finish() {
+  std::sort(keys_.begin(), keys_.end());
+  keys_.erase(std::unique(keys_.begin(), keys_.end()), keys_.end());
+}
+
+bool GroupAdjacency::adjacent(uint32_t a, uint32_t b) const {
+  if (a > b) std::swap(a, b);
+  return std::binary_search(keys_.begin(), keys_.end(), (static_cast<uint64_t>(a) << 32) | b);
+}
+
+Hemicube::Hemicube(uint32_t resolution) : n_(resolution) {
+  assert(resolution >= 2 && resolution % 2 == 0);
+  const uint32_t half = n_ / 2;
+  pixel_count_ = n_ * n_ + 4 * n_ * half;
+  dff_.resize(pixel_count_);
+  const double step = 2.0 / n_;
+  uint32_t offset = 0;
+  for (size_t f = 0; f < kLocalFaces.size(); ++f) {
+    const LocalFace& lf = kLocalFaces[f];
+    const uint32_t height = lf.top ? n_ : half;
+    const double b_min = lf.top ? -1.0 : 0.0;
+    for (uint32_t row = 0; row < height; ++row) {
+      for (uint32_t col = 0; col < n_; ++col) {
+        // The exact form factor of the pixel (Lambert) rather than the classical centre-point
+        // value: the pixels' factors then sum to 1 and edge pixels are not biased.
+        const double a0 = -1.0 + col * step, a1 = a0 + step;
+        const double b0 = b_min + row * step, b1 = b0 + step;
+        const std::array<glm::dvec3, 4> corners{
+            lf.right * a0 + lf.up * b0 + lf.forward, lf.right * a1 + lf.up * b0 + lf.forward,
+            lf.right * a1 + lf.up * b1 + lf.forward, lf.right * a0 + lf.up * b1 + lf.forward};
+        dff_[offset + row * n_ + col] =
+            point_polygon_form_factor(glm::dvec3(0.0), glm::dvec3(0, 0, 1), corners);
+      }
+    }
+    faces_[f].b_min = b_min;
+    faces_[f].height = height;
+    faces_[f].offset = offset;
+    offset += height * n_;
+  }
+  place(glm::dvec3(0.0), glm::dvec3(0, 0, 1), glm::dvec3(0, 1, 0));
+}
+
+void Hemicube::place(const glm::dvec3& eye, const glm::dvec3& normal, const glm::dvec3& up_hint) {
+  eye_ = eye;
+  glm::dvec3 t = glm::cross(up_hint, normal);
+  if (glm::dot(t, t) < 1e-12) t = glm::cross(std::abs(normal.x) < 0.9 ? glm::dvec3(1, 0, 0)
+                                                                     : glm::dvec3(0, 1, 0),
+                                             normal);
+  t = glm::normalize(t);
+  const glm::dvec3 b = glm::cross(normal, t);
+  auto to_world = [&](const glm::dvec3& v) { return v.x * t + v.y * b + v.z * normal; };
+  for (size_t f = 0; f < kLocalFaces.size(); ++f) {
+    faces_[f].right = to_world(kLocalFaces[f].right);
+    faces_[f].up = to_world(kLocalFaces[f].up);
+    faces_[f].forward = to_world(kLocalFaces[f].forward);
+  }
+}
+
+bool Hemicube::clip_to_face(const Face& face, std::span<const glm::dvec3> polygon,
+                            ProjectScratch& s) const {
+  auto& a = s.clip_a;
+  auto& b = s.clip_b;
+  a.clear();
+  double scale = 0.0;
+  for (const glm::dvec3& p : polygon) {
+    const glm::dvec3 d = p - eye_;
+    const glm::dvec3 q(glm::dot(d, face.right), glm::dot(d, face.up), glm::dot(d, face.forward));
+    scale = std::max(scale, std::abs(q.x) + std::abs(q.y) + std::abs(q.z));
+    a.push_back(q);
+  }
+  // The face's frustum: |a| <= depth, b within [b_min * depth, depth], and in front of the eye.
+  clip_plane(a, b, [](const glm::dvec3& q) { return q.z - q.x; });
+  clip_plane(b, a, [](const glm::dvec3& q) { return q.z + q.x; });
+  clip_plane(a, b, [](const glm::dvec3& q) { return q.z - q.y; });
+  if (face.b_min < 0.0) {
+    clip_plane(b, a, [](const glm::dvec3& q) { return q.z + q.y; });
+  } else {
+    clip_plane(b, a, [](const glm::dvec3& q) { return q.y; });
+  }
+  const double near = 1e-9 * scale;
+  clip_plane(a, b, [near](const glm::dvec3& q) { return q.z - near; });
+  if (b.empty()) return false;
+
+  const double half_n = 0.5 * n_;
+  s.poly2.clear();
+  s.inv_depths.clear();
+  for (const glm::dvec3& q : b) {
+    const double x = std::clamp((q.x / q.z + 1.0) * half_n, 0.0, static_cast<double>(n_));
+    const double y = std::clamp((q.y / q.z - face.b_min) * half_n, 0.0,
+                                static_cast<double>(face.height));
+    s.poly2.emplace_back(x, y);
+    s.inv_depths.push_back(static_cast<float>(1.0 / q.z));
+  }
+  return true;
+}
+
+void Hemicube::rasterize(const Face& face, uint32_t element, uint32_t group, Method method,
+                         const glm::dvec3& plane_normal, double plane_offset,
+                         std::span<const Fragment> parent, bool child, ProjectScratch& s,
+                         std::vector<Fragment>& out) const {
+  double xmin = s.poly2[0].x, xmax = xmin, ymin = s.poly2[0].y, ymax = ymin;
+  for (const glm::dvec2& p : s.poly2) {
+    xmin = std::min(xmin, p.x);
+    xmax = std::max(xmax, p.x);
+    ymin = std::min(ymin, p.y);
+    ymax = std::max(ymax, p.y);
+  }
+  PixelWindow win;
+  win.x0 = std::clamp(static_cast<int>(std::floor(xmin)), 0, static_cast<int>(n_) - 1);
+  win.y0 = std::clamp(static_cast<int>(std::floor(ymin)), 0, static_cast<int>(face.height) - 1);
+  const int x1 = std::clamp(static_cast<int>(std::ceil(xmax)), win.x0 + 1, static_cast<int>(n_));
+  const int y1 =
+      std::clamp(static_cast<int>(std::ceil(ymax)), win.y0 + 1, static_cast<int>(face.height));
+  win.width = x1 - win.x0;
+  win.height = y1 - win.y0;
+  const size_t cells = static_cast<size_t>(win.width) * static_cast<size_t>(win.height);
+
+  // Depth: 1/depth is affine in the face's (a, b) for a planar polygon, so it is evaluated at each
+  // pixel centre from the plane and clamped to the polygon's own range (a partly covered pixel's
+  // centre may lie off the polygon).
+  float inv_lo = s.inv_depths[0], inv_hi = inv_lo;
+  for (float v : s.inv_depths) {
+    inv_lo = std::min(inv_lo, v);
+    inv_hi = std::max(inv_hi, v);
+  }
+  const glm::dvec3 m(glm::dot(plane_normal, face.right), glm::dot(plane_normal, face.up),
+                     glm::dot(plane_normal, face.forward));
+  const double inv_h = plane_offset != 0.0 ? 1.0 / plane_offset : 0.0;
+  const double step = 2.0 / n_;
+  auto inv_depth_at = [&](int px, int py) {
+    const double a = -1.0 + (px + 0.5) * step;
+    const double b = face.b_min + (py + 0.5) * step;
+    const double v = (m.x * a + m.y * b + m.z) * inv_h;
+    return std::clamp(static_cast<float>(v), inv_lo, inv_hi);
+  };
+
+  // For children: walk the parent's fragments (sorted by pixel) alongside.
+  size_t pj = 0;
+  auto parent_trans = [&](uint32_t pixel, float& trans) {
+    while (pj < parent.size() && parent[pj].pixel < pixel) ++pj;
+    if (pj < parent.size() && parent[pj].pixel == pixel) {
+      trans = parent[pj].trans;
+      return true;
+    }
+    return false;  // only rounding puts a child outside its parent's pixels
+  };
+  auto emit = [&](int col, int row, float area) {
+    const int px = win.x0 + col, py = win.y0 + row;
+    Fragment fr;
+    fr.pixel = face.offset + static_cast<uint32_t>(py) * n_ + static_cast<uint32_t>(px);
+    fr.element = element;
+    fr.group = group;
+    fr.area = area;
+    if (child) {
+      if (!parent_trans(fr.pixel, fr.trans)) return;
+      fr.group = parent[pj].group;
+    } else {
+      fr.inv_depth = inv_depth_at(px, py);
+    }
+    out.push_back(fr);
+  };
+
+  if (method == Method::kAntiAliased) {
+    if (s.area.size() < cells) s.area.resize(cells);
+    scan_convert_area(s.poly2, win, std::span(s.area.data(), cells), s.scan);
+    for (int row = 0; row < win.height; ++row) {
+      for (int col = 0; col < win.width; ++col) {
+        const double a = s.area[static_cast<size_t>(row) * win.width + col];
+        if (a > 1e-9) emit(col, row, static_cast<float>(std::min(a, 1.0)));
+      }
+    }
+    return;
+  }
+
+  // Classical: the pixel belongs to the polygon when its centre is inside (top-left rule on
+  // edges, so that a centre on an edge shared by two elements goes to exactly one of them).
+  if (signed_area(s.poly2) < 0.0) std::reverse(s.poly2.begin(), s.poly2.end());
+  const size_t nv = s.poly2.size();
+  for (int row = 0; row < win.height; ++row) {
+    const double cy = win.y0 + row + 0.5;
+    for (int col = 0; col < win.width; ++col) {
+      const double cx = win.x0 + col + 0.5;
+      bool inside = true;
+      for (size_t i = 0; i < nv && inside; ++i) {
+        const glm::dvec2 p = s.poly2[i];
+        const glm::dvec2 d = s.poly2[(i + 1) % nv] - p;
+        const double e = d.x * (cy - p.y) - d.y * (cx - p.x);
+        inside = e > 0.0 || (e == 0.0 && (d.y < 0.0 || (d.y == 0.0 && d.x < 0.0)));
+      }
+      if (inside) emit(col, row, 1.0f);
+    }
+  }
+}
+
+void Hemicube::project(std::span<const glm::dvec3> polygon, uint32_t element, uint32_t group,
+                       Method method, ProjectScratch& scratch, std::vector<Fragment>& out) const {
+  const glm::dvec3 normal = newell_normal(polygon);
+  const double offset = glm::dot(normal, polygon[0] - eye_);
+  for (const Face& face : faces_) {
+    if (!clip_to_face(face, polygon, scratch)) continue;
+    rasterize(face, element, group, method, normal, offset, {}, false, scratch, out);
+  }
+}
+
+void Hemicube::project_child(std::span<const glm::dvec3> polygon, uint32_t element,
+                             std::span<const Fragment> parent, Method method,
+                             ProjectScratch& scratch, std::vector<Fragment>& out) const {
+  if (parent.empty()) return;
+  size_t begin = 0;
+  for (const Face& face : faces_) {
+    // The parent's fragments on this face (they are sorted by pixel, faces in order).
+    const uint32_t end_pixel = face.offset + face.height * n_;
+    size_t end = begin;
+    while (end < parent.size() && parent[end].pixel < end_pixel) ++end;
+    if (end > begin && clip_to_face(face, polygon, scratch)) {
+      rasterize(face, element, 0, method, glm::dvec3(0.0), 0.0, parent.subspan(begin, end - begin),
+                true, scratch, out);
+    }
+    begin = end;
+  }
+}
+
+void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
+             const GroupAdjacency& adjacency, ThreadPool& pool, std::vector<uint32_t>& order,
+             std::vector<uint32_t>& pixel_start) {
+  // Counting sort of fragment indices by pixel (stable: ties keep projection order).
+  pixel_start.assign(static_cast<size_t>(pixel_count) + 1, 0);
+  for (const Fragment& f : fragments) ++pixel_start[f.pixel + 1];
+  for (uint32_t p = 0; p < pixel_count; ++p) pixel_start[p + 1] += pixel_start[p];
+  order.resize(fragments.size());
+  {
+    std::vector<uint32_t> cursor(pixel_start.begin(), pixel_start.end() - 1);
+    for (uint32_t i = 0; i < fragments.size(); ++i) order[cursor[fragments[i].pixel]++] = i;
+  }
+
+  pool.parallel_for(pixel_count, [&](size_t begin, size_t end, size_t) {
+    struct GroupSum {
+      uint32_t group;
+      uint32_t root;
+      double area;
+      float inv_depth;
+      float trans;
+    };
+    std::vector<std::pair<uint32_t, uint32_t>> by_group;  // (group, fragment)
+    std::vector<GroupSum> groups;
+    std::vector<uint32_t> layers;
+    for (size_t p = begin; p < end; ++p) {
+      const uint32_t lo = pixel_start[p], hi = pixel_start[p + 1];
+      if (lo == hi) continue;
+      if (method == Method::kClassical) {
+        uint32_t best = order[lo];
+        for (uint32_t k = lo + 1; k < hi; ++k) {
+          const Fragment& f = fragments[order[k]];
+          const Fragment& b = fragments[best];
+          if (f.inv_depth > b.inv_depth || (f.inv_depth == b.inv_depth && f.element < b.element))
+            best = order[k];
+        }
+        for (uint32_t k = lo; k < hi; ++k) fragments[order[k]].trans = order[k] == best ? 1.0f : 0.0f;
+        continue;
+      }
+      if (hi - lo == 1) {
+        fragments[order[lo]].trans = 1.0f;
+        continue;
+      }
+      // Sum the coverage of each occlusion group: pieces of one surface never hide each other.
+      by_group.clear();
+      for (uint32_t k = lo; k < hi; ++k) by_group.emplace_back(fragments[order[k]].group, order[k]);
+      std::sort(by_group.begin(), by_group.end());
+      groups.clear();
+      for (const auto& [g, fi] : by_group) {
+        const Fragment& f = fragments[fi];
+        if (groups.empty() || groups.back().group != g) {
+          groups.push_back({g, static_cast<uint32_t>(groups.size()), 0.0, f.inv_depth, 1.0f});
+        }
+        groups.back().area += f.area;
+        groups.back().inv_depth = std::max(groups.back().inv_depth, f.inv_depth);
+      }
+      // Merge groups that share an edge (front-facing neighbours project side by side).
+      auto find = [&](uint32_t i) {
+        while (groups[i].root != i) i = groups[i].root = groups[groups[i].root].root;
+        return i;
+      };
+      if (!adjacency.empty() && groups.size() > 1) {
+        for (uint32_t i = 0; i < groups.size(); ++i)
+          for (uint32_t j = i + 1; j < groups.size(); ++j)
+            if (adjacency.adjacent(groups[i].group, groups[j].group)) {
+              const uint32_t ri = find(i), rj = find(j);
+              if (ri != rj) groups[std::max(ri, rj)].root = std::min(ri, rj);
+            }
+      }
+      layers.clear();
+      for (uint32_t i = 0; i < groups.size(); ++i) {
+        const uint32_t r = find(i);
+        if (r != i) {
+          groups[r].area += groups[i].area;
+          groups[r].inv_depth = std::max(groups[r].inv_depth, groups[i].inv_depth);
+        } else {
+          layers.push_back(i);
+        }
+      }
+      // Nearest first; ties go to the lower group id so the order is deterministic.
+      std::sort(layers.begin(), layers.end(), [&](uint32_t a, uint32_t b) {
+        if (groups[a].inv_depth != groups[b].inv_depth) return groups[a].inv_depth > groups[b].inv_depth;
+        return groups[a].group < groups[b].group;
+      });
+      double f = 0.0;  // the paper's f_{k-1}: the pixel's fraction taken by nearer layers
+      for (uint32_t l : layers) {
+        GroupSum& g = groups[l];
+        const double t = 1.0 - f;
+        // Overlapping pieces of one layer (sum > 1) share the pixel in proportion.
+        g.trans = static_cast<float>(g.area > 1.0 ? t / g.area : t);
+        f += std::min(g.area, 1.0) * t;
+      }
+      for (uint32_t i = 0; i < groups.size(); ++i) groups[i].trans = groups[find(i)].trans;
+      size_t gi = 0;
+      for (const auto& [g, fi] : by_group) {
+        while (groups[gi].group != g) ++gi;
+        fragments[fi].trans = groups[gi].trans;
+      }
+    }
+  });
+}
+
+}  // namespace detail
+
+double point_polygon_form_factor(const glm::dvec3& eye, const glm::dvec3& normal,
+                                 std::span<const glm::dvec3> polygon) {
+  double sum = 0.0;
+  const size_t n = polygon.size();
+  for (size_t i = 0; i < n; ++i) {
+    const glm::dvec3 a = glm::normalize(polygon[i] - eye);
+    const glm::dvec3 b = glm::normalize(polygon[(i + 1) % n] - eye);
+    const glm::dvec3 c = glm::cross(a, b);
+    const double len = glm::length(c);
+    if (len == 0.0) continue;
+    const double angle = std::atan2(len, glm::dot(a, b));
+    sum += angle * glm::dot(normal, c) / len;
+  }
+  return std::abs(sum) / (2.0 * std::numbers::pi);
+}
+
+std::vector<double> hemicube_form_factors(const glm::dvec3& eye, const glm::dvec3& normal,
+                                          std::span<const ReceiverPolygon> polygons, Method method,
+                                          uint32_t resolution, const glm::dvec3& up_hint) {
+  detail::Hemicube cube(resolution);
+  cube.place(eye, glm::normalize(normal), up_hint);
+  detail::ProjectScratch scratch;
+  std::vector<detail::Fragment> frags;
+  for (uint32_t i = 0; i < polygons.size(); ++i) {
+    const auto& poly = polygons[i].corners;
+    if (poly.size() < 3) continue;
+    const glm::dvec3 pn = detail::newell_normal(poly);
+    if (glm::dot(pn, eye - poly[0]) <= 0.0) continue;  // facing away
+    const uint32_t group = polygons[i].group != kNone ? polygons[i].group : 0x80000000u + i;
+    cube.project(poly, i, group, method, scratch, frags);
+  }
+  detail::ThreadPool pool(1);
+  detail::GroupAdjacency none;
+  std::vector<uint32_t> order, starts;
+  detail::resolve(frags, cube.pixel_count(), method, none, pool, order, starts);
+  std::vector<double> ff(polygons.size(), 0.0);
+  const auto& dff = cube.delta_form_factors();
+  for (const auto& f : frags) ff[f.element] += static_cast<double>(f.area) * f.trans * dff[f.pixel];
+  return ff;
+}
+
+}  // namespace hemibake::solver

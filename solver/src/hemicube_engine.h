@@ -1,0 +1,107 @@
+// The hemicube: projection of polygons into pixel fragments, and per-pixel visibility.
+#pragma once
+
+#include "hemibake/solver/scan_convert.h"
+#include "hemibake/solver/solver.h"
+#include "thread_pool.h"
+
+#include <glm/vec2.hpp>
+#include <glm/vec3.hpp>
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+namespace hemibake::solver::detail {
+
+/// One element's share of one hemicube pixel.
+struct Fragment {
+  uint32_t pixel = 0;    ///< global pixel index (top face, then the four half faces)
+  uint32_t element = 0;  ///< the caller's id for the polygon
+  uint32_t group = 0;    ///< occlusion group: fragments of one group never hide each other
+  float area = 0.0f;     ///< covered fraction of the pixel (classical: 1, the centre is inside)
+  float inv_depth = 0.0f;  ///< 1 / distance along the face axis, at the pixel (larger is nearer)
+  float trans = 0.0f;    ///< set by resolve(): fraction of the pixel not taken by nearer groups
+};
+
+/// Pairs of occlusion groups that share an edge. Two front-facing polygons that share an edge
+/// project to opposite sides of it, so within a pixel their coverages add rather than occlude.
+class GroupAdjacency {
+ public:
+  void add(uint32_t a, uint32_t b);
+  void finish();  ///< call once after the last add()
+  bool adjacent(uint32_t a, uint32_t b) const;
+  bool empty() const { return keys_.empty(); }
+
+ private:
+  std::vector<uint64_t> keys_;
+};
+
+/// Per-thread scratch for projecting polygons.
+struct ProjectScratch {
+  ScanScratch scan;
+  std::vector<double> area;
+  std::vector<glm::dvec3> clip_a, clip_b;
+  std::vector<glm::dvec2> poly2;
+  std::vector<float> inv_depths;
+};
+
+class Hemicube {
+ public:
+  /// resolution: even, >= 2. Precomputes every pixel's exact delta form factor.
+  explicit Hemicube(uint32_t resolution);
+
+  uint32_t resolution() const { return n_; }
+  uint32_t pixel_count() const { return pixel_count_; }
+  /// Exact form factor of each pixel from the hemicube's centre (they sum to 1).
+  const std::vector<double>& delta_form_factors() const { return dff_; }
+
+  /// Places the hemicube at `eye` facing `normal` (unit); `up_hint` fixes the rotation about it.
+  void place(const glm::dvec3& eye, const glm::dvec3& normal, const glm::dvec3& up_hint);
+  const glm::dvec3& eye() const { return eye_; }
+
+  /// Projects a planar convex polygon (world coordinates, front side facing the eye), appending
+  /// its fragments in increasing pixel order. Classical: a fragment per pixel whose centre is
+  /// inside; anti-aliased: a fragment per pixel it covers, with the covered area.
+  void project(std::span<const glm::dvec3> polygon, uint32_t element, uint32_t group,
+               Method method, ProjectScratch& scratch, std::vector<Fragment>& out) const;
+
+  /// Projects a polygon that lies inside a parent polygon whose resolved fragments are `parent`
+  /// (sorted by pixel), appending its fragments with the parent's transmission per pixel. No other
+  /// polygon is looked at: this is the reuse of the parent's visibility.
+  void project_child(std::span<const glm::dvec3> polygon, uint32_t element,
+                     std::span<const Fragment> parent, Method method, ProjectScratch& scratch,
+                     std::vector<Fragment>& out) const;
+
+ private:
+  struct Face {
+    glm::dvec3 right, up, forward;  // world axes of the face's (a, b, depth)
+    double b_min = -1.0;            // -1 for the top face, 0 for the half faces
+    uint32_t height = 0;            // rows
+    uint32_t offset = 0;            // first global pixel index
+  };
+  // Clips to face f and maps to pixel coordinates; false when nothing is left.
+  bool clip_to_face(const Face& face, std::span<const glm::dvec3> polygon,
+                    ProjectScratch& scratch) const;
+  void rasterize(const Face& face, uint32_t element, uint32_t group, Method method,
+                 const glm::dvec3& plane_normal, double plane_offset, std::span<const Fragment> parent,
+                 bool child, ProjectScratch& scratch, std::vector<Fragment>& out) const;
+
+  uint32_t n_;
+  uint32_t pixel_count_;
+  std::vector<double> dff_;
+  std::array<Face, 5> faces_{};
+  glm::dvec3 eye_{0.0};
+};
+
+/// Fills `trans` of every fragment: classical keeps the nearest fragment of each pixel (trans 1,
+/// others 0); anti-aliased orders the pixel's occlusion groups by depth (nearest first) and gives
+/// group k the transmission 1 - f_{k-1}, where f_k = f_{k-1} + A_k (1 - f_{k-1}) (the paper's
+/// E_k = A_k (1 - f_{k-1})). Groups that share an edge are merged first (their areas add).
+/// `order` is scratch.
+void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
+             const GroupAdjacency& adjacency, ThreadPool& pool, std::vector<uint32_t>& order,
+             std::vector<uint32_t>& pixel_start);
+
+}  // namespace hemibake::solver::detail

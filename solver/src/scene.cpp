@@ -1,0 +1,305 @@
+// Input checks and the one-off analysis of a scene: which patches form one surface.
+#include "scene_prep.h"
+
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
+#include <glm/vec3.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <numeric>
+#include <sstream>
+#include <unordered_map>
+
+namespace hemibake::solver {
+namespace {
+
+// Patches meeting at less than this angle are one smooth surface for vertex averaging.
+constexpr double kCreaseCos = 0.866;  // 30 degrees
+
+bool finite(const glm::dvec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+
+glm::dvec3 polygon_normal(const Patch& p) {
+  glm::dvec3 n(0.0);
+  for (uint32_t i = 0; i < p.corner_count; ++i) {
+    const glm::dvec3& a = p.corners[i];
+    const glm::dvec3& b = p.corners[(i + 1) % p.corner_count];
+    n += glm::cross(a, b);
+  }
+  return 0.5 * n;  // length is the area
+}
+
+struct UnionFind {
+  std::vector<uint32_t> parent;
+  explicit UnionFind(size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0u); }
+  uint32_t find(uint32_t i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  }
+  void unite(uint32_t a, uint32_t b) {
+    a = find(a);
+    b = find(b);
+    if (a != b) parent[std::max(a, b)] = std::min(a, b);
+  }
+};
+
+struct PositionHash {
+  size_t operator()(const glm::dvec3& p) const {
+    uint64_t h = 1469598103934665603ull;
+    for (int i = 0; i < 3; ++i) {
+      uint64_t bits;
+      const double v = p[i] == 0.0 ? 0.0 : p[i];  // -0 and +0 are one position
+      std::memcpy(&bits, &v, sizeof bits);
+      h = (h ^ bits) * 1099511628211ull;
+    }
+    return static_cast<size_t>(h);
+  }
+};
+
+// Pairs of patches (a < b) with an edge of one overlapping an edge of the other along a line.
+std::vector<std::pair<uint32_t, uint32_t>> touching_patches(const Scene& scene, double diagonal) {
+  struct Edge {
+    glm::dvec3 p, q;
+    uint32_t patch;
+  };
+  std::vector<Edge> edges;
+  for (uint32_t i = 0; i < scene.patches.size(); ++i) {
+    const Patch& pa = scene.patches[i];
+    for (uint32_t c = 0; c < pa.corner_count; ++c)
+      edges.push_back({pa.corners[c], pa.corners[(c + 1) % pa.corner_count], i});
+  }
+  const double tol = 1e-7 * diagonal;
+  auto overlap = [tol](const Edge& e, const Edge& f) {
+    const glm::dvec3 d = e.q - e.p;
+    const double len = glm::length(d);
+    if (len <= tol) return false;
+    const glm::dvec3 u = d / len;
+    for (const glm::dvec3& x : {f.p, f.q}) {
+      const glm::dvec3 r = x - e.p;
+      if (glm::length(r - u * glm::dot(r, u)) > tol) return false;
+    }
+    const double t0 = glm::dot(f.p - e.p, u), t1 = glm::dot(f.q - e.p, u);
+    return std::min(std::max(t0, t1), len) - std::max(std::min(t0, t1), 0.0) > tol;
+  };
+  // A uniform grid over the scene; an edge is listed in every cell its bounding box touches, and
+  // edges that span too many cells are tested against all edges instead.
+  glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
+  for (const Edge& e : edges) {
+    lo = glm::min(lo, glm::min(e.p, e.q));
+    hi = glm::max(hi, glm::max(e.p, e.q));
+  }
+  const double cell = std::max(diagonal / std::max(1.0, std::cbrt(static_cast<double>(edges.size()))), tol * 16);
+  const glm::ivec3 dims = glm::clamp(glm::ivec3((hi - lo) / cell) + 1, 1, 1024);
+  std::unordered_map<uint64_t, std::vector<uint32_t>> cells;
+  std::vector<uint32_t> big;
+  for (uint32_t i = 0; i < edges.size(); ++i) {
+    const glm::ivec3 a = glm::clamp(glm::ivec3((glm::min(edges[i].p, edges[i].q) - lo - tol) / cell), glm::ivec3(0), dims - 1);
+    const glm::ivec3 b = glm::clamp(glm::ivec3((glm::max(edges[i].p, edges[i].q) - lo + tol) / cell), glm::ivec3(0), dims - 1);
+    const glm::ivec3 span = b - a + 1;
+    if (static_cast<int64_t>(span.x) * span.y * span.z > 64) {
+      big.push_back(i);
+      continue;
+    }
+    for (int x = a.x; x <= b.x; ++x)
+      for (int y = a.y; y <= b.y; ++y)
+        for (int z = a.z; z <= b.z; ++z)
+          cells[(static_cast<uint64_t>(x) * 1024 + y) * 1024 + z].push_back(i);
+  }
+  std::vector<std::pair<uint32_t, uint32_t>> pairs;
+  auto test = [&](uint32_t i, uint32_t j) {
+    const Edge& e = edges[i];
+    const Edge& f = edges[j];
+    if (e.patch == f.patch) return;
+    if (overlap(e, f) || overlap(f, e))
+      pairs.emplace_back(std::min(e.patch, f.patch), std::max(e.patch, f.patch));
+  };
+  for (const auto& [key, list] : cells)
+    for (size_t x = 0; x < list.size(); ++x)
+      for (size_t y = x + 1; y < list.size(); ++y) test(list[x], list[y]);
+  for (uint32_t i : big)
+    for (uint32_t j = 0; j < edges.size(); ++j)
+      if (j != i) test(i, j);
+  std::sort(pairs.begin(), pairs.end());
+  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+  return pairs;
+}
+
+}  // namespace
+
+std::string validate(const Params& p) {
+  std::ostringstream err;
+  if (p.resolution < 4 || p.resolution > 4096 || p.resolution % 2 != 0)
+    err << "resolution must be an even number from 4 to 4096 (got " << p.resolution << ")";
+  else if (!(p.feps > 0.0) || !std::isfinite(p.feps))
+    err << "feps must be a positive number (got " << p.feps << ")";
+  else if (!(p.aeps > 0.0 && p.aeps < 1.0))
+    err << "aeps must lie between 0 and 1 (got " << p.aeps << ")";
+  else if (!(p.beps > 0.0) || !std::isfinite(p.beps))
+    err << "beps must be a positive number (got " << p.beps << ")";
+  else if (!(p.convergence > 0.0 && p.convergence < 1.0))
+    err << "convergence must lie between 0 and 1 (got " << p.convergence << ")";
+  else if (p.max_elements < 1)
+    err << "max_elements must be at least 1";
+  else if (p.threads > 1024)
+    err << "threads must be at most 1024 (got " << p.threads << ")";
+  else if (!(p.shooter_size > 0.0) || !std::isfinite(p.shooter_size))
+    err << "shooter_size must be a positive number (got " << p.shooter_size << ")";
+  return err.str();
+}
+
+std::string validate(const Scene& scene) {
+  std::ostringstream err;
+  if (scene.patches.empty()) return "the scene has no patches";
+  if (scene.patches.size() >= kNone / 8) return "the scene has too many patches";
+  for (size_t i = 0; i < scene.patches.size(); ++i) {
+    const Patch& p = scene.patches[i];
+    err << "patch " << i << ": ";
+    if (p.corner_count != 3 && p.corner_count != 4) {
+      err << "has " << p.corner_count << " corners; only triangles and quads are supported";
+      return err.str();
+    }
+    double size = 0.0;
+    for (uint32_t c = 0; c < p.corner_count; ++c) {
+      if (!finite(p.corners[c])) {
+        err << "corner " << c << " is not a finite point";
+        return err.str();
+      }
+      size = std::max(size, glm::length(p.corners[c] - p.corners[(c + 1) % p.corner_count]));
+    }
+    const glm::dvec3 n = polygon_normal(p);
+    const double area = glm::length(n);
+    if (!(size > 0.0) || !(area > 1e-12 * size * size)) {
+      err << "is degenerate (zero area)";
+      return err.str();
+    }
+    const glm::dvec3 unit = n / area;
+    for (uint32_t c = 0; c < p.corner_count; ++c) {
+      if (std::abs(glm::dot(unit, p.corners[c] - p.corners[0])) > 1e-4 * size) {
+        err << "is not planar (corner " << c << " lies off the plane of the others)";
+        return err.str();
+      }
+      const glm::dvec3& a = p.corners[c];
+      const glm::dvec3& b = p.corners[(c + 1) % p.corner_count];
+      const glm::dvec3& d = p.corners[(c + 2) % p.corner_count];
+      if (glm::dot(glm::cross(b - a, d - b), unit) <= 0.0) {
+        err << "is not convex (or has repeated corners)";
+        return err.str();
+      }
+    }
+    for (int ch = 0; ch < 3; ++ch) {
+      if (!(p.reflectance[ch] >= 0.0 && p.reflectance[ch] < 1.0)) {
+        err << "reflectance " << p.reflectance[ch] << " is outside [0, 1)";
+        return err.str();
+      }
+      if (!(p.emission[ch] >= 0.0) || !std::isfinite(p.emission[ch])) {
+        err << "emission " << p.emission[ch] << " is negative or not finite";
+        return err.str();
+      }
+    }
+    err.str("");
+  }
+  return {};
+}
+
+namespace detail {
+
+PreparedScene prepare(const Scene& scene) {
+  PreparedScene out;
+  const size_t n = scene.patches.size();
+  out.normal.resize(n);
+  out.area.resize(n);
+  glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
+  for (size_t i = 0; i < n; ++i) {
+    const Patch& p = scene.patches[i];
+    const glm::dvec3 nn = polygon_normal(p);
+    out.area[i] = glm::length(nn);
+    out.normal[i] = nn / out.area[i];
+    out.total_area += out.area[i];
+    for (uint32_t c = 0; c < p.corner_count; ++c) {
+      lo = glm::min(lo, p.corners[c]);
+      hi = glm::max(hi, p.corners[c]);
+    }
+  }
+  out.diagonal = glm::length(hi - lo);
+
+  // Corners with bitwise equal positions are one point; edges between such points are shared.
+  std::unordered_map<glm::dvec3, uint32_t, PositionHash> point_id;
+  std::vector<std::array<uint32_t, 4>> point_of(n);
+  for (size_t i = 0; i < n; ++i) {
+    const Patch& p = scene.patches[i];
+    for (uint32_t c = 0; c < p.corner_count; ++c) {
+      glm::dvec3 key = p.corners[c];
+      for (int k = 0; k < 3; ++k)
+        if (key[k] == 0.0) key[k] = 0.0;
+      point_of[i][c] = point_id.try_emplace(key, static_cast<uint32_t>(point_id.size())).first->second;
+    }
+  }
+  UnionFind occl(n), smooth(n);
+  std::vector<std::pair<uint32_t, uint32_t>> neighbours;
+  auto coplanar = [&](uint32_t a, uint32_t b) {
+    if (glm::dot(out.normal[a], out.normal[b]) < 1.0 - 1e-9) return false;
+    const Patch& pa = scene.patches[a];
+    const Patch& pb = scene.patches[b];
+    for (uint32_t c = 0; c < pb.corner_count; ++c)
+      if (std::abs(glm::dot(out.normal[a], pb.corners[c] - pa.corners[0])) > 1e-9 * out.diagonal)
+        return false;
+    return true;
+  };
+  // Patches sharing a whole edge (same two points) may share vertices: one smooth surface.
+  std::unordered_map<uint64_t, std::vector<uint32_t>> edge_patches;
+  for (size_t i = 0; i < n; ++i) {
+    const uint32_t cc = scene.patches[i].corner_count;
+    for (uint32_t c = 0; c < cc; ++c) {
+      uint32_t a = point_of[i][c], b = point_of[i][(c + 1) % cc];
+      if (a > b) std::swap(a, b);
+      edge_patches[(static_cast<uint64_t>(a) << 32) | b].push_back(static_cast<uint32_t>(i));
+    }
+  }
+  for (const auto& [key, list] : edge_patches) {
+    for (size_t x = 0; x < list.size(); ++x) {
+      for (size_t y = x + 1; y < list.size(); ++y) {
+        const uint32_t a = list[x], b = list[y];
+        if (glm::dot(out.normal[a], out.normal[b]) > kCreaseCos &&
+            scene.patches[a].material == scene.patches[b].material)
+          smooth.unite(a, b);
+      }
+    }
+  }
+  // Patches whose edges overlap on a line (shared edges and T-junctions alike) touch: coplanar
+  // ones are one occlusion group, the others are adjacent groups.
+  for (const auto& [a, b] : touching_patches(scene, out.diagonal)) {
+    if (coplanar(a, b)) occl.unite(a, b);
+    neighbours.emplace_back(a, b);
+  }
+  out.occlusion_group.resize(n);
+  out.smoothing_group.resize(n);
+  for (uint32_t i = 0; i < n; ++i) {
+    out.occlusion_group[i] = occl.find(i);
+    out.smoothing_group[i] = smooth.find(i);
+  }
+  for (const auto& [a, b] : neighbours) out.adjacency.add(out.occlusion_group[a], out.occlusion_group[b]);
+  out.adjacency.finish();
+
+  // Solver vertices: one per (point, smoothing group), so radiosity is averaged within a surface.
+  std::unordered_map<uint64_t, uint32_t> vertex_id;
+  out.corner_vertex.resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    const Patch& p = scene.patches[i];
+    for (uint32_t c = 0; c < 4; ++c) {
+      if (c >= p.corner_count) {
+        out.corner_vertex[i][c] = kNone;
+        continue;
+      }
+      const uint64_t key = (static_cast<uint64_t>(out.smoothing_group[i]) << 32) | point_of[i][c];
+      auto [it, fresh] = vertex_id.try_emplace(key, static_cast<uint32_t>(out.vertex_position.size()));
+      if (fresh) out.vertex_position.push_back(p.corners[c]);
+      out.corner_vertex[i][c] = it->second;
+    }
+  }
+  return out;
+}
+
+}  // namespace detail
+}  // namespace hemibake::solver

@@ -1,0 +1,29 @@
+// Scene analysis done once before solving: surfaces, groups and shared vertices.
+#pragma once
+
+#include "hemibake/solver/solver.h"
+#include "hemicube_engine.h"
+
+#include <glm/vec3.hpp>
+
+#include <array>
+#include <vector>
+
+namespace hemibake::solver::detail {
+
+struct PreparedScene {
+  std::vector<glm::dvec3> normal;             ///< unit normal per patch
+  std::vector<double> area;                   ///< per patch
+  std::vector<uint32_t> occlusion_group;      ///< per patch: coplanar, edge-connected patches
+  std::vector<uint32_t> smoothing_group;      ///< per patch: edge-connected, same material, no crease
+  GroupAdjacency adjacency;                   ///< occlusion groups that share an edge
+  std::vector<glm::dvec3> vertex_position;    ///< corner vertices, shared within a smoothing group
+  std::vector<std::array<uint32_t, 4>> corner_vertex;  ///< per patch
+  double total_area = 0.0;
+  double diagonal = 0.0;                      ///< of the scene's bounding box
+};
+
+/// Precondition: validate(scene) is empty.
+PreparedScene prepare(const Scene& scene);
+
+}  // namespace hemibake::solver::detail

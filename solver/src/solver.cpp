@@ -1,0 +1,682 @@
+// Progressive refinement radiosity (Cohen, Chen, Wallace and Greenberg 1988) with adaptive
+// substructuring (Cohen, Greenberg, Immel and Brock 1986), form factors from the anti-aliased
+// hemicube, and reuse of the parent's pixels for subdivided elements (section 2.3 of "Anti-aliased
+// hemicubes for performance improvement in radiosity solutions").
+//
+// One shot:
+//   1. The patch with the most unshot power shoots. Large patches shoot from sub-areas no wider
+//      than `shooter_size` of the scene's diagonal, each with its own hemicube, so that receivers
+//      near a large shooter (room corners) do not see it as a point.
+//   2. Every leaf element of every patch that faces the hemicube is projected; each pixel's
+//      fragments are resolved by depth (E_k = A_k (1 - f_{k-1})); F(shooter -> element) is the sum
+//      over its pixels of its visible share times the pixel's delta form factor.
+//   3. A posteriori subdivision: a leaf is too large for this interaction when (a) its form factor
+//      weighted by the shooter's share of the emitted power exceeds FEPS, or (b) it is partly hidden
+//      and the hidden part would have changed its radiosity by more than the radiosity tolerance
+//      (beps times the scene's mean emitted radiosity), or (c) the shot's radiosity differs across
+//      one of its corners by more than that tolerance. Children must be at least AEPS of the
+//      scene's area. Split elements cancel the shot; it is repeated from the same shooter, and the
+//      children's form factors come from their parent's pixels and per-pixel transmissions (no
+//      other element is looked at again) until nothing splits.
+//   4. Southwell step: every receiver gains rho * dB * F(element -> shooter), with
+//      F(element -> shooter) = F(shooter -> element) * A_shooter / A_element (capped at 1).
+#include "hemibake/solver/solver.h"
+
+#include "hemicube_engine.h"
+#include "scene_prep.h"
+#include "thread_pool.h"
+
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <functional>
+#include <cmath>
+#include <limits>
+#include <thread>
+#include <unordered_map>
+#include <unordered_set>
+
+namespace hemibake::solver {
+namespace {
+
+using detail::Fragment;
+using Clock = std::chrono::steady_clock;
+
+double channel_sum(const glm::dvec3& c) { return c.x + c.y + c.z; }
+double mean(const glm::dvec3& c) { return (c.x + c.y + c.z) / 3.0; }
+double seconds_since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+uint64_t edge_key(uint32_t a, uint32_t b) {
+  if (a > b) std::swap(a, b);
+  return (static_cast<uint64_t>(a) << 32) | b;
+}
+
+using Corners = std::array<glm::dvec3, 4>;
+
+// Child k of a quad (4 corners) or triangle (3), in the order Solver::Impl::split creates them.
+// Quads split at edge midpoints and the corners' mean (the bilinear centre); triangles at edge
+// midpoints, the fourth child being the middle triangle.
+uint32_t child_corners(const Corners& c, uint32_t n, uint32_t k, Corners& out) {
+  if (n == 4) {
+    const glm::dvec3 m01 = 0.5 * (c[0] + c[1]), m12 = 0.5 * (c[1] + c[2]);
+    const glm::dvec3 m23 = 0.5 * (c[2] + c[3]), m30 = 0.5 * (c[3] + c[0]);
+    const glm::dvec3 ctr = 0.25 * (c[0] + c[1] + c[2] + c[3]);
+    const std::array<Corners, 4> kids{{{c[0], m01, ctr, m30}, {m01, c[1], m12, ctr},
+                                       {ctr, m12, c[2], m23}, {m30, ctr, m23, c[3]}}};
+    out = kids[k];
+    return 4;
+  }
+  const glm::dvec3 m01 = 0.5 * (c[0] + c[1]), m12 = 0.5 * (c[1] + c[2]), m20 = 0.5 * (c[2] + c[0]);
+  const std::array<Corners, 4> kids{{{c[0], m01, m20, {}}, {m01, c[1], m12, {}},
+                                     {m20, m12, c[2], {}}, {m12, m20, m01, {}}}};
+  out = kids[k];
+  return 3;
+}
+
+double polygon_area(const Corners& c, uint32_t n) {
+  if (n == 4) return 0.5 * glm::length(glm::cross(c[2] - c[0], c[3] - c[1]));
+  return 0.5 * glm::length(glm::cross(c[1] - c[0], c[2] - c[0]));
+}
+
+double polygon_diameter(const Corners& c, uint32_t n) {
+  double d = 0.0;
+  for (uint32_t i = 0; i < n; ++i)
+    for (uint32_t j = i + 1; j < n; ++j) d = std::max(d, glm::length(c[i] - c[j]));
+  return d;
+}
+
+glm::dvec3 polygon_centre(const Corners& c, uint32_t n) {
+  if (n == 3) return (c[0] + c[1] + c[2]) / 3.0;
+  // Area centroid of a convex quad: area-weighted centroids of its two triangles.
+  const double a1 = 0.5 * glm::length(glm::cross(c[1] - c[0], c[2] - c[0]));
+  const double a2 = 0.5 * glm::length(glm::cross(c[2] - c[0], c[3] - c[0]));
+  const glm::dvec3 g1 = (c[0] + c[1] + c[2]) / 3.0, g2 = (c[0] + c[2] + c[3]) / 3.0;
+  return (a1 + a2) > 0.0 ? (a1 * g1 + a2 * g2) / (a1 + a2) : 0.25 * (c[0] + c[1] + c[2] + c[3]);
+}
+
+}  // namespace
+
+struct Solver::Impl {
+  Impl(const Scene& scene, const Params& p);
+
+  // Geometry and tree.
+  uint32_t corner_count(uint32_t e) const { return patches[e_patch[e]].corner_count; }
+  void corners_of(uint32_t e, Corners& out) const {
+    for (uint32_t i = 0; i < corner_count(e); ++i) out[i] = vpos[e_corner[e][i]];
+  }
+  uint32_t midpoint(uint32_t a, uint32_t b);
+  uint32_t add_element(uint32_t patch, uint32_t parent, const std::array<uint32_t, 4>& corners,
+                       const glm::dvec3& b, const glm::dvec3& unshot);
+  void split(uint32_t e);
+  template <typename Fn>
+  void for_leaves(uint32_t e, Fn&& fn) const;
+
+  // Shooting.
+  bool step();
+  void shoot_patch(uint32_t p);
+  double node_power(uint32_t element, const glm::dvec3& unshot, const Corners& c, uint32_t n) const;
+  bool needs_finer_shooter(uint32_t p, const Corners& c, uint32_t n, double power) const;
+  void shoot_from(uint32_t p, const Corners& c, uint32_t n, const glm::dvec3& dB, double area);
+  void project_all(uint32_t shooter_patch);
+  void project_children(const std::vector<uint32_t>& parents);
+  void sum_form_factors(std::span<const uint32_t> elements);
+  void update_unshot_total();
+
+  Params params;
+  std::vector<Patch> patches;
+  detail::PreparedScene prep;
+  double aeps_area = 0.0;       // smallest element area allowed
+  double b_tolerance = 0.0;     // radiosity tolerance for criteria (b) and (c)
+  double shooter_limit = 0.0;   // widest shooting sub-area
+  double emitted_power = 0.0;   // sum over patches of channel_sum(E) * A
+
+  // Vertices (shared within a smoothing group) and edge midpoints.
+  std::vector<glm::dvec3> vpos;
+  std::unordered_map<uint64_t, uint32_t> midpoints;
+
+  // Elements, structure of arrays. Children of an element are consecutive.
+  std::vector<uint32_t> e_patch, e_parent, e_child;
+  std::vector<std::array<uint32_t, 4>> e_corner;
+  std::vector<double> e_area;
+  std::vector<glm::dvec3> e_b, e_unshot;
+  std::vector<uint32_t> leaves;
+  std::vector<uint32_t> p_root;
+  std::vector<double> p_unshot;  // unshot power per patch (channel sum times area)
+  std::vector<uint8_t> p_front;  // per patch: faces the current hemicube
+  std::vector<glm::dvec3> p_centre;  // per patch: bounding sphere
+  std::vector<double> p_radius;
+
+  // Per-hemicube scratch.
+  detail::Hemicube cube;
+  detail::ThreadPool pool;
+  std::vector<Fragment> frags;
+  std::vector<uint32_t> f_begin, f_end;  // per element: its fragments in `frags`
+  std::vector<uint64_t> e_stamp;         // per element: the hemicube its form factor belongs to
+  std::vector<double> e_ff, e_ff_open;   // per element: visible and unoccluded form factor
+  uint64_t stamp = 0;
+  std::vector<detail::ProjectScratch> scratch;
+  std::vector<std::vector<Fragment>> chunk_frags;
+  std::vector<uint32_t> order, pixel_start;
+  std::vector<double> shot_b, vmin, vmax;
+
+  Stats stats;
+  bool done = false;
+};
+
+Solver::Impl::Impl(const Scene& scene, const Params& p)
+    : params(p),
+      patches(scene.patches),
+      prep(detail::prepare(scene)),
+      cube(p.resolution),
+      pool(p.threads != 0 ? p.threads : std::max(1u, std::thread::hardware_concurrency())) {
+  aeps_area = params.aeps * prep.total_area;
+  shooter_limit = params.shooter_size * prep.diagonal;
+  vpos = prep.vertex_position;
+  double emitted_mean = 0.0;
+  for (uint32_t i = 0; i < patches.size(); ++i) {
+    emitted_power += channel_sum(patches[i].emission) * prep.area[i];
+    emitted_mean += mean(patches[i].emission) * prep.area[i];
+  }
+  b_tolerance = params.beps * emitted_mean / prep.total_area;
+  p_root.resize(patches.size());
+  p_unshot.resize(patches.size());
+  p_front.resize(patches.size());
+  p_centre.resize(patches.size());
+  p_radius.resize(patches.size());
+  for (uint32_t i = 0; i < patches.size(); ++i) {
+    Corners c = patches[i].corners;
+    p_centre[i] = polygon_centre(c, patches[i].corner_count);
+    for (uint32_t k = 0; k < patches[i].corner_count; ++k)
+      p_radius[i] = std::max(p_radius[i], glm::distance(p_centre[i], c[k]));
+  }
+  for (uint32_t i = 0; i < patches.size(); ++i) {
+    p_root[i] = add_element(i, kNone, prep.corner_vertex[i], patches[i].emission, patches[i].emission);
+    p_unshot[i] = channel_sum(patches[i].emission) * prep.area[i];
+    leaves.push_back(p_root[i]);
+  }
+  stats.patches = patches.size();
+  stats.elements = leaves.size();
+  stats.emitted_power = emitted_power;
+  update_unshot_total();
+  const size_t chunks = std::max<size_t>(1, pool.chunk_count(std::numeric_limits<uint32_t>::max()));
+  scratch.resize(chunks);
+  chunk_frags.resize(chunks);
+}
+
+uint32_t Solver::Impl::midpoint(uint32_t a, uint32_t b) {
+  auto [it, fresh] = midpoints.try_emplace(edge_key(a, b), static_cast<uint32_t>(vpos.size()));
+  if (fresh) vpos.push_back(0.5 * (vpos[a] + vpos[b]));
+  return it->second;
+}
+
+uint32_t Solver::Impl::add_element(uint32_t patch, uint32_t parent,
+                                   const std::array<uint32_t, 4>& corners, const glm::dvec3& b,
+                                   const glm::dvec3& unshot) {
+  const uint32_t id = static_cast<uint32_t>(e_patch.size());
+  e_patch.push_back(patch);
+  e_parent.push_back(parent);
+  e_child.push_back(kNone);
+  e_corner.push_back(corners);
+  Corners c{};
+  corners_of(id, c);
+  e_area.push_back(polygon_area(c, patches[patch].corner_count));
+  e_b.push_back(b);
+  e_unshot.push_back(unshot);
+  f_begin.push_back(0);
+  f_end.push_back(0);
+  e_stamp.push_back(0);
+  e_ff.push_back(0.0);
+  e_ff_open.push_back(0.0);
+  return id;
+}
+
+void Solver::Impl::split(uint32_t e) {
+  const std::array<uint32_t, 4> c = e_corner[e];
+  const uint32_t p = e_patch[e];
+  // Children start with the parent's radiosity and unshot radiosity: energy carries over.
+  const glm::dvec3 b = e_b[e], u = e_unshot[e];
+  std::array<std::array<uint32_t, 4>, 4> kids;
+  if (patches[p].corner_count == 4) {
+    const uint32_t m01 = midpoint(c[0], c[1]), m12 = midpoint(c[1], c[2]);
+    const uint32_t m23 = midpoint(c[2], c[3]), m30 = midpoint(c[3], c[0]);
+    const uint32_t ctr = static_cast<uint32_t>(vpos.size());
+    vpos.push_back(0.25 * (vpos[c[0]] + vpos[c[1]] + vpos[c[2]] + vpos[c[3]]));
+    kids = {{{c[0], m01, ctr, m30}, {m01, c[1], m12, ctr}, {ctr, m12, c[2], m23}, {m30, ctr, m23, c[3]}}};
+  } else {
+    const uint32_t m01 = midpoint(c[0], c[1]), m12 = midpoint(c[1], c[2]), m20 = midpoint(c[2], c[0]);
+    kids = {{{c[0], m01, m20, kNone}, {m01, c[1], m12, kNone}, {m20, m12, c[2], kNone},
+             {m12, m20, m01, kNone}}};
+  }
+  const uint32_t first = add_element(p, e, kids[0], b, u);
+  for (int k = 1; k < 4; ++k) add_element(p, e, kids[k], b, u);
+  e_child[e] = first;
+  ++stats.splits;
+}
+
+template <typename Fn>
+void Solver::Impl::for_leaves(uint32_t e, Fn&& fn) const {
+  if (e_child[e] == kNone) {
+    fn(e);
+    return;
+  }
+  for (uint32_t k = 0; k < 4; ++k) for_leaves(e_child[e] + k, fn);
+}
+
+void Solver::Impl::update_unshot_total() {
+  double total = 0.0;
+  for (double u : p_unshot) total += u;
+  stats.unshot_fraction = emitted_power > 0.0 ? total / emitted_power : 0.0;
+  stats.elements = leaves.size();
+}
+
+void Solver::Impl::sum_form_factors(std::span<const uint32_t> elements) {
+  const auto& dff = cube.delta_form_factors();
+  pool.parallel_for(elements.size(), [&](size_t b, size_t e, size_t) {
+    for (size_t i = b; i < e; ++i) {
+      const uint32_t el = elements[i];
+      double ff = 0.0, open = 0.0;
+      for (uint32_t k = f_begin[el]; k < f_end[el]; ++k) {
+        const Fragment& f = frags[k];
+        const double a = static_cast<double>(f.area) * dff[f.pixel];
+        open += a;
+        ff += a * f.trans;
+      }
+      e_ff[el] = ff;
+      e_ff_open[el] = open;
+      e_stamp[el] = stamp;
+    }
+  });
+}
+
+void Solver::Impl::project_all(uint32_t shooter_patch) {
+  const auto t0 = Clock::now();
+  ++stats.projections;
+  const glm::dvec3 eye = cube.eye();
+  const double eps = 1e-9 * prep.diagonal;
+  for (uint32_t p = 0; p < patches.size(); ++p) {
+    // Back-face culling of the parent patch, seen from the hemicube's centre (section 2.2).
+    p_front[p] = p != shooter_patch && glm::dot(prep.normal[p], eye - patches[p].corners[0]) > eps;
+  }
+  const size_t n = leaves.size();
+  const size_t chunks = pool.chunk_count(n);
+  pool.parallel_for(n, [&](size_t b, size_t e, size_t c) {
+    auto& out = chunk_frags[c];
+    out.clear();
+    Corners poly{};
+    for (size_t i = b; i < e; ++i) {
+      const uint32_t el = leaves[i];
+      const uint32_t p = e_patch[el];
+      f_begin[el] = f_end[el] = static_cast<uint32_t>(out.size());
+      if (!p_front[p]) continue;
+      corners_of(el, poly);
+      cube.project(std::span(poly.data(), patches[p].corner_count), el, prep.occlusion_group[p],
+                   params.method, scratch[c], out);
+      f_end[el] = static_cast<uint32_t>(out.size());
+    }
+  });
+  frags.clear();
+  for (size_t c = 0; c < chunks; ++c) {
+    const uint32_t base = static_cast<uint32_t>(frags.size());
+    frags.insert(frags.end(), chunk_frags[c].begin(), chunk_frags[c].end());
+    for (size_t i = n * c / chunks; i < n * (c + 1) / chunks; ++i) {
+      f_begin[leaves[i]] += base;
+      f_end[leaves[i]] += base;
+    }
+  }
+  detail::resolve(frags, cube.pixel_count(), params.method, prep.adjacency, pool, order, pixel_start);
+  sum_form_factors(leaves);
+  stats.peak_fragments = std::max<uint64_t>(stats.peak_fragments, frags.size());
+  stats.seconds_projecting += seconds_since(t0);
+}
+
+void Solver::Impl::project_children(const std::vector<uint32_t>& parents) {
+  const auto t0 = Clock::now();
+  const size_t n = parents.size();
+  const size_t chunks = pool.chunk_count(n);
+  pool.parallel_for(n, [&](size_t b, size_t e, size_t c) {
+    auto& out = chunk_frags[c];
+    out.clear();
+    Corners poly{};
+    for (size_t i = b; i < e; ++i) {
+      const uint32_t par = parents[i];
+      const std::span<const Fragment> pf(frags.data() + f_begin[par], f_end[par] - f_begin[par]);
+      for (uint32_t k = 0; k < 4; ++k) {
+        const uint32_t ch = e_child[par] + k;
+        f_begin[ch] = f_end[ch] = static_cast<uint32_t>(out.size());
+        if (pf.empty()) continue;
+        corners_of(ch, poly);
+        cube.project_child(std::span(poly.data(), corner_count(ch)), ch, pf, params.method,
+                           scratch[c], out);
+        f_end[ch] = static_cast<uint32_t>(out.size());
+      }
+    }
+  });
+  std::vector<uint32_t> children;
+  children.reserve(n * 4);
+  for (size_t c = 0; c < chunks; ++c) {
+    const uint32_t base = static_cast<uint32_t>(frags.size());
+    frags.insert(frags.end(), chunk_frags[c].begin(), chunk_frags[c].end());
+    for (size_t i = n * c / chunks; i < n * (c + 1) / chunks; ++i) {
+      for (uint32_t k = 0; k < 4; ++k) {
+        const uint32_t ch = e_child[parents[i]] + k;
+        f_begin[ch] += base;
+        f_end[ch] += base;
+        children.push_back(ch);
+      }
+    }
+  }
+  sum_form_factors(children);
+  stats.reused_children += children.size();
+  stats.peak_fragments = std::max<uint64_t>(stats.peak_fragments, frags.size());
+  stats.seconds_reusing += seconds_since(t0);
+}
+
+void Solver::Impl::shoot_from(uint32_t p, const Corners& c, uint32_t n, const glm::dvec3& dB,
+                              double area) {
+  ++stats.hemicubes;
+  ++stamp;
+  cube.place(polygon_centre(c, n), prep.normal[p], c[1] - c[0]);
+  project_all(p);
+
+  // This sub-area's share of the emitted power: how much the interaction matters (criterion a).
+  const double weight = channel_sum(dB) * area / emitted_power;
+  auto received = [&](uint32_t e, double ff) {
+    return std::min(1.0, ff * area / e_area[e]);  // F(element -> shooter) by reciprocity
+  };
+
+  for (int round = 0; round < 64; ++round) {
+    // This shot's radiosity at every leaf, and its spread around every vertex.
+    shot_b.resize(e_patch.size());
+    vmin.assign(vpos.size(), std::numeric_limits<double>::max());
+    vmax.assign(vpos.size(), std::numeric_limits<double>::lowest());
+    for (uint32_t e : leaves) {
+      const double v = e_stamp[e] == stamp ? mean(patches[e_patch[e]].reflectance * dB) * received(e, e_ff[e]) : 0.0;
+      shot_b[e] = v;
+      for (uint32_t k = 0; k < corner_count(e); ++k) {
+        const uint32_t vert = e_corner[e][k];
+        vmin[vert] = std::min(vmin[vert], v);
+        vmax[vert] = std::max(vmax[vert], v);
+      }
+    }
+    std::vector<uint32_t> to_split;
+    const double min_parent_area = 4.0 * aeps_area;
+    for (uint32_t e : leaves) {
+      if (e_area[e] < min_parent_area) continue;
+      bool split_it = false;
+      if (e_stamp[e] == stamp && e_ff_open[e] > 0.0) {
+        // (a) too coarse for this interaction.
+        split_it = e_ff[e] * weight > params.feps;
+        stats.splits_form_factor += split_it;
+        // (b) partly hidden, and the hidden part matters.
+        if (!split_it && e_ff[e] > 0.0 && e_ff[e] < e_ff_open[e]) {
+          const double open = mean(patches[e_patch[e]].reflectance * dB) * received(e, e_ff_open[e]);
+          split_it = open - shot_b[e] > b_tolerance;
+          stats.splits_visibility += split_it;
+        }
+      }
+      // (c) the shot's radiosity jumps across one of its corners.
+      for (uint32_t k = 0; k < corner_count(e) && !split_it; ++k) {
+        const uint32_t vert = e_corner[e][k];
+        split_it = vmax[vert] - vmin[vert] > b_tolerance;
+        stats.splits_gradient += split_it;
+      }
+      if (split_it) to_split.push_back(e);
+    }
+    if (to_split.empty()) break;
+    const uint64_t room = params.max_elements > leaves.size() ? (params.max_elements - leaves.size()) / 3 : 0;
+    if (to_split.size() > room) {
+      stats.element_limit = true;
+      to_split.resize(room);
+      if (to_split.empty()) break;
+    }
+    // The shot is cancelled and repeated with the split elements.
+    ++stats.rounds;
+    std::unordered_set<uint32_t> gone(to_split.begin(), to_split.end());
+    for (uint32_t e : to_split) split(e);
+    std::vector<uint32_t> next;
+    next.reserve(leaves.size() + 3 * to_split.size());
+    for (uint32_t e : leaves)
+      if (!gone.count(e)) next.push_back(e);
+    for (uint32_t e : to_split)
+      for (uint32_t k = 0; k < 4; ++k) next.push_back(e_child[e] + k);
+    leaves.swap(next);
+    if (params.reuse_visibility) {
+      project_children(to_split);
+    } else {
+      project_all(p);
+    }
+  }
+
+  // Southwell step: distribute this sub-area's unshot radiosity.
+  for (uint32_t e : leaves) {
+    if (e_stamp[e] != stamp || e_ff[e] <= 0.0) continue;
+    const uint32_t q = e_patch[e];
+    const glm::dvec3 gain = patches[q].reflectance * dB * received(e, e_ff[e]);
+    e_b[e] += gain;
+    e_unshot[e] += gain;
+    p_unshot[q] += channel_sum(gain) * e_area[e];
+  }
+}
+
+double Solver::Impl::node_power(uint32_t element, const glm::dvec3& unshot, const Corners& c,
+                                uint32_t n) const {
+  if (element == kNone || e_child[element] == kNone) return channel_sum(unshot) * polygon_area(c, n);
+  double power = 0.0;
+  for_leaves(element, [&](uint32_t e) { power += channel_sum(e_unshot[e]) * e_area[e]; });
+  return power;
+}
+
+bool Solver::Impl::needs_finer_shooter(uint32_t p, const Corners& c, uint32_t n, double power) const {
+  const double diameter = polygon_diameter(c, n);
+  if (diameter > shooter_limit) return true;
+  // A weak shooter is not worth more hemicubes.
+  if (power < params.feps * emitted_power) return false;
+  // A nearby patch whose plane cuts through the shooting area sees only part of it: from the
+  // centre it may be wholly back-facing (a block standing on a lit floor) or wholly in front.
+  const glm::dvec3 centre = polygon_centre(c, n);
+  const double eps = 1e-6 * prep.diagonal;
+  for (uint32_t q = 0; q < patches.size(); ++q) {
+    if (q == p || glm::distance(centre, p_centre[q]) - p_radius[q] > 2.0 * diameter) continue;
+    double lo = 0.0, hi = 0.0;
+    for (uint32_t i = 0; i < n; ++i) {
+      const double d = glm::dot(prep.normal[q], c[i] - patches[q].corners[0]);
+      lo = std::min(lo, d);
+      hi = std::max(hi, d);
+    }
+    if (lo < -eps && hi > eps) return true;
+  }
+  return false;
+}
+
+void Solver::Impl::shoot_patch(uint32_t p) {
+  const uint32_t n = patches[p].corner_count;
+  // Walks the patch's element tree down to sub-areas no wider than shooter_limit; a leaf wider
+  // than that is cut geometrically (its sub-areas share its unshot radiosity).
+  struct Node {
+    Corners c;
+    uint32_t element;  // kNone: a geometric piece of a leaf
+    glm::dvec3 unshot;
+    int depth;
+  };
+  std::vector<Node> stack;
+  std::vector<Node> shooters;
+  Corners root{};
+  corners_of(p_root[p], root);
+  stack.push_back({root, p_root[p], glm::dvec3(0.0), 0});
+  while (!stack.empty()) {
+    Node node = stack.back();
+    stack.pop_back();
+    const bool leaf = node.element == kNone || e_child[node.element] == kNone;
+    if (node.element != kNone && leaf) node.unshot = e_unshot[node.element];
+    if (node.depth >= 6 || !needs_finer_shooter(p, node.c, n, node_power(node.element, node.unshot, node.c, n))) {
+      shooters.push_back(node);
+      continue;
+    }
+    for (uint32_t k = 4; k-- > 0;) {
+      Node kid;
+      child_corners(node.c, n, k, kid.c);
+      kid.depth = node.depth + 1;
+      kid.element = leaf ? kNone : e_child[node.element] + k;
+      kid.unshot = node.unshot;
+      stack.push_back(kid);
+    }
+  }
+  for (const Node& s : shooters) {
+    const double area = polygon_area(s.c, n);
+    glm::dvec3 dB = s.unshot;
+    if (s.element != kNone && e_child[s.element] != kNone) {
+      glm::dvec3 power(0.0);
+      for_leaves(s.element, [&](uint32_t e) { power += e_unshot[e] * e_area[e]; });
+      dB = power / area;
+    }
+    if (channel_sum(dB) <= 0.0) continue;
+    shoot_from(p, s.c, n, dB, area);
+  }
+  for_leaves(p_root[p], [&](uint32_t e) { e_unshot[e] = glm::dvec3(0.0); });
+  p_unshot[p] = 0.0;
+}
+
+bool Solver::Impl::step() {
+  if (done) return false;
+  if (stats.unshot_fraction < params.convergence || emitted_power <= 0.0) {
+    stats.converged = true;
+    done = true;
+    return false;
+  }
+  if (stats.shots >= params.max_shots) {
+    stats.shot_limit = true;
+    done = true;
+    return false;
+  }
+  const auto t0 = Clock::now();
+  uint32_t best = 0;
+  for (uint32_t p = 1; p < patches.size(); ++p)
+    if (p_unshot[p] > p_unshot[best]) best = p;
+  shoot_patch(best);
+  ++stats.shots;
+  update_unshot_total();
+  stats.seconds += seconds_since(t0);
+  return true;
+}
+
+Solver::Solver(const Scene& scene, const Params& params)
+    : impl_(std::make_unique<Impl>(scene, params)) {}
+Solver::~Solver() = default;
+
+bool Solver::step() { return impl_->step(); }
+
+const Stats& Solver::stats() const { return impl_->stats; }
+
+const Stats& Solver::run(const ProgressFn& progress, const CancelToken* cancel) {
+  const auto t0 = Clock::now();
+  while (true) {
+    if (cancel && cancel->cancelled()) {
+      impl_->stats.cancelled = true;
+      break;
+    }
+    if (!impl_->step()) break;
+    if (progress) {
+      Progress pr;
+      pr.shots = impl_->stats.shots;
+      pr.unshot_fraction = impl_->stats.unshot_fraction;
+      pr.elements = impl_->stats.elements;
+      pr.elapsed_seconds = seconds_since(t0);
+      progress(pr);
+    }
+  }
+  return impl_->stats;
+}
+
+Mesh Solver::mesh(bool ambient) const {
+  const Impl& s = *impl_;
+  Mesh m;
+  // Ambient term (Cohen et al. 1988): the unshot power spread over the scene and reflected on
+  // average, per channel: ambient = R * sum(dB_i A_i) / sum(A_i), R = 1 / (1 - rho_mean).
+  glm::dvec3 amb(0.0);
+  if (ambient) {
+    glm::dvec3 unshot(0.0), rho(0.0);
+    for (uint32_t e : s.leaves) unshot += s.e_unshot[e] * s.e_area[e];
+    for (uint32_t p = 0; p < s.patches.size(); ++p) rho += s.patches[p].reflectance * s.prep.area[p];
+    rho /= s.prep.total_area;
+    amb = unshot / s.prep.total_area / (glm::dvec3(1.0) - rho);
+  }
+
+  std::vector<uint32_t> leaves = s.leaves;
+  std::sort(leaves.begin(), leaves.end(), [&](uint32_t a, uint32_t b) {
+    return s.e_patch[a] != s.e_patch[b] ? s.e_patch[a] < s.e_patch[b] : a < b;
+  });
+
+  // Every vertex position, to find the vertices of other surfaces on an element's edge (they are
+  // the same points, computed by the same midpoint arithmetic).
+  struct PosHash {
+    size_t operator()(const glm::dvec3& p) const {
+      return std::hash<double>()(p.x) ^ (std::hash<double>()(p.y) * 31) ^ (std::hash<double>()(p.z) * 131);
+    }
+  };
+  std::unordered_set<glm::dvec3, PosHash> positions(s.vpos.begin(), s.vpos.end());
+  m.positions = s.vpos;
+  std::vector<std::array<uint32_t, 2>> lerp_from;  // for extra vertices: the edge they lie on
+  std::unordered_map<uint64_t, uint32_t> extra;      // edge key -> extra vertex
+
+  // Collects the vertices strictly inside edge (a, b), in order from a to b.
+  std::function<void(uint32_t, uint32_t)> hanging = [&](uint32_t a, uint32_t b) {
+    uint32_t mid = kNone;
+    if (auto it = s.midpoints.find(edge_key(a, b)); it != s.midpoints.end()) {
+      mid = it->second;
+    } else if (auto ex = extra.find(edge_key(a, b)); ex != extra.end()) {
+      mid = ex->second;
+    } else {
+      const glm::dvec3 pm = 0.5 * (m.positions[a] + m.positions[b]);
+      if (positions.count(pm)) {
+        mid = static_cast<uint32_t>(m.positions.size());
+        m.positions.push_back(pm);
+        lerp_from.push_back({a, b});
+        extra.emplace(edge_key(a, b), mid);
+      }
+    }
+    if (mid == kNone) return;
+    hanging(a, mid);
+    m.boundary.push_back(mid);
+    hanging(mid, b);
+  };
+
+  std::vector<glm::dvec3> acc(s.vpos.size(), glm::dvec3(0.0));
+  std::vector<double> weight(s.vpos.size(), 0.0);
+  m.elements.reserve(leaves.size());
+  for (uint32_t e : leaves) {
+    Mesh::Element el;
+    el.patch = s.e_patch[e];
+    el.corner_count = s.corner_count(e);
+    el.corners = s.e_corner[e];
+    el.area = s.e_area[e];
+    el.radiosity = s.e_b[e] + s.patches[el.patch].reflectance * amb;
+    el.boundary_begin = static_cast<uint32_t>(m.boundary.size());
+    for (uint32_t k = 0; k < el.corner_count; ++k) {
+      const uint32_t a = el.corners[k], b = el.corners[(k + 1) % el.corner_count];
+      m.boundary.push_back(a);
+      hanging(a, b);
+    }
+    el.boundary_end = static_cast<uint32_t>(m.boundary.size());
+    for (uint32_t i = el.boundary_begin; i < el.boundary_end; ++i) {
+      const uint32_t v = m.boundary[i];
+      if (v >= s.vpos.size()) continue;  // another surface's point: interpolated below
+      acc[v] += el.radiosity * el.area;
+      weight[v] += el.area;
+    }
+    m.elements.push_back(el);
+  }
+  m.radiosity.resize(m.positions.size(), glm::dvec3(0.0));
+  for (size_t v = 0; v < s.vpos.size(); ++v)
+    if (weight[v] > 0.0) m.radiosity[v] = acc[v] / weight[v];
+  // Extra vertices were created in order, each from an earlier vertex pair.
+  for (size_t i = 0; i < lerp_from.size(); ++i) {
+    const auto [a, b] = lerp_from[i];
+    m.radiosity[s.vpos.size() + i] = 0.5 * (m.radiosity[a] + m.radiosity[b]);
+  }
+  return m;
+}
+
+}  // namespace hemibake::solver

@@ -1,0 +1,70 @@
+#include "thread_pool.h"
+
+#include <algorithm>
+
+namespace hemibake::solver::detail {
+
+ThreadPool::ThreadPool(unsigned threads) : threads_(std::max(1u, threads)) {
+  for (unsigned i = 1; i < threads_; ++i) workers_.emplace_back([this] { worker_loop(); });
+}
+
+ThreadPool::~ThreadPool() {
+  {
+    std::lock_guard lock(mutex_);
+    stop_ = true;
+  }
+  wake_.notify_all();
+  for (auto& w : workers_) w.join();
+}
+
+size_t ThreadPool::chunk_count(size_t n) const {
+  if (n == 0) return 0;
+  // A few chunks per thread balance uneven work (hemicube faces differ in size and depth).
+  const size_t want = threads_ == 1 ? 1 : static_cast<size_t>(threads_) * 4;
+  return std::min(n, want);
+}
+
+void ThreadPool::run_chunks(std::unique_lock<std::mutex>& lock) {
+  while (next_chunk_ < job_chunks_) {
+    const size_t chunk = next_chunk_++;
+    const size_t n = job_n_, chunks = job_chunks_;
+    const auto* job = job_;
+    lock.unlock();
+    (*job)(n * chunk / chunks, n * (chunk + 1) / chunks, chunk);
+    lock.lock();
+    if (++chunks_done_ == job_chunks_) done_.notify_all();
+  }
+}
+
+void ThreadPool::worker_loop() {
+  std::unique_lock lock(mutex_);
+  uint64_t seen = 0;
+  for (;;) {
+    wake_.wait(lock, [&] { return stop_ || (generation_ != seen && next_chunk_ < job_chunks_); });
+    if (stop_) return;
+    seen = generation_;
+    run_chunks(lock);
+  }
+}
+
+void ThreadPool::parallel_for(size_t n, const std::function<void(size_t, size_t, size_t)>& fn) {
+  const size_t chunks = chunk_count(n);
+  if (chunks == 0) return;
+  if (threads_ == 1 || chunks == 1) {
+    for (size_t c = 0; c < chunks; ++c) fn(n * c / chunks, n * (c + 1) / chunks, c);
+    return;
+  }
+  std::unique_lock lock(mutex_);
+  job_ = &fn;
+  job_n_ = n;
+  job_chunks_ = chunks;
+  next_chunk_ = 0;
+  chunks_done_ = 0;
+  ++generation_;
+  wake_.notify_all();
+  run_chunks(lock);
+  done_.wait(lock, [&] { return chunks_done_ == job_chunks_; });
+  job_ = nullptr;
+}
+
+}  // namespace hemibake::solver::detail
