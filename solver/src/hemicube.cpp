@@ -162,10 +162,17 @@ bool Hemicube::clip_to_face(const Face& face, std::span<const glm::dvec3> polygo
     const double x = std::clamp((q.x / q.z + 1.0) * half_n, 0.0, static_cast<double>(n_));
     const double y = std::clamp((q.y / q.z - face.b_min) * half_n, 0.0,
                                 static_cast<double>(face.height));
+    // Clipping at a corner that lies on a clip plane repeats it: drop repeats, which would
+    // otherwise be zero-length edges.
+    if (!s.poly2.empty() && s.poly2.back() == glm::dvec2(x, y)) continue;
     s.poly2.emplace_back(x, y);
     s.inv_depths.push_back(static_cast<float>(1.0 / q.z));
   }
-  return true;
+  while (s.poly2.size() > 1 && s.poly2.back() == s.poly2.front()) {
+    s.poly2.pop_back();
+    s.inv_depths.pop_back();
+  }
+  return s.poly2.size() >= 3;
 }
 
 void Hemicube::rasterize(const Face& face, uint32_t element, uint32_t group, Method method,
@@ -189,9 +196,8 @@ void Hemicube::rasterize(const Face& face, uint32_t element, uint32_t group, Met
   win.height = y1 - win.y0;
   const size_t cells = static_cast<size_t>(win.width) * static_cast<size_t>(win.height);
 
-  // Depth: 1/depth is affine in the face's (a, b) for a planar polygon, so it is evaluated at each
-  // pixel centre from the plane and clamped to the polygon's own range (a partly covered pixel's
-  // centre may lie off the polygon).
+  // Depth: 1/depth is affine in the face's (a, b) for a planar polygon, so it is evaluated from the
+  // plane and clamped to the polygon's own range against rounding.
   float inv_lo = s.inv_depths[0], inv_hi = inv_lo;
   for (float v : s.inv_depths) {
     inv_lo = std::min(inv_lo, v);
@@ -201,9 +207,10 @@ void Hemicube::rasterize(const Face& face, uint32_t element, uint32_t group, Met
                      glm::dot(plane_normal, face.forward));
   const double inv_h = plane_offset != 0.0 ? 1.0 / plane_offset : 0.0;
   const double step = 2.0 / n_;
-  auto inv_depth_at = [&](int px, int py) {
-    const double a = -1.0 + (px + 0.5) * step;
-    const double b = face.b_min + (py + 0.5) * step;
+  // (x, y) in face pixel coordinates.
+  auto inv_depth_at = [&](double x, double y) {
+    const double a = -1.0 + x * step;
+    const double b = face.b_min + y * step;
     const double v = (m.x * a + m.y * b + m.z) * inv_h;
     return std::clamp(static_cast<float>(v), inv_lo, inv_hi);
   };
@@ -218,7 +225,8 @@ void Hemicube::rasterize(const Face& face, uint32_t element, uint32_t group, Met
     }
     return false;  // only rounding puts a child outside its parent's pixels
   };
-  auto emit = [&](int col, int row, float area) {
+  // `cx`, `cy`: where in the pixel (0..1) the polygon's covered part is centred.
+  auto emit = [&](int col, int row, float area, double cx, double cy) {
     const int px = win.x0 + col, py = win.y0 + row;
     Fragment fr;
     fr.pixel = face.offset + static_cast<uint32_t>(py) * n_ + static_cast<uint32_t>(px);
@@ -229,18 +237,36 @@ void Hemicube::rasterize(const Face& face, uint32_t element, uint32_t group, Met
       if (!parent_trans(fr.pixel, fr.trans)) return;
       fr.group = parent[pj].group;
     } else {
-      fr.inv_depth = inv_depth_at(px, py);
+      fr.inv_depth = inv_depth_at(px + cx, py + cy);
     }
     out.push_back(fr);
   };
 
   if (method == Method::kAntiAliased) {
-    if (s.area.size() < cells) s.area.resize(cells);
-    scan_convert_area(s.poly2, win, std::span(s.area.data(), cells), s.scan);
+    if (s.area.size() < cells) {
+      s.area.resize(cells);
+      s.moment_x.resize(cells);
+      s.moment_y.resize(cells);
+    }
+    const std::span<double> area(s.area.data(), cells);
+    if (child) {
+      scan_convert_area(s.poly2, win, area, s.scan);
+    } else {
+      // The depth that orders a partly covered pixel is the polygon's mean depth over the part it
+      // covers (1/depth is affine, so its mean is its value at that part's centroid). The pixel
+      // centre would misorder surfaces that meet inside a pixel, such as a block standing on a
+      // floor.
+      scan_convert_moments(s.poly2, win, area, std::span(s.moment_x.data(), cells),
+                           std::span(s.moment_y.data(), cells), s.scan);
+    }
     for (int row = 0; row < win.height; ++row) {
       for (int col = 0; col < win.width; ++col) {
-        const double a = s.area[static_cast<size_t>(row) * win.width + col];
-        if (a > 1e-9) emit(col, row, static_cast<float>(std::min(a, 1.0)));
+        const size_t cell = static_cast<size_t>(row) * win.width + col;
+        const double a = area[cell];
+        if (a <= 1e-9) continue;
+        const double cx = child ? 0.5 : std::clamp(s.moment_x[cell] / a, 0.0, 1.0);
+        const double cy = child ? 0.5 : std::clamp(s.moment_y[cell] / a, 0.0, 1.0);
+        emit(col, row, static_cast<float>(std::min(a, 1.0)), cx, cy);
       }
     }
     return;
@@ -258,10 +284,11 @@ void Hemicube::rasterize(const Face& face, uint32_t element, uint32_t group, Met
       for (size_t i = 0; i < nv && inside; ++i) {
         const glm::dvec2 p = s.poly2[i];
         const glm::dvec2 d = s.poly2[(i + 1) % nv] - p;
+        if (d.x == 0.0 && d.y == 0.0) continue;
         const double e = d.x * (cy - p.y) - d.y * (cx - p.x);
         inside = e > 0.0 || (e == 0.0 && (d.y < 0.0 || (d.y == 0.0 && d.x < 0.0)));
       }
-      if (inside) emit(col, row, 1.0f);
+      if (inside) emit(col, row, 1.0f, 0.5, 0.5);
     }
   }
 }

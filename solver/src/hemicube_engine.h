@@ -41,7 +41,7 @@ class GroupAdjacency {
 /// Per-thread scratch for projecting polygons.
 struct ProjectScratch {
   ScanScratch scan;
-  std::vector<double> area;
+  std::vector<double> area, moment_x, moment_y;
   std::vector<glm::dvec3> clip_a, clip_b;
   std::vector<glm::dvec2> poly2;
   std::vector<float> inv_depths;

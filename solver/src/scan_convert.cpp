@@ -26,16 +26,30 @@ double signed_area(std::span<const glm::dvec2> polygon) {
   return 0.5 * twice;
 }
 
-void scan_convert_area(std::span<const glm::dvec2> polygon, const PixelWindow& window,
-                       std::span<double> area, ScanScratch& scratch) {
+namespace {
+
+// One edge walk for areas and, when moment_x is not empty, first moments. For an edge piece from
+// (x0, y0) to (x1, y1) inside a pixel (local coordinates), the region between it and the pixel's
+// bottom has area -s * integral of y dx (the paper's s (x_e - x_l)(y_e + y_l) / 2), moments
+// -s * integral of x y dx and -s * integral of y^2 / 2 dx, all exact by Simpson's rule since the
+// integrands are at most quadratic. Pixels below get the full-height column: -s dx for the area,
+// -s (x1^2 - x0^2) / 2 and -s dx / 2 for the moments, handed down by the column carry.
+void walk(std::span<const glm::dvec2> polygon, const PixelWindow& window, std::span<double> area,
+          std::span<double> moment_x, std::span<double> moment_y, ScanScratch& scratch) {
   const int w = window.width;
   const int h = window.height;
   assert(w > 0 && h > 0);
-  assert(area.size() >= static_cast<size_t>(w) * static_cast<size_t>(h));
   const size_t cells = static_cast<size_t>(w) * static_cast<size_t>(h);
+  assert(area.size() >= cells);
+  const bool moments = !moment_x.empty();
   std::fill_n(area.begin(), cells, 0.0);
   scratch.carry.assign(cells, 0.0);
-  double* carry = scratch.carry.data();
+  if (moments) {
+    std::fill_n(moment_x.begin(), cells, 0.0);
+    std::fill_n(moment_y.begin(), cells, 0.0);
+    scratch.carry_x.assign(cells, 0.0);
+    scratch.carry_y.assign(cells, 0.0);
+  }
   const size_t n = polygon.size();
   if (n < 3) return;
 
@@ -81,20 +95,47 @@ void scan_convert_area(std::span<const glm::dvec2> polygon, const PixelWindow& w
       const double ye = std::clamp(a.y - py, 0.0, 1.0), yl = std::clamp(b.y - py, 0.0, 1.0);
       const size_t cell = static_cast<size_t>(row) * static_cast<size_t>(w) + static_cast<size_t>(col);
       area[cell] += s * (xe - xl) * (ye + yl) * 0.5;
-      carry[cell] += s * (xe - xl);  // times the pixel height, which is 1
+      scratch.carry[cell] += s * (xe - xl);  // times the pixel height, which is 1
+      if (moments) {
+        const double xm = 0.5 * (xe + xl), ym = 0.5 * (ye + yl);
+        const double dx6 = (xe - xl) / 6.0;  // -(x_l - x_e) / 6, the sign of -s folded in below
+        moment_x[cell] += s * dx6 * (xe * ye + 4.0 * xm * ym + xl * yl);
+        moment_y[cell] += s * dx6 * 0.5 * (ye * ye + 4.0 * ym * ym + yl * yl);
+        scratch.carry_x[cell] += s * 0.5 * (xe * xe - xl * xl);
+        scratch.carry_y[cell] += s * 0.5 * (xe - xl);
+      }
       a = b;
     }
   }
 
   // Hand each column's carry down from the top row to the rows below it.
   for (int col = 0; col < w; ++col) {
-    double cc = 0.0;
+    double cc = 0.0, cx = 0.0, cy = 0.0;
     for (int row = h - 1; row >= 0; --row) {
       const size_t cell = static_cast<size_t>(row) * static_cast<size_t>(w) + static_cast<size_t>(col);
       area[cell] += cc;
-      cc += carry[cell];
+      cc += scratch.carry[cell];
+      if (moments) {
+        moment_x[cell] += cx;
+        moment_y[cell] += cy;
+        cx += scratch.carry_x[cell];
+        cy += scratch.carry_y[cell];
+      }
     }
   }
+}
+
+}  // namespace
+
+void scan_convert_area(std::span<const glm::dvec2> polygon, const PixelWindow& window,
+                       std::span<double> area, ScanScratch& scratch) {
+  walk(polygon, window, area, {}, {}, scratch);
+}
+
+void scan_convert_moments(std::span<const glm::dvec2> polygon, const PixelWindow& window,
+                          std::span<double> area, std::span<double> moment_x,
+                          std::span<double> moment_y, ScanScratch& scratch) {
+  walk(polygon, window, area, moment_x, moment_y, scratch);
 }
 
 }  // namespace hemibake::solver

@@ -56,6 +56,11 @@ uint64_t edge_key(uint32_t a, uint32_t b) {
 
 using Corners = std::array<glm::dvec3, 4>;
 
+// A shooting area refines while a receiving patch is nearer to its centre than this times its
+// diameter, down to kMaxShooterDepth levels below the patch.
+constexpr double kNearFactor = 2.0;
+constexpr int kMaxShooterDepth = 3;
+
 // Child k of a quad (4 corners) or triangle (3), in the order Solver::Impl::split creates them.
 // Quads split at edge midpoints and the corners' mean (the bilinear centre); triangles at edge
 // midpoints, the fourth child being the middle triangle.
@@ -119,6 +124,7 @@ struct Solver::Impl {
   void shoot_patch(uint32_t p);
   double node_power(uint32_t element, const glm::dvec3& unshot, const Corners& c, uint32_t n) const;
   bool needs_finer_shooter(uint32_t p, const Corners& c, uint32_t n, double power) const;
+  double point_patch_distance(const glm::dvec3& x, uint32_t q) const;
   void shoot_from(uint32_t p, const Corners& c, uint32_t n, const glm::dvec3& dB, double area);
   void project_all(uint32_t shooter_patch);
   void project_children(const std::vector<uint32_t>& parents);
@@ -476,10 +482,16 @@ bool Solver::Impl::needs_finer_shooter(uint32_t p, const Corners& c, uint32_t n,
   if (power < params.feps * emitted_power) return false;
   // A nearby patch whose plane cuts through the shooting area sees only part of it: from the
   // centre it may be wholly back-facing (a block standing on a lit floor) or wholly in front.
+  //
+  // A receiver closer to the shooting area than its size sees it very differently from how the
+  // centre's hemicube sees the receiver (the point-source error in room corners), so such areas
+  // shoot from smaller pieces down to a depth limit.
   const glm::dvec3 centre = polygon_centre(c, n);
   const double eps = 1e-6 * prep.diagonal;
+  const glm::dvec3& normal = prep.normal[p];
   for (uint32_t q = 0; q < patches.size(); ++q) {
     if (q == p || glm::distance(centre, p_centre[q]) - p_radius[q] > 2.0 * diameter) continue;
+    if (prep.occlusion_group[q] == prep.occlusion_group[p]) continue;  // coplanar: no exchange
     double lo = 0.0, hi = 0.0;
     for (uint32_t i = 0; i < n; ++i) {
       const double d = glm::dot(prep.normal[q], c[i] - patches[q].corners[0]);
@@ -487,8 +499,32 @@ bool Solver::Impl::needs_finer_shooter(uint32_t p, const Corners& c, uint32_t n,
       hi = std::max(hi, d);
     }
     if (lo < -eps && hi > eps) return true;
+    // Only patches in front of the shooter and facing it receive.
+    if (hi <= eps) continue;
+    bool in_front = false;
+    for (uint32_t i = 0; i < patches[q].corner_count && !in_front; ++i)
+      in_front = glm::dot(normal, patches[q].corners[i] - centre) > eps;
+    if (in_front && point_patch_distance(centre, q) < kNearFactor * diameter) return true;
   }
   return false;
+}
+
+double Solver::Impl::point_patch_distance(const glm::dvec3& x, uint32_t q) const {
+  const Patch& pq = patches[q];
+  const glm::dvec3& nq = prep.normal[q];
+  const double h = glm::dot(nq, x - pq.corners[0]);
+  const glm::dvec3 foot = x - h * nq;
+  bool inside = true;
+  double edge = std::numeric_limits<double>::max();
+  for (uint32_t i = 0; i < pq.corner_count; ++i) {
+    const glm::dvec3& a = pq.corners[i];
+    const glm::dvec3& b = pq.corners[(i + 1) % pq.corner_count];
+    if (glm::dot(glm::cross(b - a, foot - a), nq) < 0.0) inside = false;
+    const glm::dvec3 ab = b - a;
+    const double t = std::clamp(glm::dot(x - a, ab) / glm::dot(ab, ab), 0.0, 1.0);
+    edge = std::min(edge, glm::distance(x, a + t * ab));
+  }
+  return inside ? std::abs(h) : edge;
 }
 
 void Solver::Impl::shoot_patch(uint32_t p) {
@@ -511,7 +547,7 @@ void Solver::Impl::shoot_patch(uint32_t p) {
     stack.pop_back();
     const bool leaf = node.element == kNone || e_child[node.element] == kNone;
     if (node.element != kNone && leaf) node.unshot = e_unshot[node.element];
-    if (node.depth >= 6 || !needs_finer_shooter(p, node.c, n, node_power(node.element, node.unshot, node.c, n))) {
+    if (node.depth >= kMaxShooterDepth || !needs_finer_shooter(p, node.c, n, node_power(node.element, node.unshot, node.c, n))) {
       shooters.push_back(node);
       continue;
     }

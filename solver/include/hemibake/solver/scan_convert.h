@@ -20,6 +20,7 @@ struct PixelWindow {
 /// Scratch space for scan_convert_area, reusable across calls so that hot loops allocate nothing.
 struct ScanScratch {
   std::vector<double> carry;      ///< the paper's C array
+  std::vector<double> carry_x, carry_y;  ///< the same for the first moments
   std::vector<double> crossings;  ///< edge parameters where an edge crosses a pixel border
 };
 
@@ -31,6 +32,14 @@ struct ScanScratch {
 /// Implements the signed-edge trapezoids plus column carry of Figure 4.
 void scan_convert_area(std::span<const glm::dvec2> polygon, const PixelWindow& window,
                        std::span<double> area, ScanScratch& scratch);
+
+/// As scan_convert_area, and also the first moments of the covered part of each pixel about the
+/// pixel's lower-left corner (integral of x dA into `moment_x`, of y dA into `moment_y`), so that
+/// the covered part's centroid is (moment_x / area, moment_y / area). Both spans are sized like
+/// `area`. The moments use the same edge walk and column carry as the areas.
+void scan_convert_moments(std::span<const glm::dvec2> polygon, const PixelWindow& window,
+                          std::span<double> area, std::span<double> moment_x,
+                          std::span<double> moment_y, ScanScratch& scratch);
 
 /// The signed area of a closed polygon (positive for counter-clockwise loops).
 double signed_area(std::span<const glm::dvec2> polygon);

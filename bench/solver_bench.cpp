@@ -1,0 +1,113 @@
+// The solver's benchmark: the Cornell box at the paper's settings in both form-factor modes, the
+// cost of re-projecting against reusing the parent's pixels, and how the cost of one hemicube grows
+// with the number of elements. Each configuration runs in a child process so that its peak memory
+// is its own. Prints markdown tables (see bench/README.md).
+#include "hemibake/solver/scenes.h"
+#include "hemibake/solver/solver.h"
+
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <vector>
+
+namespace {
+
+using namespace hemibake::solver;
+
+struct Result {
+  Stats stats;
+  long peak_kib = 0;
+};
+
+// Runs fn() in a forked child and returns its stats and peak resident memory.
+template <typename Fn>
+Result isolated(Fn fn) {
+  int fds[2];
+  if (pipe(fds) != 0) std::abort();
+  const pid_t pid = fork();
+  if (pid == 0) {
+    close(fds[0]);
+    Result r;
+    r.stats = fn();
+    rusage ru{};
+    getrusage(RUSAGE_SELF, &ru);
+    r.peak_kib = ru.ru_maxrss;
+    if (write(fds[1], &r, sizeof r) != static_cast<ssize_t>(sizeof r)) _exit(1);
+    _exit(0);
+  }
+  close(fds[1]);
+  Result r;
+  const ssize_t got = read(fds[0], &r, sizeof r);
+  close(fds[0]);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  if (got != static_cast<ssize_t>(sizeof r)) {
+    std::fprintf(stderr, "benchmark child failed\n");
+    std::exit(1);
+  }
+  return r;
+}
+
+Stats solve(const Scene& scene, const Params& params) {
+  Solver solver(scene, params);
+  return solver.run();
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const bool quick = argc > 1 && std::strcmp(argv[1], "--quick") == 0;
+  const Scene cornell = make_cornell_box();
+
+  std::printf("## Cornell box (resolution 100, FEPS 0.001, AEPS 0.0001, until unshot < 0.001 of emitted)\n\n");
+  std::printf("| method | visibility of children | threads | time (s) | shots | hemicubes | elements | "
+              "projecting (s) | reusing (s) | splits | peak memory (MB) |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
+  struct Config {
+    Method method;
+    bool reuse;
+    uint32_t threads;
+  };
+  const std::vector<Config> configs{{Method::kAntiAliased, true, 0},  {Method::kAntiAliased, true, 1},
+                                    {Method::kAntiAliased, false, 0}, {Method::kClassical, true, 0},
+                                    {Method::kClassical, false, 0}};
+  for (const Config& c : configs) {
+    Params p;
+    p.method = c.method;
+    p.reuse_visibility = c.reuse;
+    p.threads = c.threads;
+    const Result r = isolated([&] { return solve(cornell, p); });
+    const Stats& s = r.stats;
+    std::printf("| %s | %s | %s | %.3f | %llu | %llu | %llu | %.3f | %.3f | %llu | %.1f |\n",
+                c.method == Method::kAntiAliased ? "aa" : "classical",
+                c.reuse ? "reused from parent" : "re-projected", c.threads == 0 ? "all" : "1", s.seconds,
+                static_cast<unsigned long long>(s.shots), static_cast<unsigned long long>(s.hemicubes),
+                static_cast<unsigned long long>(s.elements), s.seconds_projecting, s.seconds_reusing,
+                static_cast<unsigned long long>(s.splits), r.peak_kib / 1024.0);
+    std::fflush(stdout);
+  }
+
+  std::printf("\n## Cost of one hemicube against elements (closed box, no subdivision, aa, all threads)\n\n");
+  std::printf("| elements | hemicubes | time per hemicube (ms) | time per hemicube per 1000 elements (ms) |\n");
+  std::printf("|---|---|---|---|\n");
+  for (uint32_t cells : {4u, 8u, 16u, 32u, 64u}) {
+    if (quick && cells > 16) break;
+    const Scene box = make_closed_box(1.0, cells, glm::dvec3(0.5), glm::dvec3(1.0), false);
+    Params p;
+    p.aeps = 0.5;  // nothing splits: the element count stays fixed
+    p.max_shots = 40;
+    p.shooter_size = 10.0;
+    const Result r = isolated([&] { return solve(box, p); });
+    const double per = r.stats.seconds / static_cast<double>(r.stats.hemicubes) * 1e3;
+    std::printf("| %llu | %llu | %.3f | %.4f |\n", static_cast<unsigned long long>(r.stats.elements),
+                static_cast<unsigned long long>(r.stats.hemicubes), per,
+                per / (static_cast<double>(r.stats.elements) / 1000.0));
+    std::fflush(stdout);
+  }
+  return 0;
+}
