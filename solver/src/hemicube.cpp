@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cassert>
 #include <cmath>
+#include <map>
 #include <numbers>
 
 namespace hemibake::solver {
@@ -30,26 +31,27 @@ constexpr std::array<LocalFace, 5> kLocalFaces{{
     {{1, 0, 0}, {0, 0, 1}, {0, -1, 0}, false},
 }};
 
-// Keeps the part of `in` where dist(q) >= 0 (Sutherland-Hodgman against one plane).
+// Keeps the part of `in` where dist(q) >= 0 (Sutherland-Hodgman against one plane). A convex
+// polygon gains at most one vertex per plane.
 template <typename Dist>
-void clip_plane(const std::vector<glm::dvec3>& in, std::vector<glm::dvec3>& out, Dist dist) {
-  out.clear();
-  const size_t n = in.size();
+void clip_plane(const ClipPolygon& in, ClipPolygon& out, Dist dist) {
+  out.n = 0;
+  const int n = in.n;
   if (n == 0) return;
-  glm::dvec3 prev = in[n - 1];
+  glm::dvec3 prev = in.v[n - 1];
   double dprev = dist(prev);
-  for (size_t i = 0; i < n; ++i) {
-    const glm::dvec3& cur = in[i];
+  for (int i = 0; i < n; ++i) {
+    const glm::dvec3& cur = in.v[i];
     const double dcur = dist(cur);
-    if ((dprev >= 0.0) != (dcur >= 0.0)) {
+    if ((dprev >= 0.0) != (dcur >= 0.0) && out.n < ClipPolygon::kMax) {
       const double t = dprev / (dprev - dcur);
-      out.push_back(prev + (cur - prev) * t);
+      out.v[out.n++] = prev + (cur - prev) * t;
     }
-    if (dcur >= 0.0) out.push_back(cur);
+    if (dcur >= 0.0 && out.n < ClipPolygon::kMax) out.v[out.n++] = cur;
     prev = cur;
     dprev = dcur;
   }
-  if (out.size() < 3) out.clear();
+  if (out.n < 3) out.n = 0;
 }
 
 glm::dvec3 newell_normal(std::span<const glm::dvec3> p) {
@@ -122,6 +124,9 @@ void Hemicube::place(const glm::dvec3& eye, const glm::dvec3& normal, const glm:
                                              normal);
   t = glm::normalize(t);
   const glm::dvec3 b = glm::cross(normal, t);
+  frame_x_ = t;
+  frame_y_ = b;
+  frame_z_ = normal;
   auto to_world = [&](const glm::dvec3& v) { return v.x * t + v.y * b + v.z * normal; };
   for (size_t f = 0; f < kLocalFaces.size(); ++f) {
     faces_[f].right = to_world(kLocalFaces[f].right);
@@ -130,35 +135,76 @@ void Hemicube::place(const glm::dvec3& eye, const glm::dvec3& normal, const glm:
   }
 }
 
-bool Hemicube::clip_to_face(const Face& face, std::span<const glm::dvec3> polygon,
-                            ProjectScratch& s) const {
-  auto& a = s.clip_a;
-  auto& b = s.clip_b;
-  a.clear();
-  double scale = 0.0;
+void Hemicube::to_local(std::span<const glm::dvec3> polygon, ProjectScratch& s) const {
+  s.local_n = 0;
   for (const glm::dvec3& p : polygon) {
     const glm::dvec3 d = p - eye_;
-    const glm::dvec3 q(glm::dot(d, face.right), glm::dot(d, face.up), glm::dot(d, face.forward));
-    scale = std::max(scale, std::abs(q.x) + std::abs(q.y) + std::abs(q.z));
-    a.push_back(q);
+    s.local[s.local_n++] = glm::dvec3(glm::dot(d, frame_x_), glm::dot(d, frame_y_), glm::dot(d, frame_z_));
   }
+}
+
+bool Hemicube::clip_to_face(size_t f, ProjectScratch& s) const {
+  const Face& face = faces_[f];
+  ClipPolygon& a = s.clip_a;
+  ClipPolygon& b = s.clip_b;
+  a.n = 0;
+  b.n = 0;
+  double scale = 0.0;
+  // Outcodes against the face's frustum: a polygon wholly outside one plane is not on this face.
+  unsigned all_out = 0x1f, any_out = 0;
+  for (int i = 0; i < s.local_n; ++i) {
+    const glm::dvec3& l = s.local[i];
+    // The face's (right, up, forward) in the hemicube's frame (see kLocalFaces).
+    glm::dvec3 q;
+    switch (f) {
+      case 0: q = l; break;
+      case 1: q = glm::dvec3(l.y, l.z, l.x); break;
+      case 2: q = glm::dvec3(-l.y, l.z, -l.x); break;
+      case 3: q = glm::dvec3(-l.x, l.z, l.y); break;
+      default: q = glm::dvec3(l.x, l.z, -l.y); break;
+    }
+    scale = std::max(scale, std::abs(q.x) + std::abs(q.y) + std::abs(q.z));
+    unsigned out = 0;
+    out |= (q.z - q.x < 0.0) ? 1u : 0u;
+    out |= (q.z + q.x < 0.0) ? 2u : 0u;
+    out |= (q.z - q.y < 0.0) ? 4u : 0u;
+    out |= ((face.b_min < 0.0 ? q.z + q.y : q.y) < 0.0) ? 8u : 0u;
+    out |= (q.z <= 0.0) ? 16u : 0u;
+    all_out &= out;
+    any_out |= out;
+    a.v[a.n++] = q;
+  }
+  if (all_out != 0) return false;
   // The face's frustum: |a| <= depth, b within [b_min * depth, depth], and in front of the eye.
-  clip_plane(a, b, [](const glm::dvec3& q) { return q.z - q.x; });
-  clip_plane(b, a, [](const glm::dvec3& q) { return q.z + q.x; });
-  clip_plane(a, b, [](const glm::dvec3& q) { return q.z - q.y; });
-  if (face.b_min < 0.0) {
-    clip_plane(b, a, [](const glm::dvec3& q) { return q.z + q.y; });
-  } else {
-    clip_plane(b, a, [](const glm::dvec3& q) { return q.y; });
+  // Only the planes that some corner lies outside of cut anything.
+  ClipPolygon* in = &a;
+  ClipPolygon* out = &b;
+  auto clip = [&](auto dist) {
+    clip_plane(*in, *out, dist);
+    std::swap(in, out);
+  };
+  if (any_out & 1u) clip([](const glm::dvec3& q) { return q.z - q.x; });
+  if (any_out & 2u) clip([](const glm::dvec3& q) { return q.z + q.x; });
+  if (any_out & 4u) clip([](const glm::dvec3& q) { return q.z - q.y; });
+  if (any_out & 8u) {
+    if (face.b_min < 0.0) {
+      clip([](const glm::dvec3& q) { return q.z + q.y; });
+    } else {
+      clip([](const glm::dvec3& q) { return q.y; });
+    }
   }
   const double near = 1e-9 * scale;
-  clip_plane(a, b, [near](const glm::dvec3& q) { return q.z - near; });
-  if (b.empty()) return false;
+  bool near_cut = false;
+  for (int i = 0; i < in->n && !near_cut; ++i) near_cut = in->v[i].z < near;
+  if (near_cut) clip([near](const glm::dvec3& q) { return q.z - near; });
+  if (in->n == 0) return false;
+  const ClipPolygon& clipped = *in;
 
   const double half_n = 0.5 * n_;
   s.poly2.clear();
   s.inv_depths.clear();
-  for (const glm::dvec3& q : b) {
+  for (int i = 0; i < clipped.n; ++i) {
+    const glm::dvec3& q = clipped.v[i];
     const double x = std::clamp((q.x / q.z + 1.0) * half_n, 0.0, static_cast<double>(n_));
     const double y = std::clamp((q.y / q.z - face.b_min) * half_n, 0.0,
                                 static_cast<double>(face.height));
@@ -295,11 +341,15 @@ void Hemicube::rasterize(const Face& face, uint32_t element, uint32_t group, Met
 
 void Hemicube::project(std::span<const glm::dvec3> polygon, uint32_t element, uint32_t group,
                        Method method, ProjectScratch& scratch, std::vector<Fragment>& out) const {
+  to_local(polygon, scratch);
+  bool any_in_front = false;
+  for (int i = 0; i < scratch.local_n; ++i) any_in_front = any_in_front || scratch.local[i].z > 0.0;
+  if (!any_in_front) return;  // wholly below the hemicube's base
   const glm::dvec3 normal = newell_normal(polygon);
   const double offset = glm::dot(normal, polygon[0] - eye_);
-  for (const Face& face : faces_) {
-    if (!clip_to_face(face, polygon, scratch)) continue;
-    rasterize(face, element, group, method, normal, offset, {}, false, scratch, out);
+  for (size_t f = 0; f < faces_.size(); ++f) {
+    if (!clip_to_face(f, scratch)) continue;
+    rasterize(faces_[f], element, group, method, normal, offset, {}, false, scratch, out);
   }
 }
 
@@ -307,13 +357,15 @@ void Hemicube::project_child(std::span<const glm::dvec3> polygon, uint32_t eleme
                              std::span<const Fragment> parent, Method method,
                              ProjectScratch& scratch, std::vector<Fragment>& out) const {
   if (parent.empty()) return;
+  to_local(polygon, scratch);
   size_t begin = 0;
-  for (const Face& face : faces_) {
+  for (size_t f = 0; f < faces_.size(); ++f) {
+    const Face& face = faces_[f];
     // The parent's fragments on this face (they are sorted by pixel, faces in order).
     const uint32_t end_pixel = face.offset + face.height * n_;
     size_t end = begin;
     while (end < parent.size() && parent[end].pixel < end_pixel) ++end;
-    if (end > begin && clip_to_face(face, polygon, scratch)) {
+    if (end > begin && clip_to_face(f, scratch)) {
       rasterize(face, element, 0, method, glm::dvec3(0.0), 0.0, parent.subspan(begin, end - begin),
                 true, scratch, out);
     }
@@ -447,18 +499,44 @@ std::vector<double> hemicube_form_factors(const glm::dvec3& eye, const glm::dvec
   cube.place(eye, glm::normalize(normal), up_hint);
   detail::ProjectScratch scratch;
   std::vector<detail::Fragment> frags;
+  auto group_of = [&](uint32_t i) { return polygons[i].group != kNone ? polygons[i].group : 0x80000000u + i; };
   for (uint32_t i = 0; i < polygons.size(); ++i) {
     const auto& poly = polygons[i].corners;
     if (poly.size() < 3) continue;
     const glm::dvec3 pn = detail::newell_normal(poly);
     if (glm::dot(pn, eye - poly[0]) <= 0.0) continue;  // facing away
-    const uint32_t group = polygons[i].group != kNone ? polygons[i].group : 0x80000000u + i;
-    cube.project(poly, i, group, method, scratch, frags);
+    // Long loops are cut into a fan of triangles: the clipper holds a bounded number of corners.
+    if (poly.size() <= 8) {
+      cube.project(poly, i, group_of(i), method, scratch, frags);
+      continue;
+    }
+    for (size_t k = 1; k + 1 < poly.size(); ++k) {
+      const std::array<glm::dvec3, 3> tri{poly[0], poly[k], poly[k + 1]};
+      cube.project(tri, i, group_of(i), method, scratch, frags);
+    }
+  }
+  // Polygons with a common edge (the same two corner points) are neighbours, as in a solve.
+  detail::GroupAdjacency adjacency;
+  {
+    std::map<std::pair<std::array<double, 3>, std::array<double, 3>>, std::vector<uint32_t>> edges;
+    for (uint32_t i = 0; i < polygons.size(); ++i) {
+      const auto& poly = polygons[i].corners;
+      for (size_t k = 0; k < poly.size() && poly.size() >= 3; ++k) {
+        std::array<double, 3> a{poly[k].x, poly[k].y, poly[k].z};
+        const glm::dvec3& q = poly[(k + 1) % poly.size()];
+        std::array<double, 3> b{q.x, q.y, q.z};
+        if (b < a) std::swap(a, b);
+        edges[{a, b}].push_back(i);
+      }
+    }
+    for (const auto& [edge, list] : edges)
+      for (size_t x = 0; x < list.size(); ++x)
+        for (size_t y = x + 1; y < list.size(); ++y) adjacency.add(group_of(list[x]), group_of(list[y]));
+    adjacency.finish();
   }
   detail::ThreadPool pool(1);
-  detail::GroupAdjacency none;
   std::vector<uint32_t> order, starts;
-  detail::resolve(frags, cube.pixel_count(), method, none, pool, order, starts);
+  detail::resolve(frags, cube.pixel_count(), method, adjacency, pool, order, starts);
   std::vector<double> ff(polygons.size(), 0.0);
   const auto& dff = cube.delta_form_factors();
   for (const auto& f : frags) ff[f.element] += static_cast<double>(f.area) * f.trans * dff[f.pixel];

@@ -38,11 +38,20 @@ class GroupAdjacency {
   std::vector<uint64_t> keys_;
 };
 
+/// A polygon being clipped: at most 4 corners plus one per clip plane.
+struct ClipPolygon {
+  static constexpr int kMax = 16;
+  std::array<glm::dvec3, kMax> v;
+  int n = 0;
+};
+
 /// Per-thread scratch for projecting polygons.
 struct ProjectScratch {
   ScanScratch scan;
   std::vector<double> area, moment_x, moment_y;
-  std::vector<glm::dvec3> clip_a, clip_b;
+  ClipPolygon clip_a, clip_b;
+  std::array<glm::dvec3, ClipPolygon::kMax> local;  // the polygon in the hemicube's frame
+  int local_n = 0;
   std::vector<glm::dvec2> poly2;
   std::vector<float> inv_depths;
 };
@@ -82,8 +91,8 @@ class Hemicube {
     uint32_t offset = 0;            // first global pixel index
   };
   // Clips to face f and maps to pixel coordinates; false when nothing is left.
-  bool clip_to_face(const Face& face, std::span<const glm::dvec3> polygon,
-                    ProjectScratch& scratch) const;
+  void to_local(std::span<const glm::dvec3> polygon, ProjectScratch& scratch) const;
+  bool clip_to_face(size_t face, ProjectScratch& scratch) const;
   void rasterize(const Face& face, uint32_t element, uint32_t group, Method method,
                  const glm::dvec3& plane_normal, double plane_offset, std::span<const Fragment> parent,
                  bool child, ProjectScratch& scratch, std::vector<Fragment>& out) const;
@@ -93,6 +102,7 @@ class Hemicube {
   std::vector<double> dff_;
   std::array<Face, 5> faces_{};
   glm::dvec3 eye_{0.0};
+  glm::dvec3 frame_x_{1, 0, 0}, frame_y_{0, 1, 0}, frame_z_{0, 0, 1};
 };
 
 /// Fills `trans` of every fragment: classical keeps the nearest fragment of each pixel (trans 1,

@@ -53,8 +53,29 @@ void walk(std::span<const glm::dvec2> polygon, const PixelWindow& window, std::s
   const size_t n = polygon.size();
   if (n < 3) return;
 
+  const double signed_total = signed_area(polygon);
+  if (cells == 1) {
+    // A polygon inside a single pixel: its own area and centroid, no walk needed.
+    area[0] = std::abs(signed_total);
+    if (moments && signed_total != 0.0) {
+      double cx = 0.0, cy = 0.0;
+      for (size_t i = 0; i < n; ++i) {
+        const glm::dvec2 a = polygon[i] - glm::dvec2(window.x0, window.y0);
+        const glm::dvec2 b = polygon[(i + 1) % n] - glm::dvec2(window.x0, window.y0);
+        const double cross = a.x * b.y - b.x * a.y;
+        cx += (a.x + b.x) * cross;
+        cy += (a.y + b.y) * cross;
+      }
+      // Centroid = (cx, cy) / (6 A) with A the signed area; moments are centroid times |A|.
+      const double k = std::abs(signed_total) / (6.0 * signed_total);
+      moment_x[0] = cx * k;
+      moment_y[0] = cy * k;
+    }
+    return;
+  }
+
   // Orientation: the trapezoid sum is positive for counter-clockwise loops.
-  const double s = signed_area(polygon) >= 0.0 ? 1.0 : -1.0;
+  const double s = signed_total >= 0.0 ? 1.0 : -1.0;
   const double fx0 = window.x0;
   const double fy0 = window.y0;
 
@@ -66,18 +87,32 @@ void walk(std::span<const glm::dvec2> polygon, const PixelWindow& window, std::s
     const glm::dvec2 d = q - p;
 
     // Split the edge where it crosses a pixel border, so that every piece lies in one pixel.
+    // Crossings of vertical and of horizontal pixel borders each come in increasing t; merge.
     ts.clear();
     ts.push_back(0.0);
-    ts.push_back(1.0);
     {
-      const double lo = std::min(p.x, q.x), hi = std::max(p.x, q.x);
-      for (double k = std::floor(lo) + 1.0; k < hi; k += 1.0) ts.push_back((k - p.x) / d.x);
+      std::vector<double>& ys = scratch.y_crossings;
+      ys.clear();
+      if (p.y != q.y) {
+        if (d.y > 0.0) {
+          for (double k = std::floor(p.y) + 1.0; k < q.y; k += 1.0) ys.push_back((k - p.y) / d.y);
+        } else {
+          for (double k = std::ceil(p.y) - 1.0; k > q.y; k -= 1.0) ys.push_back((k - p.y) / d.y);
+        }
+      }
+      size_t yi = 0;
+      auto push_x = [&](double t) {
+        while (yi < ys.size() && ys[yi] < t) ts.push_back(ys[yi++]);
+        ts.push_back(t);
+      };
+      if (d.x > 0.0) {
+        for (double k = std::floor(p.x) + 1.0; k < q.x; k += 1.0) push_x((k - p.x) / d.x);
+      } else {
+        for (double k = std::ceil(p.x) - 1.0; k > q.x; k -= 1.0) push_x((k - p.x) / d.x);
+      }
+      while (yi < ys.size()) ts.push_back(ys[yi++]);
     }
-    if (p.y != q.y) {
-      const double lo = std::min(p.y, q.y), hi = std::max(p.y, q.y);
-      for (double k = std::floor(lo) + 1.0; k < hi; k += 1.0) ts.push_back((k - p.y) / d.y);
-    }
-    std::sort(ts.begin(), ts.end());
+    ts.push_back(1.0);
 
     glm::dvec2 a = p;
     for (size_t k = 1; k < ts.size(); ++k) {

@@ -56,10 +56,11 @@ uint64_t edge_key(uint32_t a, uint32_t b) {
 
 using Corners = std::array<glm::dvec3, 4>;
 
-// A shooting area refines while a receiving patch is nearer to its centre than this times its
-// diameter, down to kMaxShooterDepth levels below the patch.
+// A receiver nearer to a shooting area's centre than kNearFactor times its diameter takes its share
+// from the area's quarters, down to kMaxShooterDepth levels.
 constexpr double kNearFactor = 2.0;
 constexpr int kMaxShooterDepth = 3;
+constexpr uint32_t kMinResolution = 20;
 
 // Child k of a quad (4 corners) or triangle (3), in the order Solver::Impl::split creates them.
 // Quads split at edge midpoints and the corners' mean (the bilinear centre); triangles at edge
@@ -121,12 +122,17 @@ struct Solver::Impl {
 
   // Shooting.
   bool step();
+  struct ShooterNode {
+    Corners c;
+    uint32_t element;  // kNone: a geometric piece of a leaf
+    glm::dvec3 unshot;
+    int depth;
+  };
   void shoot_patch(uint32_t p);
-  double node_power(uint32_t element, const glm::dvec3& unshot, const Corners& c, uint32_t n) const;
-  bool needs_finer_shooter(uint32_t p, const Corners& c, uint32_t n, double power) const;
-  double point_patch_distance(const glm::dvec3& x, uint32_t q) const;
-  void shoot_from(uint32_t p, const Corners& c, uint32_t n, const glm::dvec3& dB, double area);
-  void project_all(uint32_t shooter_patch);
+  void shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers, bool whole_scene);
+  void replace_split(std::vector<uint32_t>& list) const;
+  void grow_scratch();
+  void project(uint32_t shooter_patch, std::span<const uint32_t> elements);
   void project_children(const std::vector<uint32_t>& parents);
   void sum_form_factors(std::span<const uint32_t> elements);
   void update_unshot_total();
@@ -147,16 +153,19 @@ struct Solver::Impl {
   std::vector<uint32_t> e_patch, e_parent, e_child;
   std::vector<std::array<uint32_t, 4>> e_corner;
   std::vector<double> e_area;
+  std::vector<glm::dvec3> e_centre;  // bounding sphere
+  std::vector<double> e_radius;
   std::vector<glm::dvec3> e_b, e_unshot;
   std::vector<uint32_t> leaves;
   std::vector<uint32_t> p_root;
   std::vector<double> p_unshot;  // unshot power per patch (channel sum times area)
   std::vector<uint8_t> p_front;  // per patch: faces the current hemicube
-  std::vector<glm::dvec3> p_centre;  // per patch: bounding sphere
-  std::vector<double> p_radius;
 
   // Per-hemicube scratch.
-  detail::Hemicube cube;
+  // One hemicube per near-field depth: a quarter-size shooting area serves receivers half as far,
+  // which project as large, so its hemicube needs half the resolution (at least kMinResolution).
+  std::vector<detail::Hemicube> cubes;
+  detail::Hemicube* cube = nullptr;  // the one in use
   detail::ThreadPool pool;
   std::vector<Fragment> frags;
   std::vector<uint32_t> f_begin, f_end;  // per element: its fragments in `frags`
@@ -176,8 +185,13 @@ Solver::Impl::Impl(const Scene& scene, const Params& p)
     : params(p),
       patches(scene.patches),
       prep(detail::prepare(scene)),
-      cube(p.resolution),
+
       pool(p.threads != 0 ? p.threads : std::max(1u, std::thread::hardware_concurrency())) {
+  for (int d = 0; d <= kMaxShooterDepth; ++d) {
+    const uint32_t res = std::max(kMinResolution, ((params.resolution >> d) + 1) & ~1u);
+    cubes.emplace_back(std::min(res, params.resolution));
+  }
+  cube = &cubes[0];
   aeps_area = params.aeps * prep.total_area;
   shooter_limit = params.shooter_size * prep.diagonal;
   vpos = prep.vertex_position;
@@ -190,14 +204,6 @@ Solver::Impl::Impl(const Scene& scene, const Params& p)
   p_root.resize(patches.size());
   p_unshot.resize(patches.size());
   p_front.resize(patches.size());
-  p_centre.resize(patches.size());
-  p_radius.resize(patches.size());
-  for (uint32_t i = 0; i < patches.size(); ++i) {
-    Corners c = patches[i].corners;
-    p_centre[i] = polygon_centre(c, patches[i].corner_count);
-    for (uint32_t k = 0; k < patches[i].corner_count; ++k)
-      p_radius[i] = std::max(p_radius[i], glm::distance(p_centre[i], c[k]));
-  }
   for (uint32_t i = 0; i < patches.size(); ++i) {
     p_root[i] = add_element(i, kNone, prep.corner_vertex[i], patches[i].emission, patches[i].emission);
     p_unshot[i] = channel_sum(patches[i].emission) * prep.area[i];
@@ -228,7 +234,13 @@ uint32_t Solver::Impl::add_element(uint32_t patch, uint32_t parent,
   e_corner.push_back(corners);
   Corners c{};
   corners_of(id, c);
-  e_area.push_back(polygon_area(c, patches[patch].corner_count));
+  const uint32_t nc = patches[patch].corner_count;
+  e_area.push_back(polygon_area(c, nc));
+  const glm::dvec3 centre = polygon_centre(c, nc);
+  double radius = 0.0;
+  for (uint32_t i = 0; i < nc; ++i) radius = std::max(radius, glm::distance(centre, c[i]));
+  e_centre.push_back(centre);
+  e_radius.push_back(radius);
   e_b.push_back(b);
   e_unshot.push_back(unshot);
   f_begin.push_back(0);
@@ -279,7 +291,7 @@ void Solver::Impl::update_unshot_total() {
 }
 
 void Solver::Impl::sum_form_factors(std::span<const uint32_t> elements) {
-  const auto& dff = cube.delta_form_factors();
+  const auto& dff = cube->delta_form_factors();
   pool.parallel_for(elements.size(), [&](size_t b, size_t e, size_t) {
     for (size_t i = b; i < e; ++i) {
       const uint32_t el = elements[i];
@@ -297,28 +309,28 @@ void Solver::Impl::sum_form_factors(std::span<const uint32_t> elements) {
   });
 }
 
-void Solver::Impl::project_all(uint32_t shooter_patch) {
+void Solver::Impl::project(uint32_t shooter_patch, std::span<const uint32_t> elements) {
   const auto t0 = Clock::now();
   ++stats.projections;
-  const glm::dvec3 eye = cube.eye();
+  const glm::dvec3 eye = cube->eye();
   const double eps = 1e-9 * prep.diagonal;
   for (uint32_t p = 0; p < patches.size(); ++p) {
     // Back-face culling of the parent patch, seen from the hemicube's centre (section 2.2).
     p_front[p] = p != shooter_patch && glm::dot(prep.normal[p], eye - patches[p].corners[0]) > eps;
   }
-  const size_t n = leaves.size();
+  const size_t n = elements.size();
   const size_t chunks = pool.chunk_count(n);
   pool.parallel_for(n, [&](size_t b, size_t e, size_t c) {
     auto& out = chunk_frags[c];
     out.clear();
     Corners poly{};
     for (size_t i = b; i < e; ++i) {
-      const uint32_t el = leaves[i];
+      const uint32_t el = elements[i];
       const uint32_t p = e_patch[el];
       f_begin[el] = f_end[el] = static_cast<uint32_t>(out.size());
       if (!p_front[p]) continue;
       corners_of(el, poly);
-      cube.project(std::span(poly.data(), patches[p].corner_count), el, prep.occlusion_group[p],
+      cube->project(std::span(poly.data(), patches[p].corner_count), el, prep.occlusion_group[p],
                    params.method, scratch[c], out);
       f_end[el] = static_cast<uint32_t>(out.size());
     }
@@ -328,12 +340,12 @@ void Solver::Impl::project_all(uint32_t shooter_patch) {
     const uint32_t base = static_cast<uint32_t>(frags.size());
     frags.insert(frags.end(), chunk_frags[c].begin(), chunk_frags[c].end());
     for (size_t i = n * c / chunks; i < n * (c + 1) / chunks; ++i) {
-      f_begin[leaves[i]] += base;
-      f_end[leaves[i]] += base;
+      f_begin[elements[i]] += base;
+      f_end[elements[i]] += base;
     }
   }
-  detail::resolve(frags, cube.pixel_count(), params.method, prep.adjacency, pool, order, pixel_start);
-  sum_form_factors(leaves);
+  detail::resolve(frags, cube->pixel_count(), params.method, prep.adjacency, pool, order, pixel_start);
+  sum_form_factors(elements);
   stats.peak_fragments = std::max<uint64_t>(stats.peak_fragments, frags.size());
   stats.seconds_projecting += seconds_since(t0);
 }
@@ -354,7 +366,7 @@ void Solver::Impl::project_children(const std::vector<uint32_t>& parents) {
         f_begin[ch] = f_end[ch] = static_cast<uint32_t>(out.size());
         if (pf.empty()) continue;
         corners_of(ch, poly);
-        cube.project_child(std::span(poly.data(), corner_count(ch)), ch, pf, params.method,
+        cube->project_child(std::span(poly.data(), corner_count(ch)), ch, pf, params.method,
                            scratch[c], out);
         f_end[ch] = static_cast<uint32_t>(out.size());
       }
@@ -380,25 +392,84 @@ void Solver::Impl::project_children(const std::vector<uint32_t>& parents) {
   stats.seconds_reusing += seconds_since(t0);
 }
 
-void Solver::Impl::shoot_from(uint32_t p, const Corners& c, uint32_t n, const glm::dvec3& dB,
-                              double area) {
+void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers,
+                              bool whole_scene) {
+  const uint32_t n = patches[p].corner_count;
+  const double area = polygon_area(node.c, n);
+  glm::dvec3 dB = node.unshot;
+  if (node.element != kNone && e_child[node.element] != kNone) {
+    glm::dvec3 power(0.0);
+    for_leaves(node.element, [&](uint32_t e) { power += e_unshot[e] * e_area[e]; });
+    dB = power / area;
+  } else if (node.element != kNone) {
+    dB = e_unshot[node.element];
+  }
+  if (channel_sum(dB) <= 0.0 || receivers.empty()) return;
+  const double power = channel_sum(dB) * area;
+  const glm::dvec3 centre = polygon_centre(node.c, n);
+  const double diameter = polygon_diameter(node.c, n);
+
+  // Receivers split by earlier nodes are replaced by their leaves.
+  std::vector<uint32_t> current;
+  current.reserve(receivers.size());
+  for (uint32_t e : receivers) for_leaves(e, [&](uint32_t leaf) { current.push_back(leaf); });
+
+  // What the hemicube must see: every receiver, and whatever may stand between a receiver and the
+  // shooting area (within the ball around the area that holds every receiver).
+  std::vector<uint32_t> seen;
+  if (whole_scene) {
+    seen = leaves;
+  } else {
+    double radius = 0.0;
+    for (uint32_t e : current) radius = std::max(radius, glm::distance(centre, e_centre[e]) + e_radius[e]);
+    radius += 0.5 * diameter;
+    for (uint32_t e : leaves)
+      if (glm::distance(centre, e_centre[e]) - e_radius[e] <= radius) seen.push_back(e);
+  }
+
   ++stats.hemicubes;
   ++stamp;
-  cube.place(polygon_centre(c, n), prep.normal[p], c[1] - c[0]);
-  project_all(p);
+  cube = &cubes[static_cast<size_t>(node.depth)];
+  cube->place(centre, prep.normal[p], node.c[1] - node.c[0]);
+  project(p, seen);
 
-  // This sub-area's share of the emitted power: how much the interaction matters (criterion a).
-  const double weight = channel_sum(dB) * area / emitted_power;
+  // Near-field: a receiver close to the shooting area (a room corner, or a block standing on a lit
+  // floor, whose faces see only part of the area) sees it very differently from how the hemicube at
+  // its centre sees the receiver. Such receivers take their share from the area's four quarters instead, each with a
+  // hemicube of its own, down to kMaxShooterDepth levels; weak shots stay whole.
+  std::vector<uint32_t> accepted, near;
+  const bool may_refine = node.depth < kMaxShooterDepth && power >= params.feps * emitted_power;
+  const double eps = 1e-6 * prep.diagonal;
+  const glm::dvec3& normal = prep.normal[p];
+  for (uint32_t e : current) {
+    bool is_near = false;
+    const uint32_t q = e_patch[e];
+    if (may_refine && glm::distance(centre, e_centre[e]) - e_radius[e] < kNearFactor * diameter &&
+        prep.occlusion_group[q] != prep.occlusion_group[p]) {
+      // Only a receiver that some of the area can see, and that can see some of the area, counts.
+      double lo = 0.0, hi = 0.0;
+      for (uint32_t i = 0; i < n; ++i) {
+        const double d = glm::dot(prep.normal[q], node.c[i] - patches[q].corners[0]);
+        lo = std::min(lo, d);
+        hi = std::max(hi, d);
+      }
+      bool in_front = false;
+      for (uint32_t i = 0; i < corner_count(e) && !in_front; ++i)
+        in_front = glm::dot(normal, vpos[e_corner[e][i]] - centre) > eps;
+      is_near = hi > eps && in_front;
+    }
+    (is_near ? near : accepted).push_back(e);
+  }
+
+  // This area's share of the emitted power: how much the interaction matters (criterion a).
+  const double weight = power / emitted_power;
   auto received = [&](uint32_t e, double ff) {
     return std::min(1.0, ff * area / e_area[e]);  // F(element -> shooter) by reciprocity
   };
 
-  for (int round = 0; round < 64; ++round) {
-    // This shot's radiosity at every leaf, and its spread around every vertex.
-    shot_b.resize(e_patch.size());
-    vmin.assign(vpos.size(), std::numeric_limits<double>::max());
-    vmax.assign(vpos.size(), std::numeric_limits<double>::lowest());
-    for (uint32_t e : leaves) {
+  for (int round = 0; round < 64 && !accepted.empty(); ++round) {
+    // This shot's radiosity at every accepted receiver, and its spread around every vertex.
+    for (uint32_t e : accepted) {
       const double v = e_stamp[e] == stamp ? mean(patches[e_patch[e]].reflectance * dB) * received(e, e_ff[e]) : 0.0;
       shot_b[e] = v;
       for (uint32_t k = 0; k < corner_count(e); ++k) {
@@ -409,7 +480,7 @@ void Solver::Impl::shoot_from(uint32_t p, const Corners& c, uint32_t n, const gl
     }
     std::vector<uint32_t> to_split;
     const double min_parent_area = 4.0 * aeps_area;
-    for (uint32_t e : leaves) {
+    for (uint32_t e : accepted) {
       if (e_area[e] < min_parent_area) continue;
       bool split_it = false;
       if (e_stamp[e] == stamp && e_ff_open[e] > 0.0) {
@@ -431,6 +502,12 @@ void Solver::Impl::shoot_from(uint32_t p, const Corners& c, uint32_t n, const gl
       }
       if (split_it) to_split.push_back(e);
     }
+    // Reset the vertex spreads for the next round (only the touched vertices).
+    for (uint32_t e : accepted)
+      for (uint32_t k = 0; k < corner_count(e); ++k) {
+        vmin[e_corner[e][k]] = std::numeric_limits<double>::max();
+        vmax[e_corner[e][k]] = std::numeric_limits<double>::lowest();
+      }
     if (to_split.empty()) break;
     const uint64_t room = params.max_elements > leaves.size() ? (params.max_elements - leaves.size()) / 3 : 0;
     if (to_split.size() > room) {
@@ -440,24 +517,20 @@ void Solver::Impl::shoot_from(uint32_t p, const Corners& c, uint32_t n, const gl
     }
     // The shot is cancelled and repeated with the split elements.
     ++stats.rounds;
-    std::unordered_set<uint32_t> gone(to_split.begin(), to_split.end());
     for (uint32_t e : to_split) split(e);
-    std::vector<uint32_t> next;
-    next.reserve(leaves.size() + 3 * to_split.size());
-    for (uint32_t e : leaves)
-      if (!gone.count(e)) next.push_back(e);
-    for (uint32_t e : to_split)
-      for (uint32_t k = 0; k < 4; ++k) next.push_back(e_child[e] + k);
-    leaves.swap(next);
+    replace_split(leaves);
+    replace_split(accepted);
+    grow_scratch();
     if (params.reuse_visibility) {
       project_children(to_split);
     } else {
-      project_all(p);
+      replace_split(seen);
+      project(p, seen);
     }
   }
 
-  // Southwell step: distribute this sub-area's unshot radiosity.
-  for (uint32_t e : leaves) {
+  // Southwell step: distribute this area's unshot radiosity to the receivers that took it here.
+  for (uint32_t e : accepted) {
     if (e_stamp[e] != stamp || e_ff[e] <= 0.0) continue;
     const uint32_t q = e_patch[e];
     const glm::dvec3 gain = patches[q].reflectance * dB * received(e, e_ff[e]);
@@ -465,94 +538,57 @@ void Solver::Impl::shoot_from(uint32_t p, const Corners& c, uint32_t n, const gl
     e_unshot[e] += gain;
     p_unshot[q] += channel_sum(gain) * e_area[e];
   }
-}
 
-double Solver::Impl::node_power(uint32_t element, const glm::dvec3& unshot, const Corners& c,
-                                uint32_t n) const {
-  if (element == kNone || e_child[element] == kNone) return channel_sum(unshot) * polygon_area(c, n);
-  double power = 0.0;
-  for_leaves(element, [&](uint32_t e) { power += channel_sum(e_unshot[e]) * e_area[e]; });
-  return power;
-}
-
-bool Solver::Impl::needs_finer_shooter(uint32_t p, const Corners& c, uint32_t n, double power) const {
-  const double diameter = polygon_diameter(c, n);
-  if (diameter > shooter_limit) return true;
-  // A weak shooter is not worth more hemicubes.
-  if (power < params.feps * emitted_power) return false;
-  // A nearby patch whose plane cuts through the shooting area sees only part of it: from the
-  // centre it may be wholly back-facing (a block standing on a lit floor) or wholly in front.
-  //
-  // A receiver closer to the shooting area than its size sees it very differently from how the
-  // centre's hemicube sees the receiver (the point-source error in room corners), so such areas
-  // shoot from smaller pieces down to a depth limit.
-  const glm::dvec3 centre = polygon_centre(c, n);
-  const double eps = 1e-6 * prep.diagonal;
-  const glm::dvec3& normal = prep.normal[p];
-  for (uint32_t q = 0; q < patches.size(); ++q) {
-    if (q == p || glm::distance(centre, p_centre[q]) - p_radius[q] > 2.0 * diameter) continue;
-    if (prep.occlusion_group[q] == prep.occlusion_group[p]) continue;  // coplanar: no exchange
-    double lo = 0.0, hi = 0.0;
-    for (uint32_t i = 0; i < n; ++i) {
-      const double d = glm::dot(prep.normal[q], c[i] - patches[q].corners[0]);
-      lo = std::min(lo, d);
-      hi = std::max(hi, d);
-    }
-    if (lo < -eps && hi > eps) return true;
-    // Only patches in front of the shooter and facing it receive.
-    if (hi <= eps) continue;
-    bool in_front = false;
-    for (uint32_t i = 0; i < patches[q].corner_count && !in_front; ++i)
-      in_front = glm::dot(normal, patches[q].corners[i] - centre) > eps;
-    if (in_front && point_patch_distance(centre, q) < kNearFactor * diameter) return true;
+  if (near.empty()) return;
+  const bool is_leaf = node.element == kNone || e_child[node.element] == kNone;
+  for (uint32_t k = 0; k < 4; ++k) {
+    ShooterNode kid;
+    child_corners(node.c, n, k, kid.c);
+    kid.depth = node.depth + 1;
+    kid.element = is_leaf ? kNone : e_child[node.element] + k;
+    kid.unshot = dB;  // a geometric piece of a leaf shares the leaf's unshot radiosity
+    shoot_node(p, kid, near, false);
   }
-  return false;
 }
 
-double Solver::Impl::point_patch_distance(const glm::dvec3& x, uint32_t q) const {
-  const Patch& pq = patches[q];
-  const glm::dvec3& nq = prep.normal[q];
-  const double h = glm::dot(nq, x - pq.corners[0]);
-  const glm::dvec3 foot = x - h * nq;
-  bool inside = true;
-  double edge = std::numeric_limits<double>::max();
-  for (uint32_t i = 0; i < pq.corner_count; ++i) {
-    const glm::dvec3& a = pq.corners[i];
-    const glm::dvec3& b = pq.corners[(i + 1) % pq.corner_count];
-    if (glm::dot(glm::cross(b - a, foot - a), nq) < 0.0) inside = false;
-    const glm::dvec3 ab = b - a;
-    const double t = std::clamp(glm::dot(x - a, ab) / glm::dot(ab, ab), 0.0, 1.0);
-    edge = std::min(edge, glm::distance(x, a + t * ab));
-  }
-  return inside ? std::abs(h) : edge;
+void Solver::Impl::replace_split(std::vector<uint32_t>& list) const {
+  // Split elements (now inner nodes) are replaced by their children, in place of the parent.
+  bool any = false;
+  for (uint32_t e : list) any = any || e_child[e] != kNone;
+  if (!any) return;
+  std::vector<uint32_t> out;
+  out.reserve(list.size() + 16);
+  for (uint32_t e : list) for_leaves(e, [&](uint32_t leaf) { out.push_back(leaf); });
+  list.swap(out);
+}
+
+void Solver::Impl::grow_scratch() {
+  shot_b.resize(e_patch.size());
+  vmin.resize(vpos.size(), std::numeric_limits<double>::max());
+  vmax.resize(vpos.size(), std::numeric_limits<double>::lowest());
 }
 
 void Solver::Impl::shoot_patch(uint32_t p) {
   const uint32_t n = patches[p].corner_count;
-  // Walks the patch's element tree down to sub-areas no wider than shooter_limit; a leaf wider
-  // than that is cut geometrically (its sub-areas share its unshot radiosity).
-  struct Node {
-    Corners c;
-    uint32_t element;  // kNone: a geometric piece of a leaf
-    glm::dvec3 unshot;
-    int depth;
-  };
-  std::vector<Node> stack;
-  std::vector<Node> shooters;
+  // The patch shoots from pieces no wider than shooter_limit (a leaf wider than that is cut
+  // geometrically; its pieces share its unshot radiosity); each piece refines further for the
+  // receivers near it (shoot_node).
+  std::vector<ShooterNode> stack, tops;
   Corners root{};
   corners_of(p_root[p], root);
   stack.push_back({root, p_root[p], glm::dvec3(0.0), 0});
   while (!stack.empty()) {
-    Node node = stack.back();
+    ShooterNode node = stack.back();
     stack.pop_back();
     const bool leaf = node.element == kNone || e_child[node.element] == kNone;
     if (node.element != kNone && leaf) node.unshot = e_unshot[node.element];
-    if (node.depth >= kMaxShooterDepth || !needs_finer_shooter(p, node.c, n, node_power(node.element, node.unshot, node.c, n))) {
-      shooters.push_back(node);
+    if (polygon_diameter(node.c, n) <= shooter_limit || node.depth >= 6) {
+      node.depth = 0;  // near-field refinement counts from here
+      tops.push_back(node);
       continue;
     }
     for (uint32_t k = 4; k-- > 0;) {
-      Node kid;
+      ShooterNode kid;
       child_corners(node.c, n, k, kid.c);
       kid.depth = node.depth + 1;
       kid.element = leaf ? kNone : e_child[node.element] + k;
@@ -560,17 +596,8 @@ void Solver::Impl::shoot_patch(uint32_t p) {
       stack.push_back(kid);
     }
   }
-  for (const Node& s : shooters) {
-    const double area = polygon_area(s.c, n);
-    glm::dvec3 dB = s.unshot;
-    if (s.element != kNone && e_child[s.element] != kNone) {
-      glm::dvec3 power(0.0);
-      for_leaves(s.element, [&](uint32_t e) { power += e_unshot[e] * e_area[e]; });
-      dB = power / area;
-    }
-    if (channel_sum(dB) <= 0.0) continue;
-    shoot_from(p, s.c, n, dB, area);
-  }
+  grow_scratch();
+  for (const ShooterNode& top : tops) shoot_node(p, top, leaves, true);
   for_leaves(p_root[p], [&](uint32_t e) { e_unshot[e] = glm::dvec3(0.0); });
   p_unshot[p] = 0.0;
 }

@@ -47,10 +47,14 @@ TEST_P(ClosedBox, EveryElementConvergesToEOverOneMinusRho) {
   EXPECT_NEAR(total_ba / total_a / mean3(expected), 1.0, 0.005);
   // Per element, what is left is the hemicube's discretisation and the shooters' finite size;
   // with rho = 0.7 in one channel an error in the form factors is amplified 2.3 times.
-  EXPECT_LT(worst, 0.02) << "elements " << mesh.elements.size();
+  // The classical hemicube's point sampling is coarser, most of all on the lower-resolution
+  // hemicubes of near-field sub-shooters.
+  const double tolerance = GetParam().method == Method::kAntiAliased ? 0.02 : 0.03;
+  EXPECT_LT(worst, tolerance) << "elements " << mesh.elements.size();
   for (size_t v = 0; v < mesh.radiosity.size(); ++v) {
     if (mesh.radiosity[v] == glm::dvec3(0.0)) continue;  // not on any leaf
-    for (int c = 0; c < 3; ++c) ASSERT_NEAR(mesh.radiosity[v][c] / expected[c], 1.0, 0.02) << "vertex " << v;
+    for (int c = 0; c < 3; ++c)
+      ASSERT_NEAR(mesh.radiosity[v][c] / expected[c], 1.0, tolerance) << "vertex " << v;
   }
 }
 

@@ -20,7 +20,8 @@ struct ReceiverPolygon {
 
 /// Form factors from a differential area at `eye` with unit normal `normal` to each polygon, with
 /// the polygons occluding one another, as a hemicube of the given method and resolution computes
-/// them. Polygons facing away from the eye get 0. The hemicube's orientation about the normal is
+/// them. Polygons with a common edge (bitwise equal corners) are neighbours: where both cover a
+/// pixel their coverages add, as for the patches of a scene. Polygons facing away from the eye get 0. The hemicube's orientation about the normal is
 /// fixed by `up_hint` (any vector not parallel to the normal).
 std::vector<double> hemicube_form_factors(const glm::dvec3& eye, const glm::dvec3& normal,
                                           std::span<const ReceiverPolygon> polygons, Method method,

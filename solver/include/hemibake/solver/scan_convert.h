@@ -22,6 +22,7 @@ struct ScanScratch {
   std::vector<double> carry;      ///< the paper's C array
   std::vector<double> carry_x, carry_y;  ///< the same for the first moments
   std::vector<double> crossings;  ///< edge parameters where an edge crosses a pixel border
+  std::vector<double> y_crossings;  ///< the same, for horizontal borders only
 };
 
 /// Writes into `area` (width * height values, row-major from the bottom row) the area of every
