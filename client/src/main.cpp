@@ -25,7 +25,7 @@ void usage(FILE* out) {
       "  --resolution N          hemicube resolution (default 100)\n"
       "  --feps X                form-factor tolerance (default 0.001)\n"
       "  --aeps X                minimum element area / scene area (default 0.0001)\n"
-      "  --beps X                radiosity tolerance (default 0.05)\n"
+      "  --beps X                radiosity tolerance (default 0.03)\n"
       "  --convergence X         stop at unshot/emitted power below X (default 0.001)\n"
       "  --max-shots N           shot limit\n"
       "  --max-elements N        element limit\n"

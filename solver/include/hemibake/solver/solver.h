@@ -48,7 +48,7 @@ struct Params {
   double feps = 1e-3;           ///< form-factor tolerance: split when F(shooter->element) * shooter's
                                 ///< share of emitted power exceeds it
   double aeps = 1e-4;           ///< minimum element area, as a fraction of the scene's total area
-  double beps = 0.05;           ///< radiosity tolerance: split when a shot's radiosity differs across
+  double beps = 0.03;           ///< radiosity tolerance: split when a shot's radiosity differs across
                                 ///< an element's corners (or its hidden part) by more than beps times
                                 ///< the scene's mean emitted radiosity per unit area
   double convergence = 1e-3;    ///< stop when unshot power < convergence * emitted power
