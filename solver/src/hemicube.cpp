@@ -143,6 +143,27 @@ void Hemicube::to_local(std::span<const glm::dvec3> polygon, ProjectScratch& s) 
   }
 }
 
+int Hemicube::common_face(const ProjectScratch& s) const {
+  int face = -1;
+  for (int i = 0; i < s.local_n; ++i) {
+    const glm::dvec3& l = s.local[i];
+    const double ax = std::abs(l.x), ay = std::abs(l.y);
+    int f;
+    if (l.z > ax && l.z > ay) {
+      f = 0;
+    } else if (l.z > 0.0 && ax > ay && ax > l.z) {
+      f = l.x > 0.0 ? 1 : 2;
+    } else if (l.z > 0.0 && ay > ax && ay > l.z) {
+      f = l.y > 0.0 ? 3 : 4;
+    } else {
+      return -1;  // on a face boundary or below the base
+    }
+    if (face >= 0 && f != face) return -1;
+    face = f;
+  }
+  return face;
+}
+
 bool Hemicube::clip_to_face(size_t f, ProjectScratch& s) const {
   const Face& face = faces_[f];
   ClipPolygon& a = s.clip_a;
@@ -347,7 +368,11 @@ void Hemicube::project(std::span<const glm::dvec3> polygon, uint32_t element, ui
   if (!any_in_front) return;  // wholly below the hemicube's base
   const glm::dvec3 normal = newell_normal(polygon);
   const double offset = glm::dot(normal, polygon[0] - eye_);
+  // The faces' frusta are convex cones, so a convex polygon whose corners all lie in one face's
+  // frustum lies wholly on that face: the other four need not be looked at.
+  const int single = common_face(scratch);
   for (size_t f = 0; f < faces_.size(); ++f) {
+    if (single >= 0 && static_cast<int>(f) != single) continue;
     if (!clip_to_face(f, scratch)) continue;
     rasterize(faces_[f], element, group, method, normal, offset, {}, false, scratch, out);
   }

@@ -93,6 +93,8 @@ class Hemicube {
   // Clips to face f and maps to pixel coordinates; false when nothing is left.
   void to_local(std::span<const glm::dvec3> polygon, ProjectScratch& scratch) const;
   bool clip_to_face(size_t face, ProjectScratch& scratch) const;
+  // The face whose frustum holds every corner of the polygon in `scratch.local`, or -1.
+  int common_face(const ProjectScratch& scratch) const;
   void rasterize(const Face& face, uint32_t element, uint32_t group, Method method,
                  const glm::dvec3& plane_normal, double plane_offset, std::span<const Fragment> parent,
                  bool child, ProjectScratch& scratch, std::vector<Fragment>& out) const;
