@@ -4,6 +4,6 @@
 set -euo pipefail
 cd "$(dirname "$0")"
 scripts/setup.sh
-cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DHEMIBAKE_BUILD_TESTS=OFF -DHEMIBAKE_BUILD_BENCH=OFF >/dev/null
+cmake -S . -B build -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build build -j"$(nproc)" --target hemibake
 exec build/bin/hemibake cornell --render build/cornell.png --wireframe build/cornell-mesh.png "$@"

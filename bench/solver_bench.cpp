@@ -66,8 +66,9 @@ int main(int argc, char** argv) {
 
   std::printf("## Cornell box (resolution 100, FEPS 0.001, AEPS 0.0001, until unshot < 0.001 of emitted)\n\n");
   std::printf("| method | visibility of children | threads | time (s) | shots | hemicubes | elements | "
-              "projecting (s) | reusing (s) | splits | peak memory (MB) |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
+              "splits | repeated shots | scene projections | projecting (s) | children from parent (s) | "
+              "peak memory (MB) |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   struct Config {
     Method method;
     bool reuse;
@@ -83,12 +84,13 @@ int main(int argc, char** argv) {
     p.threads = c.threads;
     const Result r = isolated([&] { return solve(cornell, p); });
     const Stats& s = r.stats;
-    std::printf("| %s | %s | %s | %.3f | %llu | %llu | %llu | %.3f | %.3f | %llu | %.1f |\n",
+    std::printf("| %s | %s | %s | %.3f | %llu | %llu | %llu | %llu | %llu | %llu | %.3f | %.3f | %.1f |\n",
                 c.method == Method::kAntiAliased ? "aa" : "classical",
                 c.reuse ? "reused from parent" : "re-projected", c.threads == 0 ? "all" : "1", s.seconds,
                 static_cast<unsigned long long>(s.shots), static_cast<unsigned long long>(s.hemicubes),
-                static_cast<unsigned long long>(s.elements), s.seconds_projecting, s.seconds_reusing,
-                static_cast<unsigned long long>(s.splits), r.peak_kib / 1024.0);
+                static_cast<unsigned long long>(s.elements), static_cast<unsigned long long>(s.splits),
+                static_cast<unsigned long long>(s.rounds), static_cast<unsigned long long>(s.projections),
+                s.seconds_projecting, s.seconds_reusing, r.peak_kib / 1024.0);
     std::fflush(stdout);
   }
 
