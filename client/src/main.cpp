@@ -1,45 +1,271 @@
 // The `hemibake` command line.
 #include "render.h"
 
+#include "hemibake/protocol/gltf.h"
 #include "hemibake/solver/scenes.h"
 #include "hemibake/solver/solver.h"
 
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
+
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <map>
+#include <optional>
 #include <string>
 #include <unistd.h>
+#include <vector>
 
 namespace {
 
 using hemibake::solver::Method;
 using hemibake::solver::Params;
 
+constexpr const char* kSolverOptions =
+    "solver options (the paper's names):\n"
+    "  --method aa|classical   form factors: anti-aliased (default) or classical hemicube\n"
+    "  --resolution N          hemicube resolution (default 100)\n"
+    "  --feps X                form-factor tolerance (default 0.001)\n"
+    "  --aeps X                minimum element area / scene area (default 0.0001)\n"
+    "  --beps X                radiosity tolerance (default 0.03)\n"
+    "  --convergence X         stop at unshot/emitted power below X (default 0.001)\n"
+    "  --max-shots N           shot limit\n"
+    "  --max-elements N        element limit (default 2000000)\n"
+    "  --threads N             threads (default: all cores)\n"
+    "  --no-reuse              re-project the scene after splits instead of reusing pixels\n";
+
 void usage(FILE* out) {
-  std::fputs(
-      "usage: hemibake cornell [options]\n"
-      "  Bakes the built-in Cornell box and prints a summary.\n"
-      "options (the paper's names):\n"
-      "  --method aa|classical   form factors: anti-aliased (default) or classical hemicube\n"
-      "  --resolution N          hemicube resolution (default 100)\n"
-      "  --feps X                form-factor tolerance (default 0.001)\n"
-      "  --aeps X                minimum element area / scene area (default 0.0001)\n"
-      "  --beps X                radiosity tolerance (default 0.03)\n"
-      "  --convergence X         stop at unshot/emitted power below X (default 0.001)\n"
-      "  --max-shots N           shot limit\n"
-      "  --max-elements N        element limit\n"
-      "  --threads N             threads (default: all cores)\n"
-      "  --no-reuse              re-project the scene after splits instead of reusing pixels\n"
-      "  --render FILE.png       also render the result (Gouraud) to a PNG\n"
-      "  --wireframe FILE.png    also render the mesh (flat, with element edges) to a PNG\n",
-      out);
+  std::fprintf(out,
+               "usage:\n"
+               "  hemibake bake IN.glb|IN.gltf -o OUT.glb [options]   bake a glTF scene\n"
+               "  hemibake cornell [options]                          bake the built-in Cornell box\n"
+               "\n%s"
+               "output options (bake):\n"
+               "  --no-draco              write plain accessors instead of KHR_draco_mesh_compression\n"
+               "  --position-bits N       Draco position quantization (default 14, 0 = lossless)\n"
+               "  --texcoord-bits N       Draco texture coordinate quantization (default 12)\n"
+               "  --draco-speed N         Draco encode/decode speed 0..10 (default 5)\n"
+               "  --exposure X            radiosity scale for COLOR_0 (default: automatic)\n"
+               "  --max-triangles N       refuse larger scenes (default 2000000)\n"
+               "  --render FILE.png       also render the result (Gouraud) to a PNG\n"
+               "  --wireframe FILE.png    also render the mesh (flat, element edges) to a PNG\n"
+               "  --camera X,Y,Z:TX,TY,TZ the renders' camera and the point it looks at\n",
+               kSolverOptions);
 }
 
 bool parse_number(const char* text, double& out) {
   char* end = nullptr;
   out = std::strtod(text, &end);
   return end != text && *end == '\0';
+}
+
+struct Options {
+  Params params;
+  hemibake::protocol::WriteOptions write;
+  hemibake::protocol::LoadLimits limits;
+  std::string input, output, render_path, wire_path;
+  std::optional<hemibake::client::Camera> camera;
+};
+
+// Parses "x,y,z:tx,ty,tz" (camera position, then the point it looks at).
+std::optional<hemibake::client::Camera> parse_camera(const std::string& text) {
+  double v[6];
+  char extra;
+  if (std::sscanf(text.c_str(), "%lf,%lf,%lf:%lf,%lf,%lf%c", &v[0], &v[1], &v[2], &v[3], &v[4], &v[5], &extra) != 6)
+    return std::nullopt;
+  hemibake::client::Camera cam;
+  cam.position = {v[0], v[1], v[2]};
+  cam.target = {v[3], v[4], v[5]};
+  if (glm::length(cam.target - cam.position) <= 0.0) return std::nullopt;
+  return cam;
+}
+
+// Parses argv[first..]; returns an error message or an empty string.
+std::string parse(int argc, char** argv, int first, bool bake, Options& o) {
+  for (int i = first; i < argc; ++i) {
+    const std::string opt = argv[i];
+    if (opt == "--no-reuse") {
+      o.params.reuse_visibility = false;
+      continue;
+    }
+    if (opt == "--no-draco") {
+      o.write.draco = false;
+      continue;
+    }
+    if (opt.empty() || opt[0] != '-') {
+      if (!bake || !o.input.empty()) return "unexpected argument '" + opt + "'";
+      o.input = opt;
+      continue;
+    }
+    if (i + 1 >= argc) return opt + " needs a value";
+    const char* val = argv[++i];
+    if (opt == "-o" || opt == "--output") {
+      o.output = val;
+      continue;
+    }
+    if (opt == "--render" || opt == "--wireframe") {
+      (opt == "--render" ? o.render_path : o.wire_path) = val;
+      continue;
+    }
+    if (opt == "--camera") {
+      o.camera = parse_camera(val);
+      if (!o.camera) return std::string("--camera needs x,y,z:tx,ty,tz (got '") + val + "')";
+      continue;
+    }
+    if (opt == "--method") {
+      if (std::strcmp(val, "aa") == 0) o.params.method = Method::kAntiAliased;
+      else if (std::strcmp(val, "classical") == 0) o.params.method = Method::kClassical;
+      else return std::string("--method must be aa or classical (got '") + val + "')";
+      continue;
+    }
+    double x = 0.0;
+    if (!parse_number(val, x)) return opt + " needs a number (got '" + val + "')";
+    const bool whole = x >= 0 && x == static_cast<double>(static_cast<uint64_t>(x));
+    if (opt == "--resolution" && whole) o.params.resolution = static_cast<uint32_t>(x);
+    else if (opt == "--feps") o.params.feps = x;
+    else if (opt == "--aeps") o.params.aeps = x;
+    else if (opt == "--beps") o.params.beps = x;
+    else if (opt == "--convergence") o.params.convergence = x;
+    else if (opt == "--max-shots" && whole) o.params.max_shots = static_cast<uint64_t>(x);
+    else if (opt == "--max-elements" && whole) o.params.max_elements = static_cast<uint64_t>(x);
+    else if (opt == "--threads" && whole) o.params.threads = static_cast<uint32_t>(x);
+    else if (opt == "--position-bits" && whole && x <= 30) o.write.position_bits = static_cast<int>(x);
+    else if (opt == "--texcoord-bits" && whole && x <= 30) o.write.texcoord_bits = static_cast<int>(x);
+    else if (opt == "--draco-speed" && whole && x <= 10) o.write.encode_speed = o.write.decode_speed = static_cast<int>(x);
+    else if (opt == "--exposure" && x > 0) o.write.exposure = x;
+    else if (opt == "--max-triangles" && whole) o.limits.max_triangles = static_cast<uint64_t>(x);
+    else if (opt == "--resolution" || opt == "--max-shots" || opt == "--max-elements" || opt == "--threads" ||
+             opt == "--position-bits" || opt == "--texcoord-bits" || opt == "--draco-speed" ||
+             opt == "--exposure" || opt == "--max-triangles")
+      return opt + " is out of range (got '" + val + "')";
+    else return "unknown option '" + opt + "'";
+  }
+  return hemibake::solver::validate(o.params);
+}
+
+// Runs the solver with a progress line on a terminal.
+void solve(hemibake::solver::Solver& solver) {
+  const bool tty = isatty(STDERR_FILENO);
+  solver.run([&](const hemibake::solver::Progress& p) {
+    if (!tty) return;
+    const int width = 24;
+    const double done = p.unshot_fraction > 0.0 ? std::clamp(std::log10(1.0 / p.unshot_fraction) / 3.0, 0.0, 1.0) : 1.0;
+    const int filled = static_cast<int>(done * width);
+    std::fprintf(stderr, "\r  [%.*s%*s] shots %6llu  unshot %8.5f  elements %7llu  %6.1f s ", filled,
+                 "########################", width - filled, "", static_cast<unsigned long long>(p.shots),
+                 p.unshot_fraction, static_cast<unsigned long long>(p.elements), p.elapsed_seconds);
+  });
+  if (tty) std::fputs("\n", stderr);
+}
+
+void print_stats(const hemibake::solver::Stats& st) {
+  std::printf("  %s after %.3f s: %llu shots, %llu hemicubes, %llu elements, unshot %.5f\n",
+              st.converged ? "converged" : st.cancelled ? "cancelled" : "stopped at a limit", st.seconds,
+              static_cast<unsigned long long>(st.shots), static_cast<unsigned long long>(st.hemicubes),
+              static_cast<unsigned long long>(st.elements), st.unshot_fraction);
+  std::printf("  splits: %llu (form factor %llu, visibility %llu, gradient %llu), projections %llu, reused children %llu\n",
+              static_cast<unsigned long long>(st.splits), static_cast<unsigned long long>(st.splits_form_factor),
+              static_cast<unsigned long long>(st.splits_visibility), static_cast<unsigned long long>(st.splits_gradient),
+              static_cast<unsigned long long>(st.projections), static_cast<unsigned long long>(st.reused_children));
+}
+
+bool render_pngs(const hemibake::solver::Mesh& mesh, const Options& o, const hemibake::client::Camera& cam) {
+  for (const auto& [path, wire] : {std::pair{o.render_path, false}, std::pair{o.wire_path, true}}) {
+    if (path.empty()) continue;
+    hemibake::client::RenderOptions ro;
+    ro.gouraud = !wire;
+    ro.wireframe = wire;
+    const auto rgb = hemibake::client::render(mesh, cam, ro);
+    if (!hemibake::client::write_png(path, rgb, ro.width, ro.height)) {
+      std::fprintf(stderr, "hemibake: cannot write %s\n", path.c_str());
+      return false;
+    }
+  }
+  return true;
+}
+
+// A camera outside the scene's bounding box, looking at its centre from the -z side and above.
+hemibake::client::Camera frame(const hemibake::solver::Mesh& mesh) {
+  glm::dvec3 lo(1e300), hi(-1e300);
+  for (const auto& p : mesh.positions) {
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
+  }
+  const glm::dvec3 centre = 0.5 * (lo + hi);
+  const double size = glm::length(hi - lo);
+  hemibake::client::Camera cam;
+  cam.target = centre;
+  cam.position = centre + glm::dvec3(0.0, 0.25, 1.2) * size;
+  cam.fov_y_degrees = 45.0;
+  return cam;
+}
+
+int cornell(const Options& o) {
+  const auto scene = hemibake::solver::make_cornell_box();
+  hemibake::solver::Solver solver(scene, o.params);
+  solve(solver);
+  const auto& st = solver.stats();
+  const auto mesh = solver.mesh();
+  std::map<uint32_t, std::pair<double, double>> by_material;  // material -> (sum B*A, A)
+  for (const auto& el : mesh.elements) {
+    auto& [ba, a] = by_material[scene.patches[el.patch].material];
+    ba += (el.radiosity.x + el.radiosity.y + el.radiosity.z) / 3.0 * el.area;
+    a += el.area;
+  }
+  std::printf("Cornell box, %s hemicube, resolution %u\n",
+              o.params.method == Method::kAntiAliased ? "anti-aliased" : "classical", o.params.resolution);
+  print_stats(st);
+  const char* names[] = {"white", "red", "green", "light"};
+  for (const auto& [mat, v] : by_material)
+    std::printf("  mean radiosity %-6s %.4f\n", mat < 4 ? names[mat] : "?", v.first / v.second);
+  hemibake::client::Camera cam;
+  cam.position = {278, 273, -800};
+  cam.target = {278, 273, 0};
+  cam.fov_y_degrees = 39.3;
+  return render_pngs(mesh, o, o.camera.value_or(cam)) ? 0 : 1;
+}
+
+int bake(const Options& o) {
+  if (o.input.empty()) {
+    std::fputs("hemibake: bake needs an input file\n", stderr);
+    return 2;
+  }
+  if (o.output.empty()) {
+    std::fputs("hemibake: bake needs -o OUT.glb\n", stderr);
+    return 2;
+  }
+  const auto loaded = hemibake::protocol::load_gltf_file(o.input, o.limits);
+  for (const auto& w : loaded.warnings) std::fprintf(stderr, "hemibake: warning: %s\n", w.c_str());
+  if (!loaded.document) {
+    std::fprintf(stderr, "hemibake: %s: %s\n", o.input.c_str(), loaded.error.c_str());
+    return 1;
+  }
+  const auto& scene = hemibake::protocol::scene_of(*loaded.document);
+  std::printf("%s: %llu triangles, %zu patches\n", o.input.c_str(),
+              static_cast<unsigned long long>(hemibake::protocol::triangle_count(*loaded.document)), scene.patches.size());
+  hemibake::solver::Solver solver(scene, o.params);
+  solve(solver);
+  const auto& st = solver.stats();
+  print_stats(st);
+  const auto mesh = solver.mesh();
+  const auto written = hemibake::protocol::write_baked_glb(*loaded.document, mesh, o.params, st, o.write);
+  if (!written.error.empty()) {
+    std::fprintf(stderr, "hemibake: %s\n", written.error.c_str());
+    return 1;
+  }
+  std::ofstream out(o.output, std::ios::binary);
+  if (!out.write(reinterpret_cast<const char*>(written.glb.data()), static_cast<std::streamsize>(written.glb.size())) ||
+      !out.flush()) {
+    std::fprintf(stderr, "hemibake: cannot write %s\n", o.output.c_str());
+    return 1;
+  }
+  std::printf("  wrote %s (%zu bytes%s, exposure %.4g)\n", o.output.c_str(), written.glb.size(),
+              o.write.draco ? ", Draco" : "", written.exposure);
+  return render_pngs(mesh, o, o.camera.value_or(frame(mesh))) ? 0 : 1;
 }
 
 }  // namespace
@@ -49,104 +275,15 @@ int main(int argc, char** argv) {
     usage(argc < 2 ? stderr : stdout);
     return argc < 2 ? 2 : 0;
   }
-  if (std::strcmp(argv[1], "cornell") != 0) {
-    std::fprintf(stderr, "hemibake: unknown command '%s'\n", argv[1]);
-    usage(stderr);
+  const std::string command = argv[1];
+  if (command != "cornell" && command != "bake") {
+    std::fprintf(stderr, "hemibake: unknown command '%s' (try --help)\n", argv[1]);
     return 2;
   }
-  Params params;
-  std::string render_path, wire_path;
-  for (int i = 2; i < argc; ++i) {
-    const std::string opt = argv[i];
-    if (opt == "--no-reuse") {
-      params.reuse_visibility = false;
-      continue;
-    }
-    if (i + 1 >= argc) {
-      std::fprintf(stderr, "hemibake: %s needs a value\n", opt.c_str());
-      return 2;
-    }
-    const char* val = argv[++i];
-    if (opt == "--render" || opt == "--wireframe") {
-      (opt == "--render" ? render_path : wire_path) = val;
-      continue;
-    }
-    if (opt == "--method") {
-      if (std::strcmp(val, "aa") == 0) params.method = Method::kAntiAliased;
-      else if (std::strcmp(val, "classical") == 0) params.method = Method::kClassical;
-      else {
-        std::fprintf(stderr, "hemibake: --method must be aa or classical (got '%s')\n", val);
-        return 2;
-      }
-      continue;
-    }
-    double x = 0.0;
-    if (!parse_number(val, x)) {
-      std::fprintf(stderr, "hemibake: %s needs a number (got '%s')\n", opt.c_str(), val);
-      return 2;
-    }
-    if (opt == "--resolution") params.resolution = static_cast<uint32_t>(x);
-    else if (opt == "--feps") params.feps = x;
-    else if (opt == "--aeps") params.aeps = x;
-    else if (opt == "--beps") params.beps = x;
-    else if (opt == "--convergence") params.convergence = x;
-    else if (opt == "--max-shots") params.max_shots = static_cast<uint64_t>(x);
-    else if (opt == "--max-elements") params.max_elements = static_cast<uint64_t>(x);
-    else if (opt == "--threads") params.threads = static_cast<uint32_t>(x);
-    else {
-      std::fprintf(stderr, "hemibake: unknown option '%s'\n", opt.c_str());
-      usage(stderr);
-      return 2;
-    }
-  }
-  if (std::string err = hemibake::solver::validate(params); !err.empty()) {
+  Options o;
+  if (std::string err = parse(argc, argv, 2, command == "bake", o); !err.empty()) {
     std::fprintf(stderr, "hemibake: %s\n", err.c_str());
     return 2;
   }
-  const auto scene = hemibake::solver::make_cornell_box();
-  hemibake::solver::Solver solver(scene, params);
-  const bool tty = isatty(STDERR_FILENO);
-  const auto& st = solver.run([&](const hemibake::solver::Progress& p) {
-    if (tty)
-      std::fprintf(stderr, "\r  shots %6llu  unshot %8.5f  elements %7llu  %6.2f s ",
-                   static_cast<unsigned long long>(p.shots), p.unshot_fraction,
-                   static_cast<unsigned long long>(p.elements), p.elapsed_seconds);
-  });
-  if (tty) std::fputs("\n", stderr);
-  const auto mesh = solver.mesh();
-  std::map<uint32_t, std::pair<double, double>> by_material;  // material -> (sum B*A, A)
-  for (const auto& el : mesh.elements) {
-    auto& [ba, a] = by_material[scene.patches[el.patch].material];
-    ba += (el.radiosity.x + el.radiosity.y + el.radiosity.z) / 3.0 * el.area;
-    a += el.area;
-  }
-  std::printf("Cornell box, %s hemicube, resolution %u\n",
-              params.method == Method::kAntiAliased ? "anti-aliased" : "classical", params.resolution);
-  std::printf("  %s after %.3f s: %llu shots, %llu hemicubes, %llu elements, unshot %.5f\n",
-              st.converged ? "converged" : "stopped", st.seconds,
-              static_cast<unsigned long long>(st.shots), static_cast<unsigned long long>(st.hemicubes),
-              static_cast<unsigned long long>(st.elements), st.unshot_fraction);
-  std::printf("  splits: %llu (form factor %llu, visibility %llu, gradient %llu), projections %llu, reused children %llu\n",
-              static_cast<unsigned long long>(st.splits), static_cast<unsigned long long>(st.splits_form_factor),
-              static_cast<unsigned long long>(st.splits_visibility), static_cast<unsigned long long>(st.splits_gradient),
-              static_cast<unsigned long long>(st.projections), static_cast<unsigned long long>(st.reused_children));
-  const char* names[] = {"white", "red", "green", "light"};
-  for (const auto& [mat, v] : by_material)
-    std::printf("  mean radiosity %-6s %.4f\n", mat < 4 ? names[mat] : "?", v.first / v.second);
-  hemibake::client::Camera cam;
-  cam.position = {278, 273, -800};
-  cam.target = {278, 273, 0};
-  cam.fov_y_degrees = 39.3;
-  for (const auto& [path, wire] : {std::pair{render_path, false}, std::pair{wire_path, true}}) {
-    if (path.empty()) continue;
-    hemibake::client::RenderOptions ro;
-    ro.gouraud = !wire;
-    ro.wireframe = wire;
-    const auto rgb = hemibake::client::render(mesh, cam, ro);
-    if (!hemibake::client::write_png(path, rgb, ro.width, ro.height)) {
-      std::fprintf(stderr, "hemibake: cannot write %s\n", path.c_str());
-      return 1;
-    }
-  }
-  return 0;
+  return command == "bake" ? bake(o) : cornell(o);
 }

@@ -55,7 +55,9 @@ std::vector<uint8_t> render(const solver::Mesh& mesh, const Camera& cam, const R
 
   auto draw_triangle = [&](const ScreenVertex& a, const ScreenVertex& b, const ScreenVertex& c) {
     const double area = (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
-    if (std::abs(area) < 1e-12) return;
+    // Elements are counter-clockwise from their front; screen y points down, so a front face has
+    // negative area here. Back faces are not drawn (a double-sided surface is two elements).
+    if (area > -1e-12) return;
     const int x0 = std::max(0, static_cast<int>(std::floor(std::min({a.x, b.x, c.x}))));
     const int x1 = std::min(static_cast<int>(w) - 1, static_cast<int>(std::ceil(std::max({a.x, b.x, c.x}))));
     const int y0 = std::max(0, static_cast<int>(std::floor(std::min({a.y, b.y, c.y}))));

@@ -1,0 +1,73 @@
+// glTF 2.0 in (patches for the solver) and baked glTF out (the radiosity mesh with per-vertex
+// colours, optionally Draco-compressed).
+#pragma once
+
+#include "hemibake/solver/solver.h"
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace hemibake::protocol {
+
+/// Bounds on untrusted input.
+struct LoadLimits {
+  uint64_t max_file_bytes = 512ull << 20;  ///< the .glb/.gltf file itself
+  uint64_t max_triangles = 2'000'000;      ///< triangles in the scene, instances counted
+  uint32_t max_image_pixels = 8192 * 8192; ///< per texture image
+  bool allow_external_files = true;        ///< .gltf buffers and images beside the file; false
+                                           ///< accepts only embedded (GLB or data-URI) data
+};
+
+/// A parsed glTF file and the patches it becomes. Opaque; made by load_gltf_*.
+class SceneDocument;
+
+struct LoadResult {
+  std::shared_ptr<const SceneDocument> document;  ///< null on error
+  std::string error;                  ///< on failure: the glTF object at fault and what is wrong
+  std::vector<std::string> warnings;  ///< what was skipped or approximated
+};
+
+/// Reads a .glb or .gltf file (by its content; `path`'s folder holds a .gltf's external files).
+LoadResult load_gltf_file(const std::string& path, const LoadLimits& limits = {});
+
+/// Reads glTF from memory; `base_dir` is where external files are looked for (if allowed).
+LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& base_dir,
+                            const LoadLimits& limits = {});
+
+/// The patches to bake (world space). Valid as long as the document lives.
+const solver::Scene& scene_of(const SceneDocument& document);
+
+/// Number of triangles in the input scene (instances counted).
+uint64_t triangle_count(const SceneDocument& document);
+
+/// Output settings.
+struct WriteOptions {
+  bool draco = true;        ///< KHR_draco_mesh_compression; false writes plain accessors
+  int position_bits = 14;   ///< Draco quantization bits (0 = lossless)
+  int texcoord_bits = 12;
+  int color_bits = 10;
+  int encode_speed = 5;     ///< Draco speed options, 0 (best compression) to 10 (fastest)
+  int decode_speed = 5;
+  double exposure = 0.0;    ///< radiosity-to-[0, 1] scale for COLOR_0; 0 chooses one
+};
+
+struct WriteResult {
+  std::vector<uint8_t> glb;  ///< empty on error
+  std::string error;
+  double exposure = 0.0;     ///< the exposure used
+};
+
+/// Writes the baked scene: the input's nodes, names, materials, textures and UVs, each mesh
+/// instance replaced by its radiosity mesh (crack-free triangles over the solver's elements),
+/// COLOR_0 = exposure * radiosity / base colour in [0, 1] (materials get KHR_materials_unlit, so
+/// base colour x COLOR_0 shows the light), _RADIOSITY = linear radiosity per vertex, and the
+/// parameters, statistics and exposure in asset.extras.hemibake. `mesh` must come from a solver
+/// run on scene_of(document).
+WriteResult write_baked_glb(const SceneDocument& document, const solver::Mesh& mesh,
+                            const solver::Params& params, const solver::Stats& stats,
+                            const WriteOptions& options = {});
+
+}  // namespace hemibake::protocol

@@ -1,0 +1,691 @@
+// glTF 2.0 to patches. The file is untrusted: tinygltf parses the JSON and the GLB container, and
+// everything it does not check (accessor ranges, strides, index values, node cycles, image sizes,
+// external paths) is checked here before use, with an error that names the object at fault.
+#include "document.h"
+
+#include "hemibake/solver/solver.h"
+
+#include <stb_image.h>
+
+#include <glm/geometric.hpp>
+#include <glm/gtc/matrix_transform.hpp>
+#include <glm/gtc/quaternion.hpp>
+#include <glm/mat3x3.hpp>
+#include <glm/matrix.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <sstream>
+
+namespace hemibake::protocol {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Reflectance is capped below 1 (a glTF base colour of 1 would reflect everything it receives).
+constexpr double kMaxReflectance = 0.95;
+// Accessors with more elements than this are refused before any arithmetic on their size.
+constexpr uint64_t kMaxAccessorCount = 1ull << 28;
+
+struct LoaderContext {
+  std::string base_dir;
+  bool allow_external = false;
+  uint64_t max_bytes = 0;
+  uint32_t max_image_pixels = 0;
+  SceneDocument* doc = nullptr;
+  std::vector<std::string>* warnings = nullptr;
+};
+
+bool fs_exists(const std::string& path, void*) {
+  std::error_code ec;
+  return fs::exists(path, ec);
+}
+std::string fs_expand(const std::string& path, void*) { return path; }
+bool fs_write(std::string* err, const std::string&, const std::vector<unsigned char>&, void*) {
+  if (err) *err = "writing files is not allowed while loading";
+  return false;
+}
+bool fs_read(std::vector<unsigned char>* out, std::string* err, const std::string& path, void* user) {
+  const auto* ctx = static_cast<const LoaderContext*>(user);
+  if (!ctx->allow_external) {
+    if (err) *err = "external file '" + path + "' is not allowed here: embed buffers and images (GLB or data URIs)";
+    return false;
+  }
+  // The file must lie inside the folder of the .gltf file.
+  std::error_code ec;
+  const fs::path base = fs::weakly_canonical(ctx->base_dir.empty() ? fs::path(".") : fs::path(ctx->base_dir), ec);
+  const fs::path target = fs::weakly_canonical(fs::path(path), ec);
+  const auto rel = target.lexically_relative(base);
+  if (ec || rel.empty() || *rel.begin() == "..") {
+    if (err) *err = "external file '" + path + "' lies outside the folder of the glTF file";
+    return false;
+  }
+  const auto size = fs::file_size(target, ec);
+  if (ec) {
+    if (err) *err = "cannot read external file '" + path + "'";
+    return false;
+  }
+  if (size > ctx->max_bytes) {
+    if (err) *err = "external file '" + path + "' is larger than the limit";
+    return false;
+  }
+  std::ifstream in(target, std::ios::binary);
+  out->resize(size);
+  if (!in.read(reinterpret_cast<char*>(out->data()), static_cast<std::streamsize>(size))) {
+    if (err) *err = "cannot read external file '" + path + "'";
+    return false;
+  }
+  return true;
+}
+
+// Keeps each image's encoded bytes (for the output) and decodes it to 8-bit RGBA after checking
+// its size. An image that cannot be decoded is a warning: its texture counts as white.
+bool load_image(tinygltf::Image* image, const int index, std::string*, std::string*, int, int,
+                const unsigned char* bytes, int size, void* user) {
+  auto* ctx = static_cast<LoaderContext*>(user);
+  auto& doc = *ctx->doc;
+  if (index >= 0) {
+    if (doc.image_bytes.size() <= static_cast<size_t>(index)) {
+      doc.image_bytes.resize(index + 1);
+      doc.image_mime.resize(index + 1);
+    }
+    doc.image_bytes[index].assign(bytes, bytes + size);
+    const bool png = size >= 8 && std::memcmp(bytes, "\x89PNG", 4) == 0;
+    const bool jpeg = size >= 3 && bytes[0] == 0xff && bytes[1] == 0xd8;
+    doc.image_mime[index] = png ? "image/png" : jpeg ? "image/jpeg" : image->mimeType;
+  }
+  int w = 0, h = 0, comp = 0;
+  if (!stbi_info_from_memory(bytes, size, &w, &h, &comp)) {
+    ctx->warnings->push_back("image " + std::to_string(index) + " cannot be decoded; its texture counts as white");
+    return true;
+  }
+  if (w <= 0 || h <= 0 || static_cast<uint64_t>(w) * static_cast<uint64_t>(h) > ctx->max_image_pixels) {
+    ctx->warnings->push_back("image " + std::to_string(index) + " (" + std::to_string(w) + " x " +
+                             std::to_string(h) + ") is larger than the limit; its texture counts as white");
+    return true;
+  }
+  unsigned char* pixels = stbi_load_from_memory(bytes, size, &w, &h, &comp, 4);
+  if (!pixels) {
+    ctx->warnings->push_back("image " + std::to_string(index) + " cannot be decoded; its texture counts as white");
+    return true;
+  }
+  image->width = w;
+  image->height = h;
+  image->component = 4;
+  image->bits = 8;
+  image->pixel_type = TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE;
+  image->image.assign(pixels, pixels + static_cast<size_t>(w) * h * 4);
+  stbi_image_free(pixels);
+  return true;
+}
+
+// A checked view of an accessor's elements.
+struct View {
+  const uint8_t* data = nullptr;  // first element
+  size_t stride = 0;
+  size_t count = 0;
+  int component_type = 0;
+  int components = 0;
+  bool normalized = false;
+};
+
+int component_size(int type) {
+  switch (type) {
+    case TINYGLTF_COMPONENT_TYPE_BYTE:
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return 1;
+    case TINYGLTF_COMPONENT_TYPE_SHORT:
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: return 2;
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
+    case TINYGLTF_COMPONENT_TYPE_FLOAT: return 4;
+    default: return 0;
+  }
+}
+
+int component_count(int type) {
+  switch (type) {
+    case TINYGLTF_TYPE_SCALAR: return 1;
+    case TINYGLTF_TYPE_VEC2: return 2;
+    case TINYGLTF_TYPE_VEC3: return 3;
+    case TINYGLTF_TYPE_VEC4: return 4;
+    case TINYGLTF_TYPE_MAT2: return 4;
+    case TINYGLTF_TYPE_MAT3: return 9;
+    case TINYGLTF_TYPE_MAT4: return 16;
+    default: return 0;
+  }
+}
+
+// Checks accessor `index` for use as `what` and returns a view of it, or an error message.
+std::string view_accessor(const tinygltf::Model& m, int index, const std::string& what, View& out) {
+  std::ostringstream err;
+  const std::string name = "accessor " + std::to_string(index) + " (" + what + ")";
+  if (index < 0 || static_cast<size_t>(index) >= m.accessors.size())
+    return what + " refers to accessor " + std::to_string(index) + ", which does not exist";
+  const tinygltf::Accessor& a = m.accessors[index];
+  if (a.sparse.isSparse) return name + " is sparse; sparse accessors are not supported";
+  const int csize = component_size(a.componentType);
+  const int ncomp = component_count(a.type);
+  if (csize == 0 || ncomp == 0) return name + " has an invalid componentType or type";
+  if (a.count == 0) return name + " has no elements";
+  if (a.count > kMaxAccessorCount) return name + " has too many elements (" + std::to_string(a.count) + ")";
+  if (a.bufferView < 0 || static_cast<size_t>(a.bufferView) >= m.bufferViews.size())
+    return name + " has no valid bufferView";
+  const tinygltf::BufferView& bv = m.bufferViews[a.bufferView];
+  if (bv.buffer < 0 || static_cast<size_t>(bv.buffer) >= m.buffers.size())
+    return "bufferView " + std::to_string(a.bufferView) + " refers to buffer " + std::to_string(bv.buffer) + ", which does not exist";
+  const tinygltf::Buffer& buf = m.buffers[bv.buffer];
+  if (bv.byteOffset > buf.data.size() || bv.byteLength > buf.data.size() - bv.byteOffset)
+    return "bufferView " + std::to_string(a.bufferView) + " (offset " + std::to_string(bv.byteOffset) +
+           ", length " + std::to_string(bv.byteLength) + ") lies outside buffer " + std::to_string(bv.buffer) +
+           " (" + std::to_string(buf.data.size()) + " bytes)";
+  const size_t element = static_cast<size_t>(csize) * static_cast<size_t>(ncomp);
+  const size_t stride = bv.byteStride != 0 ? bv.byteStride : element;
+  if (stride < element || stride % static_cast<size_t>(csize) != 0 || stride > 252)
+    return "bufferView " + std::to_string(a.bufferView) + " has byteStride " + std::to_string(bv.byteStride) +
+           ", invalid for " + name;
+  if (a.byteOffset % static_cast<size_t>(csize) != 0) return name + " has a misaligned byteOffset";
+  // Last byte used: byteOffset + stride * (count - 1) + element, within the view (no overflow:
+  // count and stride are bounded above).
+  const uint64_t need = static_cast<uint64_t>(a.byteOffset) + static_cast<uint64_t>(stride) * (a.count - 1) + element;
+  if (a.byteOffset > bv.byteLength || need > bv.byteLength)
+    return name + " needs " + std::to_string(need) + " bytes but bufferView " + std::to_string(a.bufferView) +
+           " has " + std::to_string(bv.byteLength);
+  out.data = buf.data.data() + bv.byteOffset + a.byteOffset;
+  out.stride = stride;
+  out.count = a.count;
+  out.component_type = a.componentType;
+  out.components = ncomp;
+  out.normalized = a.normalized;
+  return {};
+}
+
+double read_component(const View& v, size_t i, int c) {
+  const uint8_t* p = v.data + v.stride * i + static_cast<size_t>(c) * component_size(v.component_type);
+  switch (v.component_type) {
+    case TINYGLTF_COMPONENT_TYPE_FLOAT: {
+      float f;
+      std::memcpy(&f, p, 4);
+      return f;
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return v.normalized ? p[0] / 255.0 : p[0];
+    case TINYGLTF_COMPONENT_TYPE_BYTE: {
+      const double x = static_cast<int8_t>(p[0]);
+      return v.normalized ? std::max(x / 127.0, -1.0) : x;
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
+      uint16_t s;
+      std::memcpy(&s, p, 2);
+      return v.normalized ? s / 65535.0 : s;
+    }
+    case TINYGLTF_COMPONENT_TYPE_SHORT: {
+      int16_t s;
+      std::memcpy(&s, p, 2);
+      return v.normalized ? std::max(s / 32767.0, -1.0) : s;
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: {
+      uint32_t u;
+      std::memcpy(&u, p, 4);
+      return u;
+    }
+    default: return 0.0;
+  }
+}
+
+glm::dmat4 local_matrix(const tinygltf::Node& n) {
+  if (n.matrix.size() == 16) {
+    glm::dmat4 m;
+    for (int c = 0; c < 4; ++c)
+      for (int r = 0; r < 4; ++r) m[c][r] = n.matrix[static_cast<size_t>(c * 4 + r)];  // column-major
+    return m;
+  }
+  glm::dmat4 m(1.0);
+  if (n.translation.size() == 3) m = glm::translate(m, glm::dvec3(n.translation[0], n.translation[1], n.translation[2]));
+  if (n.rotation.size() == 4) {
+    const glm::dquat q(n.rotation[3], n.rotation[0], n.rotation[1], n.rotation[2]);  // w, x, y, z
+    m = m * glm::mat4_cast(glm::normalize(q));
+  }
+  if (n.scale.size() == 3) m = glm::scale(m, glm::dvec3(n.scale[0], n.scale[1], n.scale[2]));
+  return m;
+}
+
+bool finite(const glm::dmat4& m) {
+  for (int c = 0; c < 4; ++c)
+    for (int r = 0; r < 4; ++r)
+      if (!std::isfinite(m[c][r])) return false;
+  return true;
+}
+
+double srgb_to_linear(double c) { return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4); }
+
+// Mean linear colour of a texture over a triangle of UVs (samples inside the triangle, repeat
+// wrapping). Null when the texture is absent or could not be decoded.
+std::optional<glm::dvec3> texture_mean(const tinygltf::Model& m, int texture, const std::array<glm::dvec2, 3>& uv) {
+  if (texture < 0 || static_cast<size_t>(texture) >= m.textures.size()) return std::nullopt;
+  const int source = m.textures[texture].source;
+  if (source < 0 || static_cast<size_t>(source) >= m.images.size()) return std::nullopt;
+  const tinygltf::Image& img = m.images[source];
+  if (img.width <= 0 || img.height <= 0 || img.component != 4 ||
+      img.image.size() < static_cast<size_t>(img.width) * img.height * 4)
+    return std::nullopt;
+  // Barycentric sample points: the centroid and points towards each corner and each edge.
+  static constexpr std::array<std::array<double, 3>, 7> kSamples{{{1 / 3.0, 1 / 3.0, 1 / 3.0},
+                                                                  {2 / 3.0, 1 / 6.0, 1 / 6.0},
+                                                                  {1 / 6.0, 2 / 3.0, 1 / 6.0},
+                                                                  {1 / 6.0, 1 / 6.0, 2 / 3.0},
+                                                                  {0.45, 0.45, 0.1},
+                                                                  {0.1, 0.45, 0.45},
+                                                                  {0.45, 0.1, 0.45}}};
+  glm::dvec3 sum(0.0);
+  for (const auto& b : kSamples) {
+    const glm::dvec2 t = b[0] * uv[0] + b[1] * uv[1] + b[2] * uv[2];
+    if (!std::isfinite(t.x) || !std::isfinite(t.y)) return std::nullopt;
+    const double fx = t.x - std::floor(t.x), fy = t.y - std::floor(t.y);
+    const int x = std::clamp(static_cast<int>(fx * img.width), 0, img.width - 1);
+    const int y = std::clamp(static_cast<int>(fy * img.height), 0, img.height - 1);
+    const uint8_t* px = &img.image[(static_cast<size_t>(y) * img.width + x) * 4];
+    sum += glm::dvec3(srgb_to_linear(px[0] / 255.0), srgb_to_linear(px[1] / 255.0), srgb_to_linear(px[2] / 255.0));
+  }
+  return sum / static_cast<double>(kSamples.size());
+}
+
+// Reads [r, g, b] from a tinygltf value, if it is an array of three finite numbers.
+std::optional<glm::dvec3> value_rgb(const tinygltf::Value& v) {
+  if (!v.IsArray() || v.ArrayLen() != 3) return std::nullopt;
+  glm::dvec3 out;
+  for (int i = 0; i < 3; ++i) {
+    const tinygltf::Value& c = v.Get(i);
+    if (!c.IsNumber() && !c.IsInt()) return std::nullopt;
+    out[i] = c.GetNumberAsDouble();
+    if (!std::isfinite(out[i])) return std::nullopt;
+  }
+  return out;
+}
+
+struct MaterialInfo {
+  glm::dvec3 factor{1.0};          // baseColorFactor rgb
+  int base_texture = -1;
+  int base_texcoord = 0;
+  glm::dvec3 emissive{0.0};        // emissiveFactor times strength
+  int emissive_texture = -1;
+  int emissive_texcoord = 0;
+  std::optional<glm::dvec3> reflectance_override, emission_override;
+  bool double_sided = false;
+};
+
+std::string material_info(const tinygltf::Model& m, int index, MaterialInfo& out, std::vector<std::string>& warnings) {
+  if (index < 0) {
+    out.factor = glm::dvec3(1.0);  // the glTF default material
+    return {};
+  }
+  if (static_cast<size_t>(index) >= m.materials.size()) return "material " + std::to_string(index) + " does not exist";
+  const tinygltf::Material& mat = m.materials[index];
+  const std::string name = "material " + std::to_string(index) + (mat.name.empty() ? "" : " ('" + mat.name + "')");
+  const auto& bcf = mat.pbrMetallicRoughness.baseColorFactor;
+  if (bcf.size() >= 3) out.factor = glm::dvec3(bcf[0], bcf[1], bcf[2]);
+  for (int i = 0; i < 3; ++i)
+    if (!std::isfinite(out.factor[i])) return name + " has a non-finite baseColorFactor";
+  out.base_texture = mat.pbrMetallicRoughness.baseColorTexture.index;
+  out.base_texcoord = mat.pbrMetallicRoughness.baseColorTexture.texCoord;
+  if (mat.emissiveFactor.size() == 3) out.emissive = glm::dvec3(mat.emissiveFactor[0], mat.emissiveFactor[1], mat.emissiveFactor[2]);
+  for (int i = 0; i < 3; ++i)
+    if (!std::isfinite(out.emissive[i]) || out.emissive[i] < 0.0) return name + " has an invalid emissiveFactor";
+  if (auto it = mat.extensions.find("KHR_materials_emissive_strength"); it != mat.extensions.end()) {
+    const tinygltf::Value& s = it->second.Get("emissiveStrength");
+    if (s.IsNumber() || s.IsInt()) {
+      const double k = s.GetNumberAsDouble();
+      if (!std::isfinite(k) || k < 0.0) return name + " has an invalid emissiveStrength";
+      out.emissive *= k;
+    }
+  }
+  out.emissive_texture = mat.emissiveTexture.index;
+  out.emissive_texcoord = mat.emissiveTexture.texCoord;
+  out.double_sided = mat.doubleSided;
+  // Overrides for the bake: "extras": {"hemibake": {"reflectance": [r, g, b], "emission": [r, g, b]}}.
+  if (mat.extras.IsObject() && mat.extras.Has("hemibake")) {
+    const tinygltf::Value& h = mat.extras.Get("hemibake");
+    if (h.Has("reflectance")) {
+      out.reflectance_override = value_rgb(h.Get("reflectance"));
+      if (!out.reflectance_override) return name + ": extras.hemibake.reflectance must be [r, g, b]";
+    }
+    if (h.Has("emission")) {
+      out.emission_override = value_rgb(h.Get("emission"));
+      if (!out.emission_override || glm::min(out.emission_override->x, glm::min(out.emission_override->y, out.emission_override->z)) < 0.0)
+        return name + ": extras.hemibake.emission must be [r, g, b] with non-negative numbers";
+    }
+  }
+  (void)warnings;
+  return {};
+}
+
+}  // namespace
+
+const solver::Scene& scene_of(const SceneDocument& document) { return document.scene; }
+uint64_t triangle_count(const SceneDocument& document) { return document.triangles; }
+
+LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& base_dir, const LoadLimits& limits) {
+  LoadResult result;
+  auto doc = std::make_shared<SceneDocument>();
+  if (bytes.size() > limits.max_file_bytes) {
+    result.error = "the file is " + std::to_string(bytes.size()) + " bytes, more than the limit of " +
+                   std::to_string(limits.max_file_bytes);
+    return result;
+  }
+  if (bytes.size() > 0xffffffffull) {
+    result.error = "the file is too large";
+    return result;
+  }
+  LoaderContext ctx;
+  ctx.base_dir = base_dir;
+  ctx.allow_external = limits.allow_external_files;
+  ctx.max_bytes = limits.max_file_bytes;
+  ctx.max_image_pixels = limits.max_image_pixels;
+  ctx.doc = doc.get();
+  ctx.warnings = &result.warnings;
+
+  tinygltf::TinyGLTF loader;
+  tinygltf::FsCallbacks callbacks{&fs_exists, &fs_expand, &fs_read, &fs_write, &ctx};
+  loader.SetFsCallbacks(callbacks);
+  loader.SetImageLoader(&load_image, &ctx);
+  std::string err, warn;
+  const bool binary = bytes.size() >= 4 && std::memcmp(bytes.data(), "glTF", 4) == 0;
+  bool ok = false;
+  try {
+    ok = binary ? loader.LoadBinaryFromMemory(&doc->model, &err, &warn, bytes.data(),
+                                              static_cast<unsigned int>(bytes.size()), base_dir)
+                : loader.LoadASCIIFromString(&doc->model, &err, &warn, reinterpret_cast<const char*>(bytes.data()),
+                                             static_cast<unsigned int>(bytes.size()), base_dir);
+  } catch (const std::exception& e) {
+    ok = false;
+    err = e.what();
+  }
+  if (!ok) {
+    while (!err.empty() && (err.back() == '\n' || err.back() == ' ')) err.pop_back();
+    result.error = "not a valid glTF file: " + (err.empty() ? std::string("unreadable") : err);
+    return result;
+  }
+  tinygltf::Model& m = doc->model;
+  for (const std::string& ext : m.extensionsRequired) {
+    if (ext != "KHR_draco_mesh_compression" && ext != "KHR_materials_emissive_strength" &&
+        ext != "KHR_materials_unlit" && ext != "KHR_texture_transform" && ext != "KHR_mesh_quantization") {
+      result.error = "the file requires extension " + ext + ", which hemibake does not support";
+      return result;
+    }
+  }
+  if (m.extensionsUsed.end() != std::find(m.extensionsUsed.begin(), m.extensionsUsed.end(), "KHR_lights_punctual") &&
+      !m.lights.empty())
+    result.warnings.push_back("KHR_lights_punctual lights (" + std::to_string(m.lights.size()) +
+                              ") are not supported and are not baked; use emissive materials for light sources");
+  if (!m.skins.empty()) result.warnings.push_back("skins are ignored: meshes are baked in their bind pose");
+  if (!m.animations.empty()) result.warnings.push_back("animations are ignored: the scene is baked as it stands");
+
+  // The scene graph: valid indices, a tree (one parent each, no cycles), finite transforms.
+  if (m.scenes.empty()) {
+    result.error = "the file has no scene";
+    return result;
+  }
+  const int scene_index = m.defaultScene >= 0 ? m.defaultScene : 0;
+  if (static_cast<size_t>(scene_index) >= m.scenes.size()) {
+    result.error = "the default scene " + std::to_string(scene_index) + " does not exist";
+    return result;
+  }
+  std::vector<int> parent(m.nodes.size(), -1);
+  for (size_t i = 0; i < m.nodes.size(); ++i) {
+    for (int c : m.nodes[i].children) {
+      if (c < 0 || static_cast<size_t>(c) >= m.nodes.size()) {
+        result.error = "node " + std::to_string(i) + " has child " + std::to_string(c) + ", which does not exist";
+        return result;
+      }
+      if (parent[c] != -1 || static_cast<size_t>(c) == i) {
+        result.error = "node " + std::to_string(c) + " has more than one parent (or is its own child): the node hierarchy must be a tree";
+        return result;
+      }
+      parent[c] = static_cast<int>(i);
+    }
+  }
+  doc->node_world.assign(m.nodes.size(), glm::dmat4(1.0));
+  std::vector<int> order;  // nodes of the scene, parents first
+  {
+    std::vector<uint8_t> seen(m.nodes.size(), 0);
+    std::vector<int> stack;
+    for (int root : m.scenes[scene_index].nodes) {
+      if (root < 0 || static_cast<size_t>(root) >= m.nodes.size()) {
+        result.error = "scene " + std::to_string(scene_index) + " refers to node " + std::to_string(root) + ", which does not exist";
+        return result;
+      }
+      if (parent[root] != -1) {
+        result.error = "node " + std::to_string(root) + " is a scene root and also a child of node " + std::to_string(parent[root]);
+        return result;
+      }
+      stack.push_back(root);
+    }
+    while (!stack.empty()) {
+      const int n = stack.back();
+      stack.pop_back();
+      if (seen[n]) {
+        result.error = "node " + std::to_string(n) + " appears twice in the scene (a cycle or a repeated root)";
+        return result;
+      }
+      seen[n] = 1;
+      order.push_back(n);
+      for (int c : m.nodes[n].children) stack.push_back(c);
+    }
+  }
+  for (int n : order) {
+    const glm::dmat4 local = local_matrix(m.nodes[n]);
+    doc->node_world[n] = parent[n] >= 0 ? doc->node_world[parent[n]] * local : local;
+    if (!finite(doc->node_world[n])) {
+      result.error = "node " + std::to_string(n) + " has a transform that is not finite";
+      return result;
+    }
+  }
+
+  // Triangles of every mesh instance.
+  uint64_t degenerate = 0, skipped_prims = 0;
+  for (int n : order) {
+    const tinygltf::Node& node = m.nodes[n];
+    if (node.mesh < 0) continue;
+    if (static_cast<size_t>(node.mesh) >= m.meshes.size()) {
+      result.error = "node " + std::to_string(n) + " refers to mesh " + std::to_string(node.mesh) + ", which does not exist";
+      return result;
+    }
+    const glm::dmat4& world = doc->node_world[n];
+    const bool mirrored = glm::determinant(glm::dmat3(world)) < 0.0;
+    const tinygltf::Mesh& mesh = m.meshes[node.mesh];
+    for (size_t pi = 0; pi < mesh.primitives.size(); ++pi) {
+      const tinygltf::Primitive& prim = mesh.primitives[pi];
+      const std::string where = "mesh " + std::to_string(node.mesh) + " primitive " + std::to_string(pi);
+      const int mode = prim.mode < 0 ? TINYGLTF_MODE_TRIANGLES : prim.mode;
+      if (mode != TINYGLTF_MODE_TRIANGLES && mode != TINYGLTF_MODE_TRIANGLE_STRIP && mode != TINYGLTF_MODE_TRIANGLE_FAN) {
+        if (mode >= 0 && mode <= 3) {
+          ++skipped_prims;
+          continue;
+        }
+        result.error = where + " has an invalid mode " + std::to_string(mode);
+        return result;
+      }
+      const auto pos_it = prim.attributes.find("POSITION");
+      if (pos_it == prim.attributes.end()) {
+        result.error = where + " has no POSITION attribute";
+        return result;
+      }
+      View pos;
+      if (std::string e = view_accessor(m, pos_it->second, "POSITION of " + where, pos); !e.empty()) {
+        result.error = e;
+        return result;
+      }
+      if (pos.components != 3 || pos.component_type != TINYGLTF_COMPONENT_TYPE_FLOAT) {
+        if (!(pos.components == 3 && component_size(pos.component_type) > 0)) {
+          result.error = "accessor " + std::to_string(pos_it->second) + " (POSITION of " + where + ") must be VEC3";
+          return result;
+        }
+      }
+      std::vector<glm::dvec3> points(pos.count);
+      for (size_t i = 0; i < pos.count; ++i) {
+        const glm::dvec3 p(read_component(pos, i, 0), read_component(pos, i, 1), read_component(pos, i, 2));
+        if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) {
+          result.error = "accessor " + std::to_string(pos_it->second) + " (POSITION of " + where +
+                         ") has a non-finite value at element " + std::to_string(i);
+          return result;
+        }
+        points[i] = glm::dvec3(world * glm::dvec4(p, 1.0));
+      }
+      // Indices.
+      std::vector<uint32_t> idx;
+      if (prim.indices >= 0) {
+        View iv;
+        if (std::string e = view_accessor(m, prim.indices, "indices of " + where, iv); !e.empty()) {
+          result.error = e;
+          return result;
+        }
+        if (iv.components != 1 || (iv.component_type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
+                                    iv.component_type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+                                    iv.component_type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)) {
+          result.error = "accessor " + std::to_string(prim.indices) + " (indices of " + where +
+                         ") must be SCALAR unsigned byte, short or int";
+          return result;
+        }
+        iv.normalized = false;
+        idx.resize(iv.count);
+        for (size_t i = 0; i < iv.count; ++i) {
+          const double v = read_component(iv, i, 0);
+          if (v >= static_cast<double>(pos.count)) {
+            result.error = "accessor " + std::to_string(prim.indices) + " (indices of " + where + ") has index " +
+                           std::to_string(static_cast<uint64_t>(v)) + " at element " + std::to_string(i) +
+                           ", but there are only " + std::to_string(pos.count) + " vertices";
+            return result;
+          }
+          idx[i] = static_cast<uint32_t>(v);
+        }
+      } else {
+        idx.resize(pos.count);
+        for (size_t i = 0; i < pos.count; ++i) idx[i] = static_cast<uint32_t>(i);
+      }
+      // Material and texture coordinates.
+      MaterialInfo mat;
+      if (std::string e = material_info(m, prim.material, mat, result.warnings); !e.empty()) {
+        result.error = e;
+        return result;
+      }
+      auto read_uv = [&](int set, std::vector<glm::dvec2>& uvs) -> std::string {
+        uvs.clear();
+        const auto it = prim.attributes.find("TEXCOORD_" + std::to_string(set));
+        if (it == prim.attributes.end()) return {};
+        View uv;
+        if (std::string e = view_accessor(m, it->second, "TEXCOORD_" + std::to_string(set) + " of " + where, uv); !e.empty())
+          return e;
+        if (uv.components != 2 || uv.count != pos.count)
+          return "accessor " + std::to_string(it->second) + " (TEXCOORD_" + std::to_string(set) + " of " + where +
+                 ") must be VEC2 with one element per vertex";
+        uvs.resize(uv.count);
+        for (size_t i = 0; i < uv.count; ++i) uvs[i] = glm::dvec2(read_component(uv, i, 0), read_component(uv, i, 1));
+        return {};
+      };
+      std::vector<glm::dvec2> uv0, uv_base, uv_emit;
+      for (auto [set, dest] : {std::pair{0, &uv0}, std::pair{mat.base_texcoord, &uv_base},
+                               std::pair{mat.emissive_texcoord, &uv_emit}}) {
+        if (std::string e = read_uv(set, *dest); !e.empty()) {
+          result.error = e;
+          return result;
+        }
+      }
+      // Triangles in glTF order (strips alternate winding; fans turn about the first vertex).
+      const size_t nidx = idx.size();
+      size_t ntri = 0;
+      if (mode == TINYGLTF_MODE_TRIANGLES) ntri = nidx / 3;
+      else if (nidx >= 3) ntri = nidx - 2;
+      doc->triangles += ntri;
+      if (doc->triangles > limits.max_triangles) {
+        result.error = "the scene has more than " + std::to_string(limits.max_triangles) + " triangles (the limit)";
+        return result;
+      }
+      for (size_t t = 0; t < ntri; ++t) {
+        std::array<uint32_t, 3> v;
+        if (mode == TINYGLTF_MODE_TRIANGLES) v = {idx[3 * t], idx[3 * t + 1], idx[3 * t + 2]};
+        else if (mode == TINYGLTF_MODE_TRIANGLE_STRIP)
+          v = t % 2 == 0 ? std::array{idx[t], idx[t + 1], idx[t + 2]} : std::array{idx[t + 1], idx[t], idx[t + 2]};
+        else v = {idx[t + 1], idx[t + 2], idx[0]};
+        if (mirrored) std::swap(v[1], v[2]);
+        const glm::dvec3 a = points[v[0]], b = points[v[1]], c = points[v[2]];
+        const double scale = std::max({glm::length(b - a), glm::length(c - b), glm::length(a - c)});
+        if (!(glm::length(glm::cross(b - a, c - a)) > 1e-10 * scale * scale)) {
+          ++degenerate;
+          continue;
+        }
+        PatchSource src;
+        src.node = static_cast<uint32_t>(n);
+        src.mesh = static_cast<uint32_t>(node.mesh);
+        src.primitive = static_cast<uint32_t>(pi);
+        if (!uv0.empty()) {
+          src.has_uv = true;
+          src.uv = {uv0[v[0]], uv0[v[1]], uv0[v[2]]};
+        }
+        glm::dvec3 base = mat.factor;
+        if (!uv_base.empty()) {
+          if (auto mean = texture_mean(m, mat.base_texture, {uv_base[v[0]], uv_base[v[1]], uv_base[v[2]]})) base *= *mean;
+        }
+        glm::dvec3 emission = mat.emissive;
+        if (mat.emissive_texture >= 0 && !uv_emit.empty()) {
+          if (auto mean = texture_mean(m, mat.emissive_texture, {uv_emit[v[0]], uv_emit[v[1]], uv_emit[v[2]]}))
+            emission *= *mean;
+        }
+        src.base = glm::clamp(base, 0.0, 1.0);
+        solver::Patch patch;
+        patch.corner_count = 3;
+        patch.corners = {a, b, c, glm::dvec3(0.0)};
+        patch.reflectance = glm::clamp(mat.reflectance_override.value_or(base), 0.0, kMaxReflectance);
+        patch.emission = mat.emission_override.value_or(emission);
+        patch.material = static_cast<uint32_t>(prim.material + 1);
+        doc->scene.patches.push_back(patch);
+        doc->sources.push_back(src);
+        if (mat.double_sided) {
+          std::swap(patch.corners[1], patch.corners[2]);
+          std::swap(src.uv[1], src.uv[2]);
+          src.back = true;
+          doc->scene.patches.push_back(patch);
+          doc->sources.push_back(src);
+        }
+      }
+    }
+  }
+  if (skipped_prims > 0)
+    result.warnings.push_back(std::to_string(skipped_prims) + " primitive(s) of points or lines were skipped");
+  if (degenerate > 0) result.warnings.push_back(std::to_string(degenerate) + " degenerate triangle(s) were skipped");
+  if (doc->scene.patches.empty()) {
+    result.error = "the scene has no triangles to bake";
+    return result;
+  }
+  if (std::string e = solver::validate(doc->scene); !e.empty()) {
+    result.error = "the scene cannot be baked: " + e;
+    return result;
+  }
+  result.document = std::move(doc);
+  return result;
+}
+
+LoadResult load_gltf_file(const std::string& path, const LoadLimits& limits) {
+  LoadResult result;
+  std::error_code ec;
+  const auto size = fs::file_size(path, ec);
+  if (ec) {
+    result.error = "cannot read '" + path + "': " + ec.message();
+    return result;
+  }
+  if (size > limits.max_file_bytes) {
+    result.error = "'" + path + "' is " + std::to_string(size) + " bytes, more than the limit of " +
+                   std::to_string(limits.max_file_bytes);
+    return result;
+  }
+  std::ifstream in(path, std::ios::binary);
+  std::vector<uint8_t> bytes(size);
+  if (!in.read(reinterpret_cast<char*>(bytes.data()), static_cast<std::streamsize>(size))) {
+    result.error = "cannot read '" + path + "'";
+    return result;
+  }
+  const std::string dir = fs::path(path).parent_path().string();
+  return load_gltf_memory(bytes, dir.empty() ? "." : dir, limits);
+}
+
+}  // namespace hemibake::protocol

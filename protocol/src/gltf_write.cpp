@@ -1,0 +1,377 @@
+// The baked scene as GLB: the input's structure with each mesh instance replaced by its radiosity
+// mesh, lit by COLOR_0 under KHR_materials_unlit, optionally compressed with
+// KHR_draco_mesh_compression (Khronos extension spec: fallback accessors without bufferView that
+// describe the decoded data; attributes mapped to the Draco attributes' unique ids).
+#include "document.h"
+#include "draco_codec.h"
+
+#include <stb_image_write.h>
+
+#include <glm/geometric.hpp>
+#include <glm/matrix.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <map>
+#include <sstream>
+#include <tuple>
+#include <unordered_map>
+
+namespace hemibake::protocol {
+namespace {
+
+using Value = tinygltf::Value;
+
+// Appends bytes to the single output buffer as a new bufferView (4-byte aligned); returns its index.
+int add_view(tinygltf::Model& m, const void* data, size_t size, int target = 0, int stride = 0) {
+  auto& buf = m.buffers[0].data;
+  while (buf.size() % 4 != 0) buf.push_back(0);
+  tinygltf::BufferView v;
+  v.buffer = 0;
+  v.byteOffset = buf.size();
+  v.byteLength = size;
+  v.byteStride = static_cast<size_t>(stride);
+  v.target = target;
+  const auto* p = static_cast<const uint8_t*>(data);
+  buf.insert(buf.end(), p, p + size);
+  m.bufferViews.push_back(v);
+  return static_cast<int>(m.bufferViews.size()) - 1;
+}
+
+int add_accessor(tinygltf::Model& m, int view, int component_type, int type, size_t count, bool normalized = false,
+                 std::vector<double> min = {}, std::vector<double> max = {}) {
+  tinygltf::Accessor a;
+  a.bufferView = view;
+  a.byteOffset = 0;
+  a.componentType = component_type;
+  a.type = type;
+  a.count = count;
+  a.normalized = normalized;
+  a.minValues = std::move(min);
+  a.maxValues = std::move(max);
+  m.accessors.push_back(a);
+  return static_cast<int>(m.accessors.size()) - 1;
+}
+
+void position_bounds(const std::vector<float>& p, std::vector<double>& lo, std::vector<double>& hi) {
+  lo.assign(3, std::numeric_limits<double>::max());
+  hi.assign(3, std::numeric_limits<double>::lowest());
+  for (size_t i = 0; i + 2 < p.size(); i += 3)
+    for (int c = 0; c < 3; ++c) {
+      lo[c] = std::min(lo[c], static_cast<double>(p[i + c]));
+      hi[c] = std::max(hi[c], static_cast<double>(p[i + c]));
+    }
+}
+
+// A 1 x 1 white PNG for an image whose bytes could not be kept.
+std::vector<uint8_t> white_png() {
+  std::vector<uint8_t> out;
+  const uint8_t pixel[4] = {255, 255, 255, 255};
+  stbi_write_png_to_func(
+      [](void* ctx, void* data, int size) {
+        auto* v = static_cast<std::vector<uint8_t>*>(ctx);
+        v->insert(v->end(), static_cast<uint8_t*>(data), static_cast<uint8_t*>(data) + size);
+      },
+      &out, 1, 1, 4, pixel, 4);
+  return out;
+}
+
+double mean3(const glm::dvec3& v) { return (v.x + v.y + v.z) / 3.0; }
+
+// The light a viewer must multiply the base colour by to show radiosity b: b / base per channel.
+glm::dvec3 light_of(const glm::dvec3& b, const glm::dvec3& base) {
+  glm::dvec3 out;
+  for (int c = 0; c < 3; ++c) out[c] = base[c] > 1e-4 ? b[c] / base[c] : 0.0;
+  return out;
+}
+
+}  // namespace
+
+WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, const solver::Params& params,
+                            const solver::Stats& stats, const WriteOptions& options) {
+  WriteResult result;
+  const tinygltf::Model& in = doc.model;
+  const solver::Scene& scene = doc.scene;
+  for (const auto& el : mesh.elements) {
+    if (el.patch >= doc.sources.size()) {
+      result.error = "the mesh does not belong to this scene";
+      return result;
+    }
+  }
+
+  // Exposure: the 95th percentile (by area) of the light on surfaces that do not emit maps to 0.9.
+  double exposure = options.exposure;
+  if (!(exposure > 0.0)) {
+    std::vector<std::pair<double, double>> light;  // (light, area)
+    double total = 0.0;
+    for (const auto& el : mesh.elements) {
+      if (mean3(scene.patches[el.patch].emission) > 0.0) continue;
+      light.emplace_back(mean3(light_of(el.radiosity, doc.sources[el.patch].base)), el.area);
+      total += el.area;
+    }
+    std::sort(light.begin(), light.end());
+    double acc = 0.0, p95 = 0.0;
+    for (const auto& [l, a] : light) {
+      acc += a;
+      p95 = l;
+      if (acc >= 0.95 * total) break;
+    }
+    exposure = p95 > 0.0 ? 0.9 / p95 : 1.0;
+  }
+  result.exposure = exposure;
+
+  // The elements of each output primitive: (node, primitive, back side).
+  std::map<std::tuple<uint32_t, uint32_t, bool>, std::vector<uint32_t>> groups;
+  for (uint32_t i = 0; i < mesh.elements.size(); ++i) {
+    const PatchSource& s = doc.sources[mesh.elements[i].patch];
+    groups[{s.node, s.primitive, s.back}].push_back(i);
+  }
+
+  tinygltf::Model out;
+  out.asset.version = "2.0";
+  out.asset.generator = "hemibake";
+  out.buffers.resize(1);
+  out.scenes = in.scenes;
+  out.defaultScene = in.defaultScene;
+  out.cameras = in.cameras;
+  out.samplers = in.samplers;
+  out.textures = in.textures;
+  out.nodes = in.nodes;
+  for (auto& n : out.nodes) {
+    n.mesh = -1;
+    n.skin = -1;
+    n.weights.clear();
+    n.extensions.erase("KHR_lights_punctual");
+  }
+  // Materials: shown unlit, so that base colour x COLOR_0 is exactly the baked light. Both sides
+  // of a double-sided material are baked as separate primitives, so none is double-sided.
+  out.materials = in.materials;
+  for (auto& mat : out.materials) {
+    mat.extensions["KHR_materials_unlit"] = Value(Value::Object());
+    mat.doubleSided = false;
+  }
+  int default_material = -1;
+  // Images keep their encoded bytes, now inside the GLB.
+  out.images = in.images;
+  for (size_t i = 0; i < out.images.size(); ++i) {
+    tinygltf::Image& img = out.images[i];
+    std::vector<uint8_t> bytes = i < doc.image_bytes.size() ? doc.image_bytes[i] : std::vector<uint8_t>{};
+    std::string mime = i < doc.image_mime.size() ? doc.image_mime[i] : std::string();
+    if (bytes.empty() || (mime != "image/png" && mime != "image/jpeg")) {
+      bytes = white_png();
+      mime = "image/png";
+    }
+    img.image.clear();
+    img.uri.clear();
+    img.width = img.height = img.component = img.bits = -1;
+    img.bufferView = add_view(out, bytes.data(), bytes.size());
+    img.mimeType = mime;
+  }
+
+  bool used_draco = false;
+  std::map<uint32_t, int> node_mesh;  // node -> new mesh
+  for (const auto& [key, elements] : groups) {
+    const auto [node_index, prim_index, back] = key;
+    const tinygltf::Node& node = in.nodes[node_index];
+    const tinygltf::Primitive& in_prim = in.meshes[node.mesh].primitives[prim_index];
+    const glm::dmat4 to_local = glm::inverse(doc.node_world[node_index]);
+
+    // Vertices: one per (solver vertex, texture coordinate), so UV seams stay seams.
+    PrimitiveData data;
+    bool has_uv = doc.sources[mesh.elements[elements[0]].patch].has_uv;
+    std::unordered_map<uint64_t, std::vector<std::pair<glm::dvec2, uint32_t>>> vertex_of;
+    auto add_vertex = [&](const glm::dvec3& world, const glm::dvec3& b, uint32_t patch, uint64_t key_id) {
+      const PatchSource& src = doc.sources[patch];
+      const auto& c = scene.patches[patch].corners;
+      glm::dvec2 uv(0.0);
+      if (has_uv) {
+        // Barycentric coordinates of the point in its source triangle.
+        const glm::dvec3 e0 = c[1] - c[0], e1 = c[2] - c[0], d = world - c[0];
+        const double d00 = glm::dot(e0, e0), d01 = glm::dot(e0, e1), d11 = glm::dot(e1, e1);
+        const double d20 = glm::dot(d, e0), d21 = glm::dot(d, e1);
+        const double den = d00 * d11 - d01 * d01;
+        const double v = den != 0.0 ? (d11 * d20 - d01 * d21) / den : 0.0;
+        const double w = den != 0.0 ? (d00 * d21 - d01 * d20) / den : 0.0;
+        uv = (1.0 - v - w) * src.uv[0] + v * src.uv[1] + w * src.uv[2];
+      }
+      auto& list = vertex_of[key_id];
+      for (const auto& [u, idx] : list)
+        if (glm::length(u - uv) <= 1e-7) return idx;
+      const uint32_t idx = static_cast<uint32_t>(data.vertex_count());
+      list.emplace_back(uv, idx);
+      const glm::dvec3 local(to_local * glm::dvec4(world, 1.0));
+      for (int k = 0; k < 3; ++k) data.positions.push_back(static_cast<float>(local[k]));
+      if (has_uv) {
+        data.texcoords.push_back(static_cast<float>(uv.x));
+        data.texcoords.push_back(static_cast<float>(uv.y));
+      }
+      const glm::dvec3 light = glm::clamp(exposure * light_of(b, src.base), 0.0, 1.0);
+      for (int k = 0; k < 3; ++k) {
+        data.colors.push_back(static_cast<uint16_t>(std::lround(light[k] * 65535.0)));
+        data.radiosity.push_back(static_cast<float>(b[k]));
+      }
+      return idx;
+    };
+    uint64_t extra_key = 1ull << 63;  // element centres are never shared
+    for (uint32_t ei : elements) {
+      const auto& el = mesh.elements[ei];
+      const uint32_t nb = el.boundary_end - el.boundary_begin;
+      std::vector<uint32_t> loop(nb);
+      for (uint32_t k = 0; k < nb; ++k) {
+        const uint32_t v = mesh.boundary[el.boundary_begin + k];
+        loop[k] = add_vertex(mesh.positions[v], mesh.radiosity[v], el.patch, v);
+      }
+      if (nb == 3) {
+        data.indices.insert(data.indices.end(), {loop[0], loop[1], loop[2]});
+        continue;
+      }
+      // Hanging vertices on its edges: a fan from the element's centre keeps the mesh crack-free
+      // without thin triangles along the edges.
+      glm::dvec3 centre(0.0), b(0.0);
+      for (uint32_t k = 0; k < nb; ++k) {
+        centre += mesh.positions[mesh.boundary[el.boundary_begin + k]];
+        b += mesh.radiosity[mesh.boundary[el.boundary_begin + k]];
+      }
+      const uint32_t c = add_vertex(centre / static_cast<double>(nb), b / static_cast<double>(nb), el.patch, extra_key++);
+      for (uint32_t k = 0; k < nb; ++k) data.indices.insert(data.indices.end(), {c, loop[k], loop[(k + 1) % nb]});
+    }
+
+    tinygltf::Primitive prim;
+    prim.mode = TINYGLTF_MODE_TRIANGLES;
+    prim.material = in_prim.material;
+    if (prim.material < 0) {
+      if (default_material < 0) {
+        tinygltf::Material mat;
+        mat.name = "hemibake default";
+        mat.extensions["KHR_materials_unlit"] = Value(Value::Object());
+        out.materials.push_back(mat);
+        default_material = static_cast<int>(out.materials.size()) - 1;
+      }
+      prim.material = default_material;
+    }
+    const bool small = data.vertex_count() <= 65535;
+    if (options.draco) {
+      DracoSettings ds;
+      ds.position_bits = options.position_bits;
+      ds.texcoord_bits = options.texcoord_bits;
+      ds.encode_speed = options.encode_speed;
+      ds.decode_speed = options.decode_speed;
+      DracoEncoded enc;
+      if (std::string e = draco_encode(data, ds, enc); !e.empty()) {
+        result.error = e;
+        return result;
+      }
+      used_draco = true;
+      const PrimitiveData& d = enc.decoded;
+      const int view = add_view(out, enc.bytes.data(), enc.bytes.size());
+      std::vector<double> lo, hi;
+      position_bounds(d.positions, lo, hi);
+      const size_t n = d.vertex_count();
+      prim.attributes["POSITION"] = add_accessor(out, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, n, false, lo, hi);
+      Value::Object attrs;
+      attrs["POSITION"] = Value(enc.position_id);
+      if (enc.texcoord_id >= 0) {
+        prim.attributes["TEXCOORD_0"] = add_accessor(out, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC2, n);
+        attrs["TEXCOORD_0"] = Value(enc.texcoord_id);
+      }
+      prim.attributes["COLOR_0"] = add_accessor(out, -1, TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT, TINYGLTF_TYPE_VEC3, n, true);
+      attrs["COLOR_0"] = Value(enc.color_id);
+      prim.attributes["_RADIOSITY"] = add_accessor(out, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, n);
+      attrs["_RADIOSITY"] = Value(enc.radiosity_id);
+      prim.indices = add_accessor(out, -1,
+                                  n <= 65535 ? TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT : TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT,
+                                  TINYGLTF_TYPE_SCALAR, d.indices.size());
+      Value::Object ext;
+      ext["bufferView"] = Value(view);
+      ext["attributes"] = Value(attrs);
+      prim.extensions["KHR_draco_mesh_compression"] = Value(ext);
+    } else {
+      const size_t n = data.vertex_count();
+      std::vector<double> lo, hi;
+      position_bounds(data.positions, lo, hi);
+      prim.attributes["POSITION"] = add_accessor(
+          out, add_view(out, data.positions.data(), data.positions.size() * 4, TINYGLTF_TARGET_ARRAY_BUFFER),
+          TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, n, false, lo, hi);
+      if (!data.texcoords.empty())
+        prim.attributes["TEXCOORD_0"] = add_accessor(
+            out, add_view(out, data.texcoords.data(), data.texcoords.size() * 4, TINYGLTF_TARGET_ARRAY_BUFFER),
+            TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC2, n);
+      // Vertex attribute elements must start on 4-byte boundaries: three shorts take a stride of 8.
+      std::vector<uint16_t> colors(n * 4, 0);
+      for (size_t i = 0; i < n; ++i)
+        for (int k = 0; k < 3; ++k) colors[i * 4 + k] = data.colors[i * 3 + k];
+      prim.attributes["COLOR_0"] = add_accessor(
+          out, add_view(out, colors.data(), colors.size() * 2, TINYGLTF_TARGET_ARRAY_BUFFER, 8),
+          TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT, TINYGLTF_TYPE_VEC3, n, true);
+      prim.attributes["_RADIOSITY"] = add_accessor(
+          out, add_view(out, data.radiosity.data(), data.radiosity.size() * 4, TINYGLTF_TARGET_ARRAY_BUFFER),
+          TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, n);
+      if (small) {
+        std::vector<uint16_t> idx(data.indices.begin(), data.indices.end());
+        prim.indices = add_accessor(out, add_view(out, idx.data(), idx.size() * 2, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER),
+                                    TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT, TINYGLTF_TYPE_SCALAR, idx.size());
+      } else {
+        prim.indices = add_accessor(
+            out, add_view(out, data.indices.data(), data.indices.size() * 4, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER),
+            TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT, TINYGLTF_TYPE_SCALAR, data.indices.size());
+      }
+    }
+    auto [it, fresh] = node_mesh.try_emplace(node_index, static_cast<int>(out.meshes.size()));
+    if (fresh) {
+      tinygltf::Mesh m;
+      m.name = in.meshes[node.mesh].name;
+      out.meshes.push_back(m);
+      out.nodes[node_index].mesh = it->second;
+    }
+    out.meshes[it->second].primitives.push_back(prim);
+  }
+  out.buffers[0].data.resize((out.buffers[0].data.size() + 3) & ~size_t{3}, 0);
+
+  // Extensions: what the copied materials and textures use, and ours.
+  for (const std::string& e : in.extensionsUsed)
+    if (e == "KHR_texture_transform" || e == "KHR_materials_emissive_strength") out.extensionsUsed.push_back(e);
+  out.extensionsUsed.push_back("KHR_materials_unlit");
+  if (used_draco) {
+    out.extensionsUsed.push_back("KHR_draco_mesh_compression");
+    out.extensionsRequired.push_back("KHR_draco_mesh_compression");
+  }
+  for (const std::string& e : in.extensionsRequired)
+    if (e == "KHR_texture_transform") out.extensionsRequired.push_back(e);
+
+  // How it was made.
+  Value::Object p;
+  p["method"] = Value(std::string(params.method == solver::Method::kAntiAliased ? "aa" : "classical"));
+  p["resolution"] = Value(static_cast<int>(params.resolution));
+  p["feps"] = Value(params.feps);
+  p["aeps"] = Value(params.aeps);
+  p["beps"] = Value(params.beps);
+  p["convergence"] = Value(params.convergence);
+  Value::Object s;
+  s["shots"] = Value(static_cast<double>(stats.shots));
+  s["elements"] = Value(static_cast<double>(stats.elements));
+  s["patches"] = Value(static_cast<double>(stats.patches));
+  s["seconds"] = Value(stats.seconds);
+  s["unshot_fraction"] = Value(stats.unshot_fraction);
+  s["converged"] = Value(stats.converged);
+  Value::Object h;
+  h["exposure"] = Value(exposure);
+  h["colors"] = Value(std::string("COLOR_0 = exposure * radiosity / base colour, clamped to [0, 1]; _RADIOSITY = radiosity"));
+  h["parameters"] = Value(p);
+  h["statistics"] = Value(s);
+  Value::Object extras;
+  extras["hemibake"] = Value(h);
+  out.asset.extras = Value(extras);
+
+  std::ostringstream stream;
+  tinygltf::TinyGLTF writer;
+  if (!writer.WriteGltfSceneToStream(&out, stream, false, true)) {
+    result.error = "writing the GLB failed";
+    return result;
+  }
+  const std::string bytes = stream.str();
+  result.glb.assign(bytes.begin(), bytes.end());
+  return result;
+}
+
+}  // namespace hemibake::protocol
