@@ -1,0 +1,368 @@
+// glTF in, bake, GLB out, read back with Draco's own decoder and a GLB parser written here: the
+// geometry survives, the radiosity is the closed form, COLOR_0 is in [0, 1].
+#include "hemibake/protocol/gltf.h"
+#include "hemibake/solver/solver.h"
+
+#include <draco/compression/decode.h>
+#include <draco/core/decoder_buffer.h>
+#include <draco/mesh/mesh.h>
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <glm/geometric.hpp>
+#include <glm/gtc/type_ptr.hpp>
+#include <glm/mat4x4.hpp>
+
+#include <cmath>
+#include <cstring>
+#include <string>
+#include <vector>
+
+namespace hemibake::protocol {
+namespace {
+
+using nlohmann::json;
+
+std::string base64(const std::vector<uint8_t>& data) {
+  static const char* k = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  for (size_t i = 0; i < data.size(); i += 3) {
+    const uint32_t b = (data[i] << 16) | (i + 1 < data.size() ? data[i + 1] << 8 : 0) | (i + 2 < data.size() ? data[i + 2] : 0);
+    out += k[(b >> 18) & 63];
+    out += k[(b >> 12) & 63];
+    out += i + 1 < data.size() ? k[(b >> 6) & 63] : '=';
+    out += i + 2 < data.size() ? k[b & 63] : '=';
+  }
+  return out;
+}
+
+// A glTF document built in memory: quads (two triangles each) in one primitive per material.
+struct GltfBuilder {
+  json doc = json::object();
+  std::vector<uint8_t> blob;
+  GltfBuilder() {
+    doc["asset"] = {{"version", "2.0"}};
+    doc["scene"] = 0;
+    doc["scenes"] = json::array({json{{"nodes", json::array()}}});
+    doc["nodes"] = json::array();
+    doc["meshes"] = json::array();
+    doc["materials"] = json::array();
+    doc["accessors"] = json::array();
+    doc["bufferViews"] = json::array();
+  }
+  int view(const void* data, size_t size) {
+    while (blob.size() % 4) blob.push_back(0);
+    const size_t off = blob.size();
+    blob.insert(blob.end(), static_cast<const uint8_t*>(data), static_cast<const uint8_t*>(data) + size);
+    doc["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", off}, {"byteLength", size}});
+    return static_cast<int>(doc["bufferViews"].size()) - 1;
+  }
+  int material(const glm::dvec3& base, const glm::dvec3& emission) {
+    json m = {{"pbrMetallicRoughness", {{"baseColorFactor", {base.x, base.y, base.z, 1.0}}}}};
+    const double top = std::max({emission.x, emission.y, emission.z});
+    if (top > 0) {
+      m["emissiveFactor"] = {emission.x / top, emission.y / top, emission.z / top};
+      m["extensions"]["KHR_materials_emissive_strength"]["emissiveStrength"] = top;
+    }
+    doc["materials"].push_back(m);
+    return static_cast<int>(doc["materials"].size()) - 1;
+  }
+  // A mesh of quads (corners counter-clockwise from the front), one material.
+  int mesh(const std::vector<std::array<glm::dvec3, 4>>& quads, int material) {
+    std::vector<float> pos;
+    std::vector<uint16_t> idx;
+    for (const auto& q : quads) {
+      const auto base = static_cast<uint16_t>(pos.size() / 3);
+      for (const auto& p : q)
+        for (int k = 0; k < 3; ++k) pos.push_back(static_cast<float>(p[k]));
+      for (int k : {0, 1, 2, 0, 2, 3}) idx.push_back(static_cast<uint16_t>(base + k));
+    }
+    std::vector<double> lo(3, 1e300), hi(3, -1e300);
+    for (size_t i = 0; i < pos.size(); ++i) {
+      lo[i % 3] = std::min(lo[i % 3], static_cast<double>(pos[i]));
+      hi[i % 3] = std::max(hi[i % 3], static_cast<double>(pos[i]));
+    }
+    const int pv = view(pos.data(), pos.size() * 4);
+    doc["accessors"].push_back({{"bufferView", pv}, {"componentType", 5126}, {"count", pos.size() / 3},
+                                {"type", "VEC3"}, {"min", lo}, {"max", hi}});
+    const int iv = view(idx.data(), idx.size() * 2);
+    doc["accessors"].push_back({{"bufferView", iv}, {"componentType", 5123}, {"count", idx.size()}, {"type", "SCALAR"}});
+    const int n = static_cast<int>(doc["accessors"].size());
+    doc["meshes"].push_back({{"primitives", json::array({json{{"attributes", {{"POSITION", n - 2}}},
+                                                               {"indices", n - 1}, {"material", material}}})}});
+    return static_cast<int>(doc["meshes"].size()) - 1;
+  }
+  int node(json n, bool root = true) {
+    doc["nodes"].push_back(n);
+    const int i = static_cast<int>(doc["nodes"].size()) - 1;
+    if (root) doc["scenes"][0]["nodes"].push_back(i);
+    return i;
+  }
+  std::vector<uint8_t> gltf() {
+    json d = doc;
+    d["buffers"] = json::array({json{{"byteLength", blob.size()}, {"uri", "data:application/octet-stream;base64," + base64(blob)}}});
+    const std::string s = d.dump();
+    return std::vector<uint8_t>(s.begin(), s.end());
+  }
+};
+
+// The inward-facing walls of the box [0, size]^3, each split into cells x cells quads.
+std::vector<std::array<glm::dvec3, 4>> box_walls(double size, int cells) {
+  std::vector<std::array<glm::dvec3, 4>> quads;
+  const double step = size / cells;
+  for (int axis = 0; axis < 3; ++axis) {
+    const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+    for (int side = 0; side < 2; ++side) {
+      for (int i = 0; i < cells; ++i) {
+        for (int j = 0; j < cells; ++j) {
+          std::array<glm::dvec3, 4> q;
+          const double uv[4][2] = {{i * step, j * step}, {(i + 1) * step, j * step}, {(i + 1) * step, (j + 1) * step}, {i * step, (j + 1) * step}};
+          for (int c = 0; c < 4; ++c) {
+            q[c][axis] = side == 0 ? 0.0 : size;
+            q[c][u] = uv[c][0];
+            q[c][v] = uv[c][1];
+          }
+          // Counter-clockwise in (u, v) faces +axis: the wall at 0 faces in, the one at size faces out.
+          if (side == 1) std::swap(q[1], q[3]);
+          quads.push_back(q);
+        }
+      }
+    }
+  }
+  return quads;
+}
+
+// A GLB read back with this file's own parser.
+struct Glb {
+  json doc;
+  std::vector<uint8_t> bin;
+};
+
+Glb parse_glb(const std::vector<uint8_t>& bytes) {
+  Glb g;
+  EXPECT_GE(bytes.size(), 20u);
+  uint32_t magic, version, length, json_len, json_type;
+  std::memcpy(&magic, bytes.data(), 4);
+  std::memcpy(&version, bytes.data() + 4, 4);
+  std::memcpy(&length, bytes.data() + 8, 4);
+  EXPECT_EQ(magic, 0x46546C67u);
+  EXPECT_EQ(version, 2u);
+  EXPECT_EQ(length, bytes.size());
+  std::memcpy(&json_len, bytes.data() + 12, 4);
+  std::memcpy(&json_type, bytes.data() + 16, 4);
+  EXPECT_EQ(json_type, 0x4E4F534Au);
+  g.doc = json::parse(bytes.begin() + 20, bytes.begin() + 20 + json_len);
+  const size_t bin_at = 20 + json_len;
+  if (bin_at + 8 <= bytes.size()) {
+    uint32_t bin_len;
+    std::memcpy(&bin_len, bytes.data() + bin_at, 4);
+    g.bin.assign(bytes.begin() + bin_at + 8, bytes.begin() + bin_at + 8 + bin_len);
+  }
+  return g;
+}
+
+struct Decoded {
+  std::vector<glm::dvec3> positions, colors, radiosity;
+  std::vector<uint32_t> indices;
+};
+
+// Reads a primitive with Draco's decoder (compressed) or straight from its accessors (plain).
+Decoded read_primitive(const Glb& g, const json& prim) {
+  Decoded d;
+  const json& acc = g.doc["accessors"];
+  if (prim.contains("extensions") && prim["extensions"].contains("KHR_draco_mesh_compression")) {
+    const json& ext = prim["extensions"]["KHR_draco_mesh_compression"];
+    const json& view = g.doc["bufferViews"][ext["bufferView"].get<int>()];
+    draco::DecoderBuffer buffer;
+    buffer.Init(reinterpret_cast<const char*>(g.bin.data()) + view.value("byteOffset", 0), view["byteLength"].get<size_t>());
+    draco::Decoder decoder;
+    auto mesh = decoder.DecodeMeshFromBuffer(&buffer);
+    EXPECT_TRUE(mesh.ok());
+    if (!mesh.ok()) return d;
+    const draco::Mesh& m = *mesh.value();
+    auto read = [&](const char* name, std::vector<glm::dvec3>& out) {
+      const auto* att = m.GetAttributeByUniqueId(ext["attributes"][name].get<uint32_t>());
+      ASSERT_NE(att, nullptr) << name;
+      for (draco::PointIndex p(0); p < m.num_points(); ++p) {
+        float v[3];
+        ASSERT_TRUE(att->ConvertValue<float>(att->mapped_index(p), 3, v));
+        out.emplace_back(v[0], v[1], v[2]);
+      }
+    };
+    read("POSITION", d.positions);
+    read("COLOR_0", d.colors);
+    read("_RADIOSITY", d.radiosity);
+    for (draco::FaceIndex f(0); f < m.num_faces(); ++f)
+      for (int k = 0; k < 3; ++k) d.indices.push_back(m.face(f)[k].value());
+    // The fallback accessors describe the decoded data.
+    EXPECT_EQ(acc[prim["attributes"]["POSITION"].get<int>()]["count"].get<size_t>(), d.positions.size());
+    EXPECT_EQ(acc[prim["indices"].get<int>()]["count"].get<size_t>(), d.indices.size());
+    return d;
+  }
+  auto read = [&](int a, std::vector<glm::dvec3>& out) {
+    const json& ac = acc[a];
+    const json& view = g.doc["bufferViews"][ac["bufferView"].get<int>()];
+    const size_t base = view.value("byteOffset", 0) + ac.value("byteOffset", 0);
+    const int ct = ac["componentType"];
+    const size_t csize = ct == 5126 ? 4 : 2;
+    const size_t stride = view.value("byteStride", 3 * csize);
+    for (size_t i = 0; i < ac["count"].get<size_t>(); ++i) {
+      glm::dvec3 v;
+      for (int k = 0; k < 3; ++k) {
+        const uint8_t* p = g.bin.data() + base + i * stride + k * csize;
+        if (ct == 5126) {
+          float f;
+          std::memcpy(&f, p, 4);
+          v[k] = f;
+        } else {
+          uint16_t s;
+          std::memcpy(&s, p, 2);
+          v[k] = s / 65535.0;
+        }
+      }
+      out.push_back(v);
+    }
+  };
+  read(prim["attributes"]["POSITION"], d.positions);
+  read(prim["attributes"]["COLOR_0"], d.colors);
+  read(prim["attributes"]["_RADIOSITY"], d.radiosity);
+  const json& ia = acc[prim["indices"].get<int>()];
+  const json& iview = g.doc["bufferViews"][ia["bufferView"].get<int>()];
+  for (size_t i = 0; i < ia["count"].get<size_t>(); ++i) {
+    const size_t at = iview.value("byteOffset", 0) + ia.value("byteOffset", 0);
+    if (ia["componentType"] == 5123) {
+      uint16_t s;
+      std::memcpy(&s, g.bin.data() + at + 2 * i, 2);
+      d.indices.push_back(s);
+    } else {
+      uint32_t u;
+      std::memcpy(&u, g.bin.data() + at + 4 * i, 4);
+      d.indices.push_back(u);
+    }
+  }
+  return d;
+}
+
+glm::dmat4 node_matrix(const json& n) {
+  glm::dmat4 m(1.0);
+  if (n.contains("matrix")) {
+    for (int i = 0; i < 16; ++i) glm::value_ptr(m)[i] = n["matrix"][i].get<double>();
+  } else if (n.contains("translation")) {
+    m[3] = glm::dvec4(n["translation"][0].get<double>(), n["translation"][1].get<double>(), n["translation"][2].get<double>(), 1.0);
+  }
+  return m;
+}
+
+struct Baked {
+  std::vector<uint8_t> glb;
+  double exposure = 0.0;
+};
+
+Baked bake(const std::vector<uint8_t>& gltf, bool draco, solver::Params params = {}) {
+  const LoadResult loaded = load_gltf_memory(gltf, ".", {});
+  EXPECT_TRUE(loaded.document) << loaded.error;
+  if (!loaded.document) return {};
+  solver::Solver solver(scene_of(*loaded.document), params);
+  solver.run();
+  WriteOptions options;
+  options.draco = draco;
+  const WriteResult written = write_baked_glb(*loaded.document, solver.mesh(), params, solver.stats(), options);
+  EXPECT_EQ(written.error, "");
+  return {written.glb, written.exposure};
+}
+
+class ClosedBoxGltf : public ::testing::TestWithParam<bool> {};
+
+// A closed box, every wall emitting E and reflecting rho: _RADIOSITY = E / (1 - rho) everywhere,
+// as read back by Draco's decoder (or from plain accessors); COLOR_0 lies in [0, 1] and is
+// exposure * radiosity / base colour; the triangles cover the walls exactly.
+TEST_P(ClosedBoxGltf, BakesToEOverOneMinusRhoReadBackIndependently) {
+  const glm::dvec3 rho(0.5, 0.6, 0.4), e(0.3, 0.2, 0.1);
+  GltfBuilder b;
+  const int mat = b.material(rho, e);
+  b.node({{"name", "room"}, {"mesh", b.mesh(box_walls(2.0, 2), mat)}, {"translation", {1.0, -2.0, 0.5}}});
+  const Baked baked = bake(b.gltf(), GetParam());
+  ASSERT_FALSE(baked.glb.empty());
+  const Glb g = parse_glb(baked.glb);
+  ASSERT_EQ(g.doc["nodes"].size(), 1u);
+  EXPECT_EQ(g.doc["nodes"][0]["name"], "room");
+  EXPECT_NEAR(g.doc["asset"]["extras"]["hemibake"]["exposure"].get<double>(), baked.exposure, 1e-12);
+  const glm::dvec3 expected = e / (glm::dvec3(1.0) - rho);
+  const json& prim = g.doc["meshes"][g.doc["nodes"][0]["mesh"].get<int>()]["primitives"][0];
+  const Decoded d = read_primitive(g, prim);
+  ASSERT_GT(d.positions.size(), 0u);
+  ASSERT_EQ(d.radiosity.size(), d.positions.size());
+  for (size_t i = 0; i < d.radiosity.size(); ++i) {
+    for (int c = 0; c < 3; ++c) {
+      ASSERT_NEAR(d.radiosity[i][c] / expected[c], 1.0, 0.02) << "vertex " << i;
+      ASSERT_GE(d.colors[i][c], 0.0);
+      ASSERT_LE(d.colors[i][c], 1.0);
+      ASSERT_NEAR(d.colors[i][c], std::min(1.0, baked.exposure * d.radiosity[i][c] / rho[c]), 2e-3);
+    }
+  }
+  // Node-local positions: the node's translation still applies, and the box is where it was.
+  const glm::dmat4 world = node_matrix(g.doc["nodes"][0]);
+  double area = 0.0;
+  const double q = GetParam() ? 1e-3 : 1e-6;  // Draco quantizes positions (14 bits over 2 m)
+  for (size_t t = 0; t + 2 < d.indices.size(); t += 3) {
+    glm::dvec3 p[3];
+    for (int k = 0; k < 3; ++k) {
+      p[k] = glm::dvec3(world * glm::dvec4(d.positions[d.indices[t + k]], 1.0)) - glm::dvec3(1.0, -2.0, 0.5);
+      for (int c = 0; c < 3; ++c) {
+        ASSERT_GE(p[k][c], -q);
+        ASSERT_LE(p[k][c], 2.0 + q);
+      }
+    }
+    area += 0.5 * glm::length(glm::cross(p[1] - p[0], p[2] - p[0]));
+  }
+  EXPECT_NEAR(area, 24.0, 24.0 * 1e-3);  // six 2 x 2 walls, no gaps, no overlaps
+  // KHR_materials_unlit on every material, Draco required when used.
+  for (const auto& m : g.doc["materials"]) EXPECT_TRUE(m["extensions"].contains("KHR_materials_unlit"));
+  const auto& required = g.doc.value("extensionsRequired", json::array());
+  EXPECT_EQ(std::find(required.begin(), required.end(), "KHR_draco_mesh_compression") != required.end(), GetParam());
+}
+
+INSTANTIATE_TEST_SUITE_P(Protocol, ClosedBoxGltf, ::testing::Values(true, false),
+                         [](const auto& p) { return std::string(p.param ? "Draco" : "Plain"); });
+
+// Each instance of a mesh (nodes sharing it, nested transforms) gets a mesh of its own, in the
+// node's local frame.
+TEST(BakedGlb, InstancesGetTheirOwnMeshesInTheirNodesFrames) {
+  GltfBuilder b;
+  const int white = b.material(glm::dvec3(0.7), glm::dvec3(0.0));
+  const int lamp = b.material(glm::dvec3(0.5), glm::dvec3(5.0));
+  // A floor, a lamp above it, and a small panel used twice (two nodes, one nested).
+  using Q = std::array<glm::dvec3, 4>;
+  using V = glm::dvec3;
+  const int floor_mesh = b.mesh({Q{V(0, 0, 0), V(0, 0, 4), V(4, 0, 4), V(4, 0, 0)}}, white);
+  const int lamp_mesh = b.mesh({Q{V(1, 3, 1), V(3, 3, 1), V(3, 3, 3), V(1, 3, 3)}}, lamp);
+  b.node({{"name", "floor"}, {"mesh", floor_mesh}});
+  b.node({{"name", "lamp"}, {"mesh", lamp_mesh}});
+  const int panel = b.mesh({Q{V(0, 0, 0), V(1, 0, 0), V(1, 1, 0), V(0, 1, 0)}}, white);
+  b.node({{"name", "panel a"}, {"mesh", panel}, {"translation", {0.5, 0.5, 0.5}}});
+  const int child = b.node({{"name", "panel b"}, {"mesh", panel}, {"translation", {0.0, 0.0, 1.0}}}, false);
+  b.node({{"name", "group"}, {"children", {child}}, {"matrix", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 2, 0.5, 1, 1}}});
+  const Baked baked = bake(b.gltf(), true);
+  const Glb g = parse_glb(baked.glb);
+  const json& nodes = g.doc["nodes"];
+  ASSERT_EQ(nodes.size(), 5u);
+  EXPECT_NE(nodes[2]["mesh"], nodes[3]["mesh"]);
+  // Panel b's world = group matrix * its translation: z from 2 (1 + 1), x from 2 to 3.
+  const Decoded d = read_primitive(g, g.doc["meshes"][nodes[3]["mesh"].get<int>()]["primitives"][0]);
+  const glm::dmat4 world = node_matrix(nodes[4]) * node_matrix(nodes[3]);
+  for (const auto& p : d.positions) {
+    const glm::dvec3 w(world * glm::dvec4(p, 1.0));
+    EXPECT_NEAR(w.z, 2.0, 1e-3);
+    EXPECT_GE(w.x, 2.0 - 1e-3);
+    EXPECT_LE(w.x, 3.0 + 1e-3);
+  }
+  // The panels face +z, away from the lamp's light from above: only indirect light from the
+  // floor reaches them, and the floor under the lamp is lit.
+  const Decoded floor = read_primitive(g, g.doc["meshes"][nodes[0]["mesh"].get<int>()]["primitives"][0]);
+  double brightest = 0.0;
+  for (const auto& r : floor.radiosity) brightest = std::max(brightest, r.x);
+  EXPECT_GT(brightest, 0.1);
+}
+
+}  // namespace
+}  // namespace hemibake::protocol
