@@ -21,7 +21,8 @@ struct PatchSource {
   uint32_t mesh = 0;
   uint32_t primitive = 0;
   bool has_uv = false;
-  std::array<glm::dvec2, 3> uv{};  ///< TEXCOORD_0 at the triangle's corners
+  std::array<glm::dvec2, 4> uv{};  ///< TEXCOORD_0 at the patch's corners (a quad's diagonal
+                                   ///< 1-3 is the edge its two source triangles shared)
   glm::dvec3 base{1.0};    ///< displayed base colour (linear): factor times the texture's mean
   bool back = false;       ///< the back side of a double-sided triangle
 };

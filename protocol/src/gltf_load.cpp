@@ -20,6 +20,7 @@
 #include <fstream>
 #include <optional>
 #include <sstream>
+#include <unordered_map>
 
 namespace hemibake::protocol {
 namespace {
@@ -601,6 +602,15 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
         result.error = "the scene has more than " + std::to_string(limits.max_triangles) + " triangles (the limit)";
         return result;
       }
+      // The primitive's triangles, with their colours.
+      struct Tri {
+        std::array<uint32_t, 3> v;
+        glm::dvec3 base, emission;
+        double area;
+        bool used;
+      };
+      std::vector<Tri> tris;
+      tris.reserve(ntri);
       for (size_t t = 0; t < ntri; ++t) {
         std::array<uint32_t, 3> v;
         if (mode == TINYGLTF_MODE_TRIANGLES) v = {idx[3 * t], idx[3 * t + 1], idx[3 * t + 2]};
@@ -610,17 +620,10 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
         if (mirrored) std::swap(v[1], v[2]);
         const glm::dvec3 a = points[v[0]], b = points[v[1]], c = points[v[2]];
         const double scale = std::max({glm::length(b - a), glm::length(c - b), glm::length(a - c)});
-        if (!(glm::length(glm::cross(b - a, c - a)) > 1e-10 * scale * scale)) {
+        const double area = 0.5 * glm::length(glm::cross(b - a, c - a));
+        if (!(area > 0.5e-10 * scale * scale)) {
           ++degenerate;
           continue;
-        }
-        PatchSource src;
-        src.node = static_cast<uint32_t>(n);
-        src.mesh = static_cast<uint32_t>(node.mesh);
-        src.primitive = static_cast<uint32_t>(pi);
-        if (!uv0.empty()) {
-          src.has_uv = true;
-          src.uv = {uv0[v[0]], uv0[v[1]], uv0[v[2]]};
         }
         glm::dvec3 base = mat.factor;
         if (!uv_base.empty()) {
@@ -631,22 +634,83 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
           if (auto mean = texture_mean(m, mat.emissive_texture, {uv_emit[v[0]], uv_emit[v[1]], uv_emit[v[2]]}))
             emission *= *mean;
         }
-        src.base = glm::clamp(base, 0.0, 1.0);
+        tris.push_back({v, base, emission, area, false});
+      }
+      // Exporters split quads into triangle pairs. Pairs that form a planar convex quad become one
+      // quad patch again: its elements are then quads, and its light is not cut along the diagonal.
+      std::unordered_map<uint64_t, std::vector<uint32_t>> by_edge;
+      auto edge_key = [](uint32_t a, uint32_t b) { return (static_cast<uint64_t>(std::min(a, b)) << 32) | std::max(a, b); };
+      for (uint32_t t = 0; t < tris.size(); ++t)
+        for (int k = 0; k < 3; ++k) by_edge[edge_key(tris[t].v[k], tris[t].v[(k + 1) % 3])].push_back(t);
+      auto emit = [&](const std::array<uint32_t, 4>& v, uint32_t count, const glm::dvec3& base, const glm::dvec3& emission) {
+        PatchSource src;
+        src.node = static_cast<uint32_t>(n);
+        src.mesh = static_cast<uint32_t>(node.mesh);
+        src.primitive = static_cast<uint32_t>(pi);
         solver::Patch patch;
-        patch.corner_count = 3;
-        patch.corners = {a, b, c, glm::dvec3(0.0)};
+        patch.corner_count = count;
+        for (uint32_t k = 0; k < count; ++k) {
+          patch.corners[k] = points[v[k]];
+          if (!uv0.empty()) src.uv[k] = uv0[v[k]];
+        }
+        src.has_uv = !uv0.empty();
+        src.base = glm::clamp(base, 0.0, 1.0);
         patch.reflectance = glm::clamp(mat.reflectance_override.value_or(base), 0.0, kMaxReflectance);
         patch.emission = mat.emission_override.value_or(emission);
         patch.material = static_cast<uint32_t>(prim.material + 1);
         doc->scene.patches.push_back(patch);
         doc->sources.push_back(src);
         if (mat.double_sided) {
-          std::swap(patch.corners[1], patch.corners[2]);
-          std::swap(src.uv[1], src.uv[2]);
+          // The back side: the same corners in reverse order (a quad keeps its diagonal 1-3).
+          std::reverse(patch.corners.begin(), patch.corners.begin() + count);
+          std::reverse(src.uv.begin(), src.uv.begin() + count);
+          if (count == 4) {
+            std::rotate(patch.corners.begin(), patch.corners.begin() + 1, patch.corners.begin() + 4);
+            std::rotate(src.uv.begin(), src.uv.begin() + 1, src.uv.begin() + 4);
+          }
           src.back = true;
           doc->scene.patches.push_back(patch);
           doc->sources.push_back(src);
         }
+      };
+      for (uint32_t t = 0; t < tris.size(); ++t) {
+        if (tris[t].used) continue;
+        tris[t].used = true;
+        const auto& tv = tris[t].v;
+        const glm::dvec3 tn = glm::normalize(glm::cross(points[tv[1]] - points[tv[0]], points[tv[2]] - points[tv[0]]));
+        bool merged = false;
+        for (int k = 0; k < 3 && !merged; ++k) {
+          // This triangle is (p, q, r) with the shared edge q -> r; the neighbour runs r -> q -> s.
+          const uint32_t q = tv[k], r = tv[(k + 1) % 3], p = tv[(k + 2) % 3];
+          for (uint32_t u : by_edge[edge_key(q, r)]) {
+            if (u == t || tris[u].used) continue;
+            const auto& uv = tris[u].v;
+            int j = -1;
+            for (int i = 0; i < 3; ++i)
+              if (uv[i] == r && uv[(i + 1) % 3] == q) j = i;
+            if (j < 0) continue;
+            const uint32_t s4 = uv[(j + 2) % 3];
+            if (s4 == p) continue;
+            const std::array<uint32_t, 4> quad{p, q, s4, r};
+            // Planar and strictly convex, seen along this triangle's normal.
+            const double size = glm::length(points[s4] - points[p]) + glm::length(points[r] - points[q]);
+            if (std::abs(glm::dot(tn, points[s4] - points[p])) > 1e-9 * size) continue;
+            bool convex = true;
+            for (int i = 0; i < 4 && convex; ++i) {
+              const glm::dvec3 e0 = points[quad[(i + 1) % 4]] - points[quad[i]];
+              const glm::dvec3 e1 = points[quad[(i + 2) % 4]] - points[quad[(i + 1) % 4]];
+              convex = glm::dot(glm::cross(e0, e1), tn) > 1e-6 * glm::length(e0) * glm::length(e1);
+            }
+            if (!convex) continue;
+            tris[u].used = true;
+            const double wa = tris[t].area, wb = tris[u].area;
+            emit(quad, 4, (wa * tris[t].base + wb * tris[u].base) / (wa + wb),
+                 (wa * tris[t].emission + wb * tris[u].emission) / (wa + wb));
+            merged = true;
+            break;
+          }
+        }
+        if (!merged) emit({tv[0], tv[1], tv[2], 0}, 3, tris[t].base, tris[t].emission);
       }
     }
   }

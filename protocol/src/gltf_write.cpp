@@ -186,14 +186,24 @@ WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, 
       const auto& c = scene.patches[patch].corners;
       glm::dvec2 uv(0.0);
       if (has_uv) {
-        // Barycentric coordinates of the point in its source triangle.
-        const glm::dvec3 e0 = c[1] - c[0], e1 = c[2] - c[0], d = world - c[0];
-        const double d00 = glm::dot(e0, e0), d01 = glm::dot(e0, e1), d11 = glm::dot(e1, e1);
-        const double d20 = glm::dot(d, e0), d21 = glm::dot(d, e1);
-        const double den = d00 * d11 - d01 * d01;
-        const double v = den != 0.0 ? (d11 * d20 - d01 * d21) / den : 0.0;
-        const double w = den != 0.0 ? (d00 * d21 - d01 * d20) / den : 0.0;
-        uv = (1.0 - v - w) * src.uv[0] + v * src.uv[1] + w * src.uv[2];
+        // Texture coordinates are linear over each source triangle: a triangle patch's own, or
+        // for a quad the half (0, 1, 3) or (1, 2, 3) that holds the point.
+        auto interpolate = [&](int i0, int i1, int i2, glm::dvec2& out_uv) {
+          const glm::dvec3 e0 = c[i1] - c[i0], e1 = c[i2] - c[i0], d = world - c[i0];
+          const double d00 = glm::dot(e0, e0), d01 = glm::dot(e0, e1), d11 = glm::dot(e1, e1);
+          const double d20 = glm::dot(d, e0), d21 = glm::dot(d, e1);
+          const double den = d00 * d11 - d01 * d01;
+          const double v = den != 0.0 ? (d11 * d20 - d01 * d21) / den : 0.0;
+          const double w = den != 0.0 ? (d00 * d21 - d01 * d20) / den : 0.0;
+          out_uv = (1.0 - v - w) * src.uv[i0] + v * src.uv[i1] + w * src.uv[i2];
+          return std::min({1.0 - v - w, v, w});
+        };
+        if (scene.patches[patch].corner_count == 3) {
+          interpolate(0, 1, 2, uv);
+        } else {
+          glm::dvec2 other;
+          if (interpolate(0, 1, 3, uv) < interpolate(1, 2, 3, other)) uv = other;
+        }
       }
       auto& list = vertex_of[key_id];
       for (const auto& [u, idx] : list)
