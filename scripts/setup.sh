@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Installs every Debian package hemibake needs to build, test and run. Idempotent: when everything is
-# present it only checks (dpkg-query) and returns in well under a second.
+# Installs the Debian packages hemibake needs to build and run, and with --test also those its tests
+# need. Idempotent: when everything is present it only checks (dpkg-query) and returns in well under
+# a second.
 set -euo pipefail
 
 packages=(
@@ -9,6 +10,14 @@ packages=(
   libtinygltf-dev libdraco-dev libstb-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
 )
+if [[ "${1:-}" == "--test" ]]; then
+  # Chromium for the three.js render check; Node.js and npm for the independent glTF checks in
+  # tests/e2e (a newer node already on the machine is kept).
+  packages+=(chromium)
+  if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
+    packages+=(nodejs npm)
+  fi
+fi
 
 missing=()
 for p in "${packages[@]}"; do

@@ -147,8 +147,12 @@ WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, 
   // Materials: shown unlit, so that base colour x COLOR_0 is exactly the baked light. Both sides
   // of a double-sided material are baked as separate primitives, so none is double-sided.
   out.materials = in.materials;
+  // Unlit shading ignores emission, whose light is in COLOR_0 now: the emissive properties go.
   for (auto& mat : out.materials) {
     mat.extensions["KHR_materials_unlit"] = Value(Value::Object());
+    mat.extensions.erase("KHR_materials_emissive_strength");
+    mat.emissiveFactor = {0.0, 0.0, 0.0};
+    mat.emissiveTexture = tinygltf::TextureInfo();
     mat.doubleSided = false;
   }
   int default_material = -1;
@@ -340,7 +344,7 @@ WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, 
 
   // Extensions: what the copied materials and textures use, and ours.
   for (const std::string& e : in.extensionsUsed)
-    if (e == "KHR_texture_transform" || e == "KHR_materials_emissive_strength") out.extensionsUsed.push_back(e);
+    if (e == "KHR_texture_transform") out.extensionsUsed.push_back(e);
   out.extensionsUsed.push_back("KHR_materials_unlit");
   if (used_draco) {
     out.extensionsUsed.push_back("KHR_draco_mesh_compression");
