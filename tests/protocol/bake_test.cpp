@@ -14,8 +14,13 @@
 #include <glm/mat4x4.hpp>
 
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <string>
+#include <unistd.h>
 #include <vector>
 
 namespace hemibake::protocol {
@@ -362,6 +367,56 @@ TEST(BakedGlb, InstancesGetTheirOwnMeshesInTheirNodesFrames) {
   double brightest = 0.0;
   for (const auto& r : floor.radiosity) brightest = std::max(brightest, r.x);
   EXPECT_GT(brightest, 0.1);
+}
+
+// Two independent decoders agree on the baked file: Draco's own C++ decoder (read here) and
+// gltf-transform with draco3d under node (tests/e2e/decode.mjs) give the same vertices, colours and
+// radiosity.
+TEST(BakedGlb, DracoDecoderAndGltfTransformAgree) {
+  GltfBuilder b;
+  const int lamp = b.material(glm::dvec3(0.5), glm::dvec3(4.0, 3.0, 2.0));
+  const int wall = b.material(glm::dvec3(0.6, 0.5, 0.4), glm::dvec3(0.0));
+  b.node({{"name", "room"}, {"mesh", b.mesh(box_walls(1.0, 2), wall)}});
+  using Q = std::array<glm::dvec3, 4>;
+  using V = glm::dvec3;
+  b.node({{"name", "lamp"}, {"mesh", b.mesh({Q{V(0.4, 0.99, 0.4), V(0.6, 0.99, 0.4), V(0.6, 0.99, 0.6), V(0.4, 0.99, 0.6)}}, lamp)}});
+  const Baked baked = bake(b.gltf(), true);
+  ASSERT_FALSE(baked.glb.empty());
+  const auto dir = std::filesystem::temp_directory_path() / ("hemibake-agree-" + std::to_string(getpid()));
+  std::filesystem::create_directories(dir);
+  const auto glb_path = dir / "baked.glb", json_path = dir / "decoded.json";
+  std::ofstream(glb_path, std::ios::binary).write(reinterpret_cast<const char*>(baked.glb.data()),
+                                                  static_cast<std::streamsize>(baked.glb.size()));
+  const std::string command = "node " HEMIBAKE_SOURCE_DIR "/tests/e2e/decode.mjs " + glb_path.string() + " " +
+                              json_path.string();
+  ASSERT_EQ(std::system(command.c_str()), 0) << command << " (run `npm ci` in tests/e2e; test.sh does)";
+  std::ifstream in(json_path);
+  const json node_side = json::parse(in);
+  std::filesystem::remove_all(dir);
+
+  const Glb g = parse_glb(baked.glb);
+  size_t compared = 0;
+  for (const json& p : node_side["primitives"]) {
+    const json& prim = g.doc["meshes"][p["mesh"].get<int>()]["primitives"][p["primitive"].get<int>()];
+    const Decoded d = read_primitive(g, prim);
+    const json& attrs = p["attributes"];
+    ASSERT_EQ(attrs["POSITION"]["count"].get<size_t>(), d.positions.size());
+    const auto& pos = attrs["POSITION"]["array"];
+    const auto& col = attrs["COLOR_0"]["array"];
+    const auto& rad = attrs["_RADIOSITY"]["array"];
+    const double col_scale = attrs["COLOR_0"]["normalized"].get<bool>() ? 65535.0 : 1.0;
+    for (size_t i = 0; i < d.positions.size(); ++i) {
+      for (int k = 0; k < 3; ++k) {
+        ASSERT_NEAR(pos[3 * i + k].get<double>(), d.positions[i][k], 1e-6) << "vertex " << i;
+        ASSERT_NEAR(col[3 * i + k].get<double>() / col_scale, d.colors[i][k], 1e-6) << "vertex " << i;
+        ASSERT_NEAR(rad[3 * i + k].get<double>(), d.radiosity[i][k], 1e-6 * (1.0 + d.radiosity[i][k])) << "vertex " << i;
+      }
+    }
+    ASSERT_EQ(p["indices"].size(), d.indices.size());
+    for (size_t i = 0; i < d.indices.size(); ++i) ASSERT_EQ(p["indices"][i].get<uint32_t>(), d.indices[i]);
+    compared += d.positions.size();
+  }
+  EXPECT_GT(compared, 20u);
 }
 
 }  // namespace
