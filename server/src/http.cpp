@@ -1,0 +1,240 @@
+#include "hemibake/server/http.h"
+
+#include <boost/asio/dispatch.hpp>
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <boost/asio/strand.hpp>
+#include <boost/beast/core.hpp>
+#include <boost/beast/http.hpp>
+
+#include <chrono>
+#include <cstdio>
+#include <optional>
+
+namespace hemibake::server {
+namespace {
+
+namespace beast = boost::beast;
+namespace http = beast::http;
+namespace net = boost::asio;
+using tcp = net::ip::tcp;
+
+std::chrono::steady_clock::duration seconds(double s) {
+  return std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(s));
+}
+
+class Session : public std::enable_shared_from_this<Session> {
+ public:
+  Session(tcp::socket&& socket, Service& service, const HttpOptions& options, std::atomic<size_t>& streams)
+      : stream_(std::move(socket)), service_(service), options_(options), streams_(streams), timer_(stream_.get_executor()) {}
+
+  void run() { net::dispatch(stream_.get_executor(), [self = shared_from_this()] { self->read(); }); }
+
+ private:
+  void read() {
+    parser_.emplace();
+    parser_->body_limit(options_.max_body_bytes);
+    stream_.expires_after(seconds(options_.read_timeout));
+    http::async_read(stream_, buffer_, *parser_, [self = shared_from_this()](beast::error_code ec, size_t) { self->on_read(ec); });
+  }
+
+  void on_read(beast::error_code ec) {
+    if (ec == http::error::end_of_stream || ec == beast::error::timeout) return close();
+    if (ec == http::error::body_limit) {
+      Response r;
+      r.status = 413;
+      r.body = R"({"error":"the request body is larger than the limit"})";
+      keep_alive_ = false;
+      return send(r);
+    }
+    if (ec) {
+      // A broken request: answer 400 if we can, then drop the connection.
+      Response r;
+      r.status = 400;
+      r.body = std::string(R"({"error":"malformed HTTP request: )") + ec.message() + "\"}";
+      keep_alive_ = false;
+      return send(r);
+    }
+    auto msg = parser_->release();
+    keep_alive_ = msg.keep_alive();
+    Request req;
+    req.method = std::string(msg.method_string());
+    req.target = std::string(msg.target());
+    for (const auto& f : msg) {
+      std::string name(f.name_string());
+      for (auto& c : name) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+      req.headers[name] = std::string(f.value());
+    }
+    req.body = std::move(msg.body());
+    const std::string job = Service::events_job(req);
+    if (!job.empty()) return start_events(req, job);
+    Response r;
+    try {
+      r = service_.handle(req);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "hemibake-server: %s %s failed: %s\n", req.method.c_str(), req.target.c_str(), e.what());
+      r = Response{500, {}, R"({"error":"internal error"})"};
+    }
+    send(r);
+  }
+
+  void send(const Response& r) {
+    service_.count_response(r.status);
+    auto res = std::make_shared<http::response<http::string_body>>(static_cast<http::status>(r.status), 11);
+    res->set(http::field::server, "hemibake");
+    if (!r.content_type.empty()) res->set(http::field::content_type, r.content_type);
+    for (const auto& [k, v] : r.headers) res->insert(k, v);
+    res->body() = r.body;
+    res->keep_alive(keep_alive_);
+    res->prepare_payload();
+    stream_.expires_after(seconds(options_.read_timeout));
+    http::async_write(stream_, *res, [self = shared_from_this(), res](beast::error_code ec, size_t) {
+      if (ec || !self->keep_alive_) return self->close();
+      self->read();
+    });
+  }
+
+  // Server-Sent Events: every event since Last-Event-ID, then new ones as they come, a heartbeat
+  // comment when idle, and the end of the stream after the job's final event.
+  void start_events(const Request& req, const std::string& id) {
+    if (auto denied = service_.check_auth(req)) return send(*denied);
+    const auto rec = service_.store().get(id);
+    if (!rec) {
+      keep_alive_ = true;
+      return send(Response{404, {}, R"({"error":"no such job"})"});
+    }
+    if (streams_.fetch_add(1) >= options_.max_streams) {
+      streams_.fetch_sub(1);
+      Response r{503, {{"Retry-After", "5"}}, R"({"error":"too many event streams; retry later"})"};
+      return send(r);
+    }
+    counted_ = true;
+    job_ = id;
+    if (auto it = req.headers.find("last-event-id"); it != req.headers.end()) last_ = std::strtoull(it->second.c_str(), nullptr, 10);
+    service_.count_response(200);
+    out_ = std::make_shared<std::string>(
+        "HTTP/1.1 200 OK\r\nServer: hemibake\r\nContent-Type: text/event-stream\r\nCache-Control: no-cache\r\n"
+        "Connection: close\r\nX-Accel-Buffering: no\r\n\r\n");
+    idle_ = std::chrono::steady_clock::now();
+    write_events();
+  }
+
+  void write_events() {
+    stream_.expires_after(seconds(options_.read_timeout));
+    net::async_write(stream_, net::buffer(*out_), [self = shared_from_this(), keep = out_](beast::error_code ec, size_t) {
+      if (ec || self->done_) return self->close();
+      self->timer_.expires_after(std::chrono::milliseconds(200));
+      self->timer_.async_wait([self](beast::error_code) { self->poll_events(); });
+    });
+  }
+
+  void poll_events() {
+    auto out = std::make_shared<std::string>();
+    const auto events = service_.store().events_after(job_id(), last_, 100);
+    for (const auto& e : events) {
+      *out += "id: " + std::to_string(e.seq) + "\nevent: " + e.type + "\ndata: " + e.data + "\n\n";
+      last_ = e.seq;
+    }
+    const auto rec = service_.store().get(job_id());
+    if (!rec || (finished(rec->state) && events.empty() && service_.store().events_after(job_id(), last_, 1).empty())) {
+      done_ = true;
+    }
+    const auto now = std::chrono::steady_clock::now();
+    if (out->empty() && !done_) {
+      if (now - idle_ < seconds(options_.heartbeat)) {
+        timer_.expires_after(std::chrono::milliseconds(200));
+        timer_.async_wait([self = shared_from_this()](beast::error_code) { self->poll_events(); });
+        return;
+      }
+      *out = ": heartbeat\n\n";
+    }
+    idle_ = now;
+    out_ = out;
+    write_events();
+  }
+
+  const std::string& job_id() const { return job_; }
+
+  void close() {
+    if (counted_) {
+      streams_.fetch_sub(1);
+      counted_ = false;
+    }
+    beast::error_code ec;
+    stream_.socket().shutdown(tcp::socket::shutdown_send, ec);
+  }
+
+  beast::tcp_stream stream_;
+  beast::flat_buffer buffer_;
+  std::optional<http::request_parser<http::string_body>> parser_;
+  Service& service_;
+  HttpOptions options_;
+  std::atomic<size_t>& streams_;
+  net::steady_timer timer_;
+  bool keep_alive_ = false;
+  // Event streams.
+  std::string job_;
+  uint64_t last_ = 0;
+  bool done_ = false;
+  bool counted_ = false;
+  std::shared_ptr<std::string> out_;
+  std::chrono::steady_clock::time_point idle_;
+};
+
+}  // namespace
+
+struct HttpServer::Impl {
+  Impl(Service& s, net::io_context& ctx, const HttpOptions& o) : service(s), io(ctx), options(o), acceptor(net::make_strand(ctx)) {}
+  void accept() {
+    acceptor.async_accept(net::make_strand(io), [this](beast::error_code ec, tcp::socket socket) {
+      if (ec) {
+        if (!acceptor.is_open()) return;
+      } else {
+        std::make_shared<Session>(std::move(socket), service, options, streams)->run();
+      }
+      accept();
+    });
+  }
+  Service& service;
+  net::io_context& io;
+  HttpOptions options;
+  tcp::acceptor acceptor;
+  std::atomic<size_t> streams{0};
+};
+
+HttpServer::HttpServer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+HttpServer::~HttpServer() { stop(); }
+
+std::unique_ptr<HttpServer> HttpServer::start(Service& service, net::io_context& io, const HttpOptions& options,
+                                              std::string& error) {
+  auto impl = std::make_unique<Impl>(service, io, options);
+  beast::error_code ec;
+  const auto address = net::ip::make_address(options.host, ec);
+  if (ec) {
+    error = "bad listen address '" + options.host + "': " + ec.message();
+    return nullptr;
+  }
+  const tcp::endpoint endpoint(address, options.port);
+  impl->acceptor.open(endpoint.protocol(), ec);
+  if (!ec) impl->acceptor.set_option(net::socket_base::reuse_address(true), ec);
+  if (!ec) impl->acceptor.bind(endpoint, ec);
+  if (!ec) impl->acceptor.listen(net::socket_base::max_listen_connections, ec);
+  if (ec) {
+    error = "cannot listen on " + options.host + ":" + std::to_string(options.port) + ": " + ec.message();
+    return nullptr;
+  }
+  impl->accept();
+  return std::unique_ptr<HttpServer>(new HttpServer(std::move(impl)));
+}
+
+unsigned short HttpServer::port() const { return impl_->acceptor.local_endpoint().port(); }
+
+void HttpServer::stop() {
+  if (!impl_) return;
+  net::dispatch(impl_->acceptor.get_executor(), [impl = impl_.get()] {
+    beast::error_code ec;
+    impl->acceptor.close(ec);
+  });
+}
+
+}  // namespace hemibake::server

@@ -1,0 +1,150 @@
+// hemibake-server: the baking service.
+#include "hemibake/server/http.h"
+#include "hemibake/server/service.h"
+
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/signal_set.hpp>
+
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace {
+
+void usage(FILE* out) {
+  std::fputs(
+      "usage: hemibake-server [options]\n"
+      "  --listen HOST:PORT      address to serve on (default 127.0.0.1:8080)\n"
+      "  --data DIR              data directory for the embedded job store (default ./hemibake-data)\n"
+      "  --workers N             concurrent bakes (default: number of cores)\n"
+      "  --solver-threads N      threads inside each bake (default 1)\n"
+      "  --tokens FILE           bearer tokens, one per line (also HEMIBAKE_TOKENS, comma-separated);\n"
+      "                          without any, no authentication\n"
+      "  --max-body BYTES        largest scene accepted (default 268435456)\n"
+      "  --max-queue N           queued jobs before 429 (default 100)\n"
+      "  --max-streams N         concurrent event streams (default 64)\n"
+      "  --job-seconds S         time budget per job (default 3600)\n"
+      "  --max-elements N        element budget per job (default 2000000)\n"
+      "  --max-triangles N       largest scene in triangles (default 2000000)\n"
+      "  --max-attempts N        restarts of a job interrupted by a crash (default 3)\n"
+      "  --expire-hours H        delete finished jobs and results after H hours (default 168)\n",
+      out);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  hemibake::server::ServiceOptions so;
+  so.data_dir = "hemibake-data";
+  hemibake::server::HttpOptions ho;
+  std::string tokens_file;
+  for (int i = 1; i < argc; ++i) {
+    const std::string opt = argv[i];
+    if (opt == "--help" || opt == "-h") {
+      usage(stdout);
+      return 0;
+    }
+    if (i + 1 >= argc) {
+      std::fprintf(stderr, "hemibake-server: %s needs a value\n", opt.c_str());
+      return 2;
+    }
+    const std::string val = argv[++i];
+    char* end = nullptr;
+    const double num = std::strtod(val.c_str(), &end);
+    const bool is_num = end != val.c_str() && *end == '\0' && num >= 0;
+    auto need_num = [&]() {
+      if (!is_num) {
+        std::fprintf(stderr, "hemibake-server: %s needs a non-negative number (got '%s')\n", opt.c_str(), val.c_str());
+        std::exit(2);
+      }
+      return num;
+    };
+    if (opt == "--listen") {
+      const size_t colon = val.rfind(':');
+      if (colon == std::string::npos) {
+        std::fprintf(stderr, "hemibake-server: --listen needs HOST:PORT (got '%s')\n", val.c_str());
+        return 2;
+      }
+      ho.host = val.substr(0, colon);
+      const long port = std::strtol(val.c_str() + colon + 1, &end, 10);
+      if (*end != '\0' || port < 0 || port > 65535) {
+        std::fprintf(stderr, "hemibake-server: bad port in '%s'\n", val.c_str());
+        return 2;
+      }
+      ho.port = static_cast<unsigned short>(port);
+    } else if (opt == "--data") so.data_dir = val;
+    else if (opt == "--workers") so.workers = static_cast<unsigned>(need_num());
+    else if (opt == "--solver-threads") so.solver_threads = static_cast<unsigned>(need_num());
+    else if (opt == "--tokens") tokens_file = val;
+    else if (opt == "--max-body") so.max_body_bytes = ho.max_body_bytes = static_cast<uint64_t>(need_num());
+    else if (opt == "--max-queue") so.max_queue = static_cast<size_t>(need_num());
+    else if (opt == "--max-streams") ho.max_streams = static_cast<size_t>(need_num());
+    else if (opt == "--job-seconds") so.job_seconds = need_num();
+    else if (opt == "--max-elements") so.max_elements = static_cast<uint64_t>(need_num());
+    else if (opt == "--max-triangles") so.max_triangles = static_cast<uint64_t>(need_num());
+    else if (opt == "--max-attempts") so.max_attempts = static_cast<int>(need_num());
+    else if (opt == "--expire-hours") so.expire_seconds = need_num() * 3600.0;
+    else {
+      std::fprintf(stderr, "hemibake-server: unknown option '%s' (try --help)\n", opt.c_str());
+      return 2;
+    }
+  }
+  if (!tokens_file.empty()) {
+    std::ifstream in(tokens_file);
+    if (!in) {
+      std::fprintf(stderr, "hemibake-server: cannot read tokens file '%s'\n", tokens_file.c_str());
+      return 2;
+    }
+    for (std::string line; std::getline(in, line);) {
+      while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.pop_back();
+      if (!line.empty() && line[0] != '#') so.tokens.push_back(line);
+    }
+  }
+  if (const char* env = std::getenv("HEMIBAKE_TOKENS")) {
+    std::string all = env;
+    for (size_t start = 0; start <= all.size();) {
+      const size_t comma = all.find(',', start);
+      const std::string t = all.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+      if (!t.empty()) so.tokens.push_back(t);
+      if (comma == std::string::npos) break;
+      start = comma + 1;
+    }
+  }
+  std::string error;
+  auto service = hemibake::server::Service::start(so, error);
+  if (!service) {
+    std::fprintf(stderr, "hemibake-server: %s\n", error.c_str());
+    return 1;
+  }
+  boost::asio::io_context io;
+  auto http = hemibake::server::HttpServer::start(*service, io, ho, error);
+  if (!http) {
+    std::fprintf(stderr, "hemibake-server: %s\n", error.c_str());
+    return 1;
+  }
+  std::printf("hemibake-server: serving http://%s:%u/ (data in %s, %s)\n", ho.host.c_str(), http->port(),
+              so.data_dir.c_str(), so.tokens.empty() ? "no authentication" : "bearer tokens required");
+  std::printf("  submit:  curl -sS -X POST --data-binary @scene.glb -H 'Content-Type: model/gltf-binary' "
+              "http://%s:%u/v1/jobs\n", ho.host.c_str(), http->port());
+  std::fflush(stdout);
+  // SIGTERM/SIGINT: stop accepting, stop the workers (running jobs go back to the queue), let the
+  // responses in flight finish, then leave.
+  boost::asio::signal_set signals(io, SIGINT, SIGTERM);
+  signals.async_wait([&](const boost::system::error_code&, int) {
+    std::printf("hemibake-server: shutting down\n");
+    std::fflush(stdout);
+    http->stop();
+    service->stop();
+    io.stop();
+  });
+  const unsigned n = std::max(2u, std::thread::hardware_concurrency());
+  std::vector<std::thread> threads;
+  for (unsigned i = 1; i < n; ++i) threads.emplace_back([&io] { io.run(); });
+  io.run();
+  for (auto& t : threads) t.join();
+  return 0;
+}

@@ -1,0 +1,98 @@
+// The API description served at /openapi.json.
+#pragma once
+
+namespace hemibake::server {
+
+inline constexpr const char* kOpenApi = R"json({
+  "openapi": "3.1.0",
+  "info": {"title": "hemibake", "version": "0.1.0",
+           "description": "Radiosity baking service: POST a glTF scene, follow the job, fetch the baked GLB."},
+  "components": {
+    "securitySchemes": {"bearer": {"type": "http", "scheme": "bearer"}},
+    "schemas": {
+      "Error": {"type": "object", "properties": {"error": {"type": "string"}}, "required": ["error"]},
+      "Progress": {"type": "object", "properties": {
+        "shots": {"type": "integer"}, "unshot_fraction": {"type": "number"}, "elements": {"type": "integer"},
+        "elapsed_seconds": {"type": "number"}, "eta_seconds": {"type": "number", "description": "-1 when unknown"}}},
+      "Job": {"type": "object", "properties": {
+        "id": {"type": "string"},
+        "state": {"enum": ["queued", "running", "succeeded", "failed", "cancelled"]},
+        "params": {"type": "object"}, "progress": {"$ref": "#/components/schemas/Progress"},
+        "scene_bytes": {"type": "integer"}, "result_bytes": {"type": "integer"}, "attempts": {"type": "integer"},
+        "created": {"type": "number"}, "started": {"type": "number"}, "finished": {"type": "number"},
+        "seconds": {"type": "number"}, "error": {"type": "string"}, "links": {"type": "object"}},
+        "required": ["id", "state", "params"]}
+    },
+    "parameters": {
+      "id": {"name": "id", "in": "path", "required": true, "schema": {"type": "string"}}
+    }
+  },
+  "security": [{"bearer": []}, {}],
+  "paths": {
+    "/v1/jobs": {
+      "post": {
+        "summary": "Submit a scene to bake",
+        "description": "The scene as the body (model/gltf-binary or model/gltf+json, all data embedded), or multipart/form-data with a 'scene' file part and an optional 'params' JSON part. Bake parameters as query parameters with the command line's names: method, resolution, feps, aeps, beps, convergence, max_shots, max_elements, reuse, draco, position_bits, texcoord_bits, draco_speed, exposure. An identical scene and parameters as a finished job are answered from the store (200, X-Hemibake-Cache: hit).",
+        "parameters": [{"name": "Idempotency-Key", "in": "header", "schema": {"type": "string", "maxLength": 200}}],
+        "requestBody": {"required": true, "content": {
+          "model/gltf-binary": {"schema": {"type": "string", "format": "binary"}},
+          "model/gltf+json": {"schema": {"type": "object"}},
+          "multipart/form-data": {"schema": {"type": "object", "properties": {
+            "scene": {"type": "string", "format": "binary"}, "params": {"type": "object"}}}}}},
+        "responses": {
+          "202": {"description": "Accepted", "headers": {"Location": {"schema": {"type": "string"}}},
+                  "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Job"}}}},
+          "200": {"description": "Same Idempotency-Key, or a cache hit", "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Job"}}}},
+          "400": {"description": "Bad parameters", "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Error"}}}},
+          "401": {"description": "Missing or wrong bearer token"},
+          "413": {"description": "Scene too large"},
+          "415": {"description": "Unsupported content type"},
+          "422": {"description": "The scene is not a usable glTF file", "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Error"}}}},
+          "429": {"description": "Queue full", "headers": {"Retry-After": {"schema": {"type": "integer"}}}}}},
+      "get": {
+        "summary": "List jobs, newest first",
+        "parameters": [
+          {"name": "state", "in": "query", "schema": {"enum": ["queued", "running", "succeeded", "failed", "cancelled"]}},
+          {"name": "limit", "in": "query", "schema": {"type": "integer", "minimum": 1, "maximum": 1000, "default": 50}},
+          {"name": "after", "in": "query", "description": "Paging cursor: the last id of the previous page", "schema": {"type": "string"}}],
+        "responses": {"200": {"description": "A page of jobs; 'next' links the following page",
+          "content": {"application/json": {"schema": {"type": "object", "properties": {
+            "jobs": {"type": "array", "items": {"$ref": "#/components/schemas/Job"}}, "next": {"type": "string"}}}}}}}}
+    },
+    "/v1/jobs/{id}": {
+      "parameters": [{"$ref": "#/components/parameters/id"}],
+      "get": {"summary": "A job's state and progress", "responses": {
+        "200": {"description": "The job", "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Job"}}}},
+        "404": {"description": "No such job"}}},
+      "delete": {"summary": "Cancel a queued or running job (the worker stops within one shot)", "responses": {
+        "200": {"description": "Cancelled", "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Job"}}}},
+        "404": {"description": "No such job"}, "409": {"description": "Already finished"}}}
+    },
+    "/v1/jobs/{id}/events": {
+      "parameters": [{"$ref": "#/components/parameters/id"},
+                     {"name": "Last-Event-ID", "in": "header", "schema": {"type": "string"}}],
+      "get": {"summary": "Server-Sent Events: 'progress' and 'state' events with ids, a heartbeat comment, and a final 'state' event when the job ends",
+        "responses": {"200": {"description": "An event stream", "content": {"text/event-stream": {}}},
+                      "404": {"description": "No such job"}, "503": {"description": "Too many streams"}}}
+    },
+    "/v1/jobs/{id}/result": {
+      "parameters": [{"$ref": "#/components/parameters/id"},
+                     {"name": "If-None-Match", "in": "header", "schema": {"type": "string"}}],
+      "get": {"summary": "The baked GLB", "responses": {
+        "200": {"description": "The result", "headers": {"ETag": {"schema": {"type": "string"}}},
+                "content": {"model/gltf-binary": {"schema": {"type": "string", "format": "binary"}}}},
+        "304": {"description": "Not modified"}, "404": {"description": "No such job"},
+        "409": {"description": "Not finished, failed or cancelled"}}}
+    },
+    "/v1/jobs/{id}/preview": {
+      "parameters": [{"$ref": "#/components/parameters/id"}],
+      "get": {"summary": "The current state of a running job as GLB (not implemented yet: 501)", "responses": {"501": {"description": "Not implemented"}}}
+    },
+    "/healthz": {"get": {"summary": "Liveness", "security": [{}], "responses": {"200": {"description": "Alive"}}}},
+    "/readyz": {"get": {"summary": "Readiness", "security": [{}], "responses": {"200": {"description": "Ready"}, "503": {"description": "Not ready"}}}},
+    "/metrics": {"get": {"summary": "Prometheus metrics", "responses": {"200": {"description": "Text exposition format", "content": {"text/plain": {}}}}}},
+    "/openapi.json": {"get": {"summary": "This document", "responses": {"200": {"description": "OpenAPI 3.1"}}}}
+  }
+})json";
+
+}  // namespace hemibake::server

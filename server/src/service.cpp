@@ -1,0 +1,505 @@
+#include "hemibake/server/service.h"
+
+#include "hemibake/protocol/gltf.h"
+#include "hemibake/protocol/job.h"
+#include "hemibake/solver/solver.h"
+#include "openapi.h"
+
+#include <nlohmann/json.hpp>
+#include <openssl/evp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <sstream>
+
+namespace hemibake::server {
+namespace {
+
+using nlohmann::json;
+
+std::string sha256_hex(const std::string& data) {
+  unsigned char digest[EVP_MAX_MD_SIZE];
+  unsigned int len = 0;
+  EVP_Digest(data.data(), data.size(), digest, &len, EVP_sha256(), nullptr);
+  static const char* hex = "0123456789abcdef";
+  std::string out;
+  for (unsigned i = 0; i < len; ++i) {
+    out += hex[digest[i] >> 4];
+    out += hex[digest[i] & 15];
+  }
+  return out;
+}
+
+Response error(int status, const std::string& message) {
+  Response r;
+  r.status = status;
+  r.body = json{{"error", message}}.dump();
+  return r;
+}
+
+std::string percent_decode(const std::string& s) {
+  std::string out;
+  for (size_t i = 0; i < s.size(); ++i) {
+    if (s[i] == '+') {
+      out += ' ';
+    } else if (s[i] == '%' && i + 2 < s.size() && std::isxdigit(static_cast<unsigned char>(s[i + 1])) &&
+               std::isxdigit(static_cast<unsigned char>(s[i + 2]))) {
+      out += static_cast<char>(std::stoi(s.substr(i + 1, 2), nullptr, 16));
+      i += 2;
+    } else {
+      out += s[i];
+    }
+  }
+  return out;
+}
+
+// Constant-time comparison, so that response timing does not reveal how much of a token matched.
+bool same(const std::string& a, const std::string& b) {
+  unsigned char diff = a.size() == b.size() ? 0 : 1;
+  const size_t n = std::max(a.size(), b.size());
+  for (size_t i = 0; i < n; ++i) {
+    const unsigned char x = i < a.size() ? static_cast<unsigned char>(a[i]) : 0;
+    const unsigned char y = i < b.size() ? static_cast<unsigned char>(b[i]) : 0;
+    diff |= static_cast<unsigned char>(x ^ y);
+  }
+  return diff == 0;
+}
+
+// The parts of a multipart/form-data body by field name: (content type, data).
+std::map<std::string, std::pair<std::string, std::string>> parse_multipart(const std::string& body, const std::string& boundary) {
+  std::map<std::string, std::pair<std::string, std::string>> parts;
+  const std::string delim = "--" + boundary;
+  size_t pos = body.find(delim);
+  while (pos != std::string::npos) {
+    pos += delim.size();
+    if (body.compare(pos, 2, "--") == 0) break;
+    if (body.compare(pos, 2, "\r\n") == 0) pos += 2;
+    const size_t head_end = body.find("\r\n\r\n", pos);
+    if (head_end == std::string::npos) break;
+    const std::string head = body.substr(pos, head_end - pos);
+    const size_t next = body.find("\r\n" + delim, head_end + 4);
+    if (next == std::string::npos) break;
+    std::string name, type;
+    std::istringstream lines(head);
+    std::string line;
+    while (std::getline(lines, line)) {
+      if (!line.empty() && line.back() == '\r') line.pop_back();
+      std::string lower = line;
+      std::transform(lower.begin(), lower.end(), lower.begin(), ::tolower);
+      if (lower.rfind("content-disposition:", 0) == 0) {
+        const size_t n = lower.find("name=\"");
+        if (n != std::string::npos) name = line.substr(n + 6, line.find('"', n + 6) - (n + 6));
+      } else if (lower.rfind("content-type:", 0) == 0) {
+        type = lower.substr(13);
+        type.erase(0, type.find_first_not_of(' '));
+      }
+    }
+    parts[name] = {type, body.substr(head_end + 4, next - (head_end + 4))};
+    pos = next + 2;
+  }
+  return parts;
+}
+
+}  // namespace
+
+std::map<std::string, std::string> parse_query(const std::string& query) {
+  std::map<std::string, std::string> out;
+  size_t start = 0;
+  while (start < query.size()) {
+    size_t end = query.find('&', start);
+    if (end == std::string::npos) end = query.size();
+    const std::string pair = query.substr(start, end - start);
+    const size_t eq = pair.find('=');
+    if (!pair.empty()) out[percent_decode(pair.substr(0, eq))] = eq == std::string::npos ? "" : percent_decode(pair.substr(eq + 1));
+    start = end + 1;
+  }
+  return out;
+}
+
+std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::string& err) {
+  std::unique_ptr<Service> s(new Service(options));
+  s->store_ = Store::open(options.data_dir, err);
+  if (!s->store_) return nullptr;
+  // An accepted job is never lost: what a crash left running runs again (up to max_attempts).
+  s->store_->recover(options.max_attempts);
+  s->store_->expire(options.expire_seconds);
+  s->running_ = true;
+  const unsigned n = options.workers != 0 ? options.workers : std::max(1u, std::thread::hardware_concurrency());
+  for (unsigned i = 0; i < n; ++i) s->workers_.emplace_back([p = s.get()] { p->worker_loop(); });
+  return s;
+}
+
+Service::~Service() { stop(); }
+
+void Service::stop() {
+  {
+    std::lock_guard lock(mutex_);
+    if (!running_) return;
+    running_ = false;
+    for (auto& [id, token] : active_) token->cancel();
+  }
+  wake_.notify_all();
+  for (auto& w : workers_) w.join();
+  workers_.clear();
+}
+
+void Service::count_response(int status) {
+  std::lock_guard lock(metrics_mutex_);
+  ++responses_[status];
+}
+
+void Service::worker_loop() {
+  while (running_) {
+    std::string id, scene, params;
+    if (!store_->claim(id, scene, params)) {
+      std::unique_lock lock(mutex_);
+      wake_.wait_for(lock, std::chrono::milliseconds(250), [&] { return !running_; });
+      continue;
+    }
+    bake(id, scene, params);
+  }
+}
+
+void Service::bake(const std::string& id, const std::string& scene, const std::string& params) {
+  const auto t0 = std::chrono::steady_clock::now();
+  store_->add_event(id, "state", json{{"state", "running"}}.dump());
+  protocol::JobSpec spec;
+  if (std::string e = protocol::parse_params_json(params, spec); !e.empty()) {
+    store_->fail(id, e);
+    store_->add_event(id, "state", json{{"state", "failed"}, {"error", e}}.dump());
+    return;
+  }
+  spec.params.threads = options_.solver_threads;
+  spec.params.max_elements = std::min<uint64_t>(spec.params.max_elements, options_.max_elements);
+  protocol::LoadLimits limits;
+  limits.allow_external_files = false;
+  limits.max_file_bytes = options_.max_body_bytes;
+  limits.max_triangles = options_.max_triangles;
+  const auto loaded = protocol::load_gltf_memory(
+      std::span(reinterpret_cast<const uint8_t*>(scene.data()), scene.size()), "", limits);
+  if (!loaded.document) {
+    store_->fail(id, loaded.error);
+    store_->add_event(id, "state", json{{"state", "failed"}, {"error", loaded.error}}.dump());
+    return;
+  }
+  solver::Solver solver(protocol::scene_of(*loaded.document), spec.params);
+  solver::CancelToken token;
+  {
+    std::lock_guard lock(mutex_);
+    if (!running_) {
+      store_->requeue(id);
+      return;
+    }
+    active_[id] = &token;
+  }
+  bool over_budget = false;
+  double last_report = -1.0;
+  solver.run(
+      [&](const solver::Progress& p) {
+        if (p.elapsed_seconds > options_.job_seconds) {
+          over_budget = true;
+          token.cancel();
+        }
+        if (p.elapsed_seconds - last_report < 0.5) return;
+        last_report = p.elapsed_seconds;
+        // Time left, from how fast the unshot power has fallen so far (it falls roughly
+        // geometrically): elapsed * log(u / target) / log(1 / u).
+        const double target = spec.params.convergence;
+        double eta = -1.0;
+        if (p.unshot_fraction > target && p.unshot_fraction < 1.0)
+          eta = p.elapsed_seconds * std::log(p.unshot_fraction / target) / std::log(1.0 / p.unshot_fraction);
+        const json progress = {{"shots", p.shots}, {"unshot_fraction", p.unshot_fraction}, {"elements", p.elements},
+                               {"elapsed_seconds", p.elapsed_seconds}, {"eta_seconds", eta}};
+        store_->set_progress(id, progress.dump());
+        store_->add_event(id, "progress", progress.dump());
+      },
+      &token);
+  {
+    std::lock_guard lock(mutex_);
+    active_.erase(id);
+  }
+  const solver::Stats& st = solver.stats();
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const json final_progress = {{"shots", st.shots}, {"unshot_fraction", st.unshot_fraction}, {"elements", st.elements},
+                               {"elapsed_seconds", st.seconds}, {"eta_seconds", 0.0}};
+  store_->set_progress(id, final_progress.dump());
+  if (st.cancelled) {
+    if (over_budget) {
+      const std::string e = "the bake exceeded its time budget of " + std::to_string(options_.job_seconds) + " s";
+      store_->fail(id, e);
+      store_->add_event(id, "state", json{{"state", "failed"}, {"error", e}}.dump());
+    } else if (!running_) {
+      store_->requeue(id);  // shutting down: the job runs again after the restart
+    } else {
+      store_->add_event(id, "state", json{{"state", "cancelled"}}.dump());
+    }
+    return;
+  }
+  const auto written = protocol::write_baked_glb(*loaded.document, solver.mesh(), spec.params, st, spec.write);
+  if (!written.error.empty()) {
+    store_->fail(id, written.error);
+    store_->add_event(id, "state", json{{"state", "failed"}, {"error", written.error}}.dump());
+    return;
+  }
+  const std::string glb(written.glb.begin(), written.glb.end());
+  store_->succeed(id, glb, "\"" + sha256_hex(glb) + "\"");
+  store_->add_event(id, "state", json{{"state", "succeeded"}}.dump());
+  std::lock_guard lock(metrics_mutex_);
+  ++bakes_;
+  bake_seconds_sum_ += seconds;
+  size_t b = 0;
+  while (b < bake_seconds_buckets_.size() && seconds > bake_seconds_buckets_[b]) ++b;
+  ++bake_seconds_counts_[b];
+  shots_ += st.shots;
+  shot_seconds_ += st.seconds;
+}
+
+std::optional<Response> Service::check_auth(const Request& request) const {
+  if (options_.tokens.empty()) return std::nullopt;
+  const std::string path = request.target.substr(0, request.target.find('?'));
+  if (path == "/healthz" || path == "/readyz") return std::nullopt;
+  const auto it = request.headers.find("authorization");
+  std::string given;
+  if (it != request.headers.end() && it->second.rfind("Bearer ", 0) == 0) given = it->second.substr(7);
+  bool ok = false;
+  for (const auto& t : options_.tokens) ok = same(given, t) || ok;  // no early exit
+  if (ok) return std::nullopt;
+  Response r = error(401, given.empty() ? "a bearer token is required" : "the bearer token is not valid");
+  r.headers.emplace_back("WWW-Authenticate", "Bearer realm=\"hemibake\"");
+  return r;
+}
+
+std::string Service::events_job(const Request& request) {
+  const std::string path = request.target.substr(0, request.target.find('?'));
+  const std::string prefix = "/v1/jobs/", suffix = "/events";
+  if (request.method != "GET" || path.rfind(prefix, 0) != 0 || path.size() <= prefix.size() + suffix.size() ||
+      path.compare(path.size() - suffix.size(), suffix.size(), suffix) != 0)
+    return {};
+  const std::string id = path.substr(prefix.size(), path.size() - prefix.size() - suffix.size());
+  return id.find('/') == std::string::npos ? id : std::string();
+}
+
+Response Service::job_json(const JobRecord& r, int status) {
+  json j = {{"id", r.id},
+            {"state", to_string(r.state)},
+            {"params", json::parse(r.params, nullptr, false)},
+            {"scene_bytes", r.scene_bytes},
+            {"attempts", r.attempts},
+            {"created", r.created},
+            {"links", {{"self", "/v1/jobs/" + r.id}, {"events", "/v1/jobs/" + r.id + "/events"},
+                       {"result", "/v1/jobs/" + r.id + "/result"}}}};
+  if (!r.progress.empty()) j["progress"] = json::parse(r.progress, nullptr, false);
+  if (r.started > 0) j["started"] = r.started;
+  if (r.finished > 0) j["finished"] = r.finished;
+  if (r.started > 0 && r.finished > 0) j["seconds"] = r.finished - r.started;
+  if (!r.error.empty()) j["error"] = r.error;
+  if (r.state == JobState::kSucceeded) j["result_bytes"] = r.result_bytes;
+  Response resp;
+  resp.status = status;
+  resp.body = j.dump();
+  return resp;
+}
+
+Response Service::submit(const Request& req, const std::string& query) {
+  protocol::JobSpec spec;
+  std::map<std::string, std::string> values = parse_query(query);
+  std::string scene, content_type;
+  const auto ct_it = req.headers.find("content-type");
+  std::string ct = ct_it == req.headers.end() ? "" : ct_it->second;
+  std::string ct_lower = ct;
+  std::transform(ct_lower.begin(), ct_lower.end(), ct_lower.begin(), ::tolower);
+  const std::string media = ct_lower.substr(0, ct_lower.find(';'));
+  if (media == "multipart/form-data") {
+    const size_t b = ct_lower.find("boundary=");
+    if (b == std::string::npos) return error(400, "multipart/form-data needs a boundary");
+    std::string boundary = ct.substr(b + 9);
+    if (!boundary.empty() && boundary.front() == '"') boundary = boundary.substr(1, boundary.find('"', 1) - 1);
+    boundary = boundary.substr(0, boundary.find(';'));
+    const auto parts = parse_multipart(req.body, boundary);
+    const auto s = parts.find("scene");
+    if (s == parts.end()) return error(400, "the form has no 'scene' file part");
+    scene = s->second.second;
+    content_type = s->second.first;
+    if (const auto p = parts.find("params"); p != parts.end()) {
+      protocol::JobSpec from_json;
+      const json j = json::parse(p->second.second, nullptr, false);
+      if (j.is_discarded() || !j.is_object()) return error(400, "the 'params' part must be a JSON object");
+      for (const auto& [k, v] : j.items())
+        if (!values.count(k)) values[k] = v.is_string() ? v.get<std::string>() : v.dump();
+    }
+  } else if (media == "model/gltf-binary" || media == "model/gltf+json" || media == "application/octet-stream") {
+    scene = req.body;
+    content_type = media;
+  } else {
+    Response r = error(415, "send the scene as model/gltf-binary, model/gltf+json or multipart/form-data (got '" + ct + "')");
+    return r;
+  }
+  if (scene.empty()) return error(400, "the scene is empty");
+  if (scene.size() > options_.max_body_bytes) return error(413, "the scene is larger than " + std::to_string(options_.max_body_bytes) + " bytes");
+  if (std::string e = protocol::apply_params(values, spec); !e.empty()) return error(400, e);
+  // The scene is checked before it is accepted: a bad file is refused now, not in the queue.
+  protocol::LoadLimits limits;
+  limits.allow_external_files = false;
+  limits.max_file_bytes = options_.max_body_bytes;
+  limits.max_triangles = options_.max_triangles;
+  const auto loaded = protocol::load_gltf_memory(std::span(reinterpret_cast<const uint8_t*>(scene.data()), scene.size()), "", limits);
+  if (!loaded.document) return error(422, loaded.error);
+  const std::string params = protocol::params_json(spec);
+  const std::string cache_key = sha256_hex(scene) + ":" + sha256_hex(params);
+  // The same scene and parameters as a finished job: its answer at once.
+  if (auto cached = store_->find_cached(cache_key)) {
+    auto rec = store_->get(*cached);
+    if (rec) {
+      Response r = job_json(*rec, 200);
+      r.headers.emplace_back("Location", "/v1/jobs/" + rec->id);
+      r.headers.emplace_back("X-Hemibake-Cache", "hit");
+      return r;
+    }
+  }
+  const auto key_it = req.headers.find("idempotency-key");
+  const std::string idem = key_it == req.headers.end() ? "" : key_it->second;
+  if (idem.size() > 200) return error(400, "the Idempotency-Key is longer than 200 characters");
+  if (idem.empty() && store_->count(JobState::kQueued) >= options_.max_queue) {
+    Response r = error(429, "the queue is full (" + std::to_string(options_.max_queue) + " jobs); retry later");
+    r.headers.emplace_back("Retry-After", "30");
+    return r;
+  }
+  bool existed = false;
+  const std::string id = store_->create(scene, content_type, params, cache_key, idem, existed);
+  if (id.empty()) return error(500, "the job could not be stored");
+  wake_.notify_one();
+  auto rec = store_->get(id);
+  if (!rec) return error(500, "the job could not be read back");
+  Response r = job_json(*rec, existed ? 200 : 202);
+  r.headers.emplace_back("Location", "/v1/jobs/" + id);
+  for (const auto& w : loaded.warnings) r.headers.emplace_back("Warning", "199 hemibake \"" + w + "\"");
+  return r;
+}
+
+Response Service::metrics() {
+  std::ostringstream m;
+  m << "# HELP hemibake_jobs Jobs in the store by state.\n# TYPE hemibake_jobs gauge\n";
+  for (JobState s : {JobState::kQueued, JobState::kRunning, JobState::kSucceeded, JobState::kFailed, JobState::kCancelled})
+    m << "hemibake_jobs{state=\"" << to_string(s) << "\"} " << store_->count(s) << "\n";
+  m << "# HELP hemibake_queue_depth Jobs waiting for a worker.\n# TYPE hemibake_queue_depth gauge\n";
+  m << "hemibake_queue_depth " << store_->count(JobState::kQueued) << "\n";
+  std::lock_guard lock(metrics_mutex_);
+  m << "# HELP hemibake_bake_seconds Time to bake a job.\n# TYPE hemibake_bake_seconds histogram\n";
+  uint64_t cum = 0;
+  for (size_t i = 0; i < bake_seconds_buckets_.size(); ++i) {
+    cum += bake_seconds_counts_[i];
+    m << "hemibake_bake_seconds_bucket{le=\"" << bake_seconds_buckets_[i] << "\"} " << cum << "\n";
+  }
+  cum += bake_seconds_counts_.back();
+  m << "hemibake_bake_seconds_bucket{le=\"+Inf\"} " << cum << "\n";
+  m << "hemibake_bake_seconds_sum " << bake_seconds_sum_ << "\nhemibake_bake_seconds_count " << bakes_ << "\n";
+  m << "# HELP hemibake_shots_per_second Shots per second of solver time, over all bakes.\n"
+       "# TYPE hemibake_shots_per_second gauge\n";
+  m << "hemibake_shots_per_second " << (shot_seconds_ > 0 ? static_cast<double>(shots_) / shot_seconds_ : 0.0) << "\n";
+  m << "# HELP hemibake_http_responses HTTP responses by status code.\n# TYPE hemibake_http_responses counter\n";
+  for (const auto& [status, n] : responses_) m << "hemibake_http_responses{code=\"" << status << "\"} " << n << "\n";
+  Response r;
+  r.body = m.str();
+  r.content_type = "text/plain; version=0.0.4";
+  return r;
+}
+
+Response Service::handle(const Request& req) {
+  if (auto denied = check_auth(req)) return *denied;
+  const size_t q = req.target.find('?');
+  const std::string path = req.target.substr(0, q);
+  const std::string query = q == std::string::npos ? "" : req.target.substr(q + 1);
+  if (path == "/healthz") {
+    Response r;
+    r.body = R"({"status":"ok"})";
+    return r;
+  }
+  if (path == "/readyz") return running_ ? Response{200, {}, R"({"status":"ready"})"} : error(503, "not ready");
+  if (path == "/metrics" && req.method == "GET") return metrics();
+  if (path == "/openapi.json" && req.method == "GET") {
+    Response r;
+    r.body = kOpenApi;
+    return r;
+  }
+  if (path == "/v1/jobs") {
+    if (req.method == "POST") return submit(req, query);
+    if (req.method != "GET") return error(405, "use GET or POST on /v1/jobs");
+    const auto args = parse_query(query);
+    std::optional<JobState> state;
+    if (auto it = args.find("state"); it != args.end()) {
+      state = job_state_from(it->second);
+      if (!state) return error(400, "state must be queued, running, succeeded, failed or cancelled");
+    }
+    size_t limit = 50;
+    if (auto it = args.find("limit"); it != args.end()) {
+      char* end = nullptr;
+      const long v = std::strtol(it->second.c_str(), &end, 10);
+      if (*end != '\0' || v < 1 || v > 1000) return error(400, "limit must be 1 to 1000");
+      limit = static_cast<size_t>(v);
+    }
+    const std::string after = args.count("after") ? args.at("after") : "";
+    const auto jobs = store_->list(state, limit, after);
+    json list = json::array();
+    for (const auto& r : jobs) list.push_back(json::parse(job_json(r, 200).body));
+    json body = {{"jobs", list}};
+    if (jobs.size() == limit) body["next"] = "/v1/jobs?limit=" + std::to_string(limit) + "&after=" + jobs.back().id +
+                                             (state ? std::string("&state=") + to_string(*state) : "");
+    Response r;
+    r.body = body.dump();
+    return r;
+  }
+  const std::string prefix = "/v1/jobs/";
+  if (path.rfind(prefix, 0) == 0) {
+    std::string rest = path.substr(prefix.size());
+    const size_t slash = rest.find('/');
+    const std::string id = rest.substr(0, slash);
+    const std::string sub = slash == std::string::npos ? "" : rest.substr(slash + 1);
+    auto rec = store_->get(id);
+    if (!rec) return error(404, "no job " + id);
+    if (sub.empty()) {
+      if (req.method == "GET") return job_json(*rec, 200);
+      if (req.method == "DELETE") {
+        if (finished(rec->state)) return error(409, std::string("the job has already ") + (rec->state == JobState::kSucceeded ? "succeeded" : to_string(rec->state)));
+        store_->cancel(id);
+        {
+          std::lock_guard lock(mutex_);
+          if (auto it = active_.find(id); it != active_.end()) it->second->cancel();
+        }
+        if (rec->state == JobState::kQueued) store_->add_event(id, "state", json{{"state", "cancelled"}}.dump());
+        return job_json(*store_->get(id), 200);
+      }
+      return error(405, "use GET or DELETE on a job");
+    }
+    if (sub == "result" && req.method == "GET") {
+      if (rec->state != JobState::kSucceeded) {
+        Response r = error(409, std::string("the job is ") + to_string(rec->state) + (rec->error.empty() ? "" : ": " + rec->error));
+        if (!finished(rec->state)) r.headers.emplace_back("Retry-After", "5");
+        return r;
+      }
+      const auto inm = req.headers.find("if-none-match");
+      if (inm != req.headers.end() && inm->second == rec->etag) {
+        Response r;
+        r.status = 304;
+        r.headers.emplace_back("ETag", rec->etag);
+        r.content_type.clear();
+        return r;
+      }
+      auto data = store_->result(id);
+      if (!data) return error(404, "the result has expired");
+      Response r;
+      r.body = std::move(*data);
+      r.content_type = "model/gltf-binary";
+      r.headers.emplace_back("ETag", rec->etag);
+      r.headers.emplace_back("Content-Disposition", "attachment; filename=\"" + id + ".glb\"");
+      return r;
+    }
+    if (sub == "preview" && req.method == "GET")
+      return error(501, "previews of running jobs are not implemented yet; the result is available when the job succeeds");
+    return error(404, "no such resource: " + path);
+  }
+  return error(404, "no such resource: " + path);
+}
+
+}  // namespace hemibake::server
