@@ -1,0 +1,346 @@
+// The real server binary on loopback, spoken to over real HTTP (a Beast client written here).
+#include <boost/asio/connect.hpp>
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/beast/core.hpp>
+#include <boost/beast/http.hpp>
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <atomic>
+#include <csignal>
+#include <cstring>
+#include <map>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <sys/wait.h>
+#include <thread>
+#include <unistd.h>
+#include <vector>
+
+namespace {
+
+namespace beast = boost::beast;
+namespace http = beast::http;
+namespace net = boost::asio;
+using tcp = net::ip::tcp;
+using nlohmann::json;
+using namespace std::chrono_literals;
+
+std::string read_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// A hemibake-server process on a free loopback port.
+class ServerProcess {
+ public:
+  ServerProcess(const std::string& data_dir, std::vector<std::string> extra = {}, std::vector<std::string> env = {}) {
+    int fds[2];
+    if (pipe(fds) != 0) std::abort();
+    pid_ = fork();
+    if (pid_ == 0) {
+      dup2(fds[1], STDOUT_FILENO);
+      close(fds[0]);
+      for (const auto& e : env) putenv(const_cast<char*>(e.c_str()));
+      std::vector<std::string> args = {HEMIBAKE_SERVER, "--listen", "127.0.0.1:0", "--data", data_dir};
+      args.insert(args.end(), extra.begin(), extra.end());
+      std::vector<char*> argv;
+      for (auto& a : args) argv.push_back(a.data());
+      argv.push_back(nullptr);
+      execv(argv[0], argv.data());
+      _exit(127);
+    }
+    close(fds[1]);
+    // The first line names the port: "hemibake-server: serving http://127.0.0.1:PORT/ ...".
+    FILE* out = fdopen(fds[0], "r");
+    char line[512] = {0};
+    if (fgets(line, sizeof line, out)) {
+      const char* p = std::strstr(line, "127.0.0.1:");
+      if (p) port_ = static_cast<unsigned short>(std::atoi(p + 10));
+    }
+    out_ = out;
+  }
+  ~ServerProcess() { stop(SIGTERM); }
+  unsigned short port() const { return port_; }
+  void stop(int sig) {
+    if (pid_ <= 0) return;
+    kill(pid_, sig);
+    int status = 0;
+    waitpid(pid_, &status, 0);
+    pid_ = -1;
+    if (out_) fclose(out_);
+    out_ = nullptr;
+  }
+
+ private:
+  pid_t pid_ = -1;
+  unsigned short port_ = 0;
+  FILE* out_ = nullptr;
+};
+
+struct Reply {
+  int status = 0;
+  std::map<std::string, std::string> headers;
+  std::string body;
+  json js() const { return json::parse(body, nullptr, false); }
+};
+
+Reply request(unsigned short port, http::verb method, const std::string& target, const std::string& body = {},
+              std::map<std::string, std::string> headers = {}) {
+  net::io_context io;
+  beast::tcp_stream stream(io);
+  stream.expires_after(30s);
+  stream.connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
+  http::request<http::string_body> req(method, target, 11);
+  req.set(http::field::host, "127.0.0.1");
+  for (const auto& [k, v] : headers) req.set(k, v);
+  req.body() = body;
+  req.prepare_payload();
+  http::write(stream, req);
+  beast::flat_buffer buffer;
+  http::response_parser<http::string_body> parser;
+  parser.body_limit(1ull << 30);
+  http::read(stream, buffer, parser);
+  Reply r;
+  r.status = static_cast<int>(parser.get().result_int());
+  for (const auto& f : parser.get()) {
+    std::string name(f.name_string());
+    for (auto& c : name) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    r.headers[name] = std::string(f.value());
+  }
+  r.body = parser.get().body();
+  return r;
+}
+
+// Reads an event stream until it ends; returns (id, event, data) triples.
+std::vector<std::tuple<uint64_t, std::string, std::string>> events(unsigned short port, const std::string& id,
+                                                                   uint64_t last = 0) {
+  net::io_context io;
+  beast::tcp_stream stream(io);
+  stream.expires_after(120s);
+  stream.connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
+  std::string req = "GET /v1/jobs/" + id + "/events HTTP/1.1\r\nHost: 127.0.0.1\r\n";
+  if (last) req += "Last-Event-ID: " + std::to_string(last) + "\r\n";
+  req += "\r\n";
+  net::write(stream, net::buffer(req));
+  std::string all;
+  beast::error_code ec;
+  char buf[4096];
+  for (;;) {
+    const size_t n = stream.read_some(net::buffer(buf), ec);
+    all.append(buf, n);
+    if (ec) break;
+  }
+  std::vector<std::tuple<uint64_t, std::string, std::string>> out;
+  const size_t body = all.find("\r\n\r\n");
+  std::istringstream lines(all.substr(body == std::string::npos ? all.size() : body + 4));
+  uint64_t eid = 0;
+  std::string type, data;
+  for (std::string line; std::getline(lines, line);) {
+    if (line.rfind("id: ", 0) == 0) eid = std::stoull(line.substr(4));
+    else if (line.rfind("event: ", 0) == 0) type = line.substr(7);
+    else if (line.rfind("data: ", 0) == 0) data = line.substr(6);
+    else if (line.empty() && !type.empty()) {
+      out.emplace_back(eid, type, data);
+      type.clear();
+    }
+  }
+  return out;
+}
+
+std::string temp_dir(const std::string& name) {
+  const auto d = std::filesystem::temp_directory_path() / ("hemibake-" + name + "-" + std::to_string(getpid()));
+  std::filesystem::remove_all(d);
+  return d.string();
+}
+
+const std::string& cornell() {
+  static const std::string scene = read_file(HEMIBAKE_SOURCE_DIR "/data/cornell-box.gltf");
+  return scene;
+}
+
+json wait_finished(unsigned short port, const std::string& id, std::chrono::seconds limit = 120s) {
+  const auto until = std::chrono::steady_clock::now() + limit;
+  json j;
+  while (std::chrono::steady_clock::now() < until) {
+    j = request(port, http::verb::get, "/v1/jobs/" + id).js();
+    const std::string s = j.value("state", "");
+    if (s == "succeeded" || s == "failed" || s == "cancelled") return j;
+    std::this_thread::sleep_for(100ms);
+  }
+  return j;
+}
+
+const std::map<std::string, std::string> kGltf = {{"Content-Type", "model/gltf+json"}};
+
+TEST(Server, SubmitStreamFetchAndCacheHit) {
+  ServerProcess server(temp_dir("submit"), {"--workers", "1"});
+  ASSERT_NE(server.port(), 0);
+  const Reply posted = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.05", cornell(), kGltf);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = posted.js()["id"];
+  EXPECT_EQ(posted.headers.at("location"), "/v1/jobs/" + id);
+  // The stream carries the job's events in order and ends with its final state.
+  const auto evs = events(server.port(), id);
+  ASSERT_FALSE(evs.empty());
+  for (size_t i = 1; i < evs.size(); ++i) EXPECT_EQ(std::get<0>(evs[i]), std::get<0>(evs[i - 1]) + 1);
+  EXPECT_EQ(std::get<1>(evs.back()), "state");
+  EXPECT_EQ(json::parse(std::get<2>(evs.back()))["state"], "succeeded");
+  // Resuming after the first event replays only what came after it.
+  const auto resumed = events(server.port(), id, std::get<0>(evs.front()));
+  EXPECT_EQ(resumed.size(), evs.size() - 1);
+  const json job = request(server.port(), http::verb::get, "/v1/jobs/" + id).js();
+  EXPECT_EQ(job["state"], "succeeded");
+  EXPECT_LT(job["progress"]["unshot_fraction"].get<double>(), 0.05);
+  const Reply result = request(server.port(), http::verb::get, "/v1/jobs/" + id + "/result");
+  ASSERT_EQ(result.status, 200);
+  EXPECT_EQ(result.headers.at("content-type"), "model/gltf-binary");
+  EXPECT_EQ(result.body.substr(0, 4), "glTF");
+  const Reply again = request(server.port(), http::verb::get, "/v1/jobs/" + id + "/result", "",
+                              {{"If-None-Match", result.headers.at("etag")}});
+  EXPECT_EQ(again.status, 304);
+  // The same scene and parameters: answered from the store.
+  const Reply cached = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.05", cornell(), kGltf);
+  EXPECT_EQ(cached.status, 200);
+  EXPECT_EQ(cached.headers.at("x-hemibake-cache"), "hit");
+  EXPECT_EQ(cached.js()["id"], id);
+  // Listing, with the state filter.
+  const json list = request(server.port(), http::verb::get, "/v1/jobs?state=succeeded").js();
+  ASSERT_EQ(list["jobs"].size(), 1u);
+  EXPECT_EQ(list["jobs"][0]["id"], id);
+  EXPECT_EQ(request(server.port(), http::verb::get, "/openapi.json").js()["openapi"], "3.1.0");
+  EXPECT_NE(request(server.port(), http::verb::get, "/metrics").body.find("hemibake_jobs{state=\"succeeded\"} 1"), std::string::npos);
+}
+
+TEST(Server, RefusesBadRequestsWithJsonErrors) {
+  ServerProcess server(temp_dir("errors"), {"--workers", "1", "--max-body", "100000"});
+  auto post = [&](const std::string& body, const std::string& type, const std::string& query = "") {
+    return request(server.port(), http::verb::post, "/v1/jobs" + query, body, {{"Content-Type", type}});
+  };
+  EXPECT_EQ(post(cornell(), "text/plain").status, 415);
+  EXPECT_EQ(post("{\"asset\":", "model/gltf+json").status, 422);
+  EXPECT_EQ(post(cornell(), "model/gltf+json", "?resolution=7").status, 400);
+  EXPECT_EQ(post(cornell(), "model/gltf+json", "?bogus=1").status, 400);
+  EXPECT_EQ(post(std::string(200000, 'x'), "model/gltf-binary").status, 413);
+  const Reply bad = post("{\"asset\":{\"version\":\"2.0\"},\"scenes\":[{\"nodes\":[5]}]}", "model/gltf+json");
+  EXPECT_EQ(bad.status, 422);
+  EXPECT_NE(bad.js()["error"].get<std::string>().find("node 5"), std::string::npos) << bad.body;
+  EXPECT_EQ(request(server.port(), http::verb::get, "/v1/jobs/nope").status, 404);
+}
+
+TEST(Server, IdempotencyKeyMakesRetriesSafe) {
+  ServerProcess server(temp_dir("idem"), {"--workers", "1"});
+  const std::map<std::string, std::string> h = {{"Content-Type", "model/gltf+json"}, {"Idempotency-Key", "abc-123"}};
+  const Reply a = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.3", cornell(), h);
+  const Reply b = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.3", cornell(), h);
+  EXPECT_EQ(a.status, 202);
+  EXPECT_EQ(b.status, 200);
+  EXPECT_EQ(a.js()["id"], b.js()["id"]);
+  EXPECT_EQ(request(server.port(), http::verb::get, "/v1/jobs").js()["jobs"].size(), 1u);
+}
+
+TEST(Server, BearerTokensWhenConfigured) {
+  ServerProcess server(temp_dir("auth"), {"--workers", "1"}, {"HEMIBAKE_TOKENS=s3cret,other"});
+  const Reply none = request(server.port(), http::verb::get, "/v1/jobs");
+  EXPECT_EQ(none.status, 401);
+  EXPECT_EQ(none.headers.at("www-authenticate").rfind("Bearer", 0), 0u);
+  EXPECT_EQ(request(server.port(), http::verb::get, "/v1/jobs", "", {{"Authorization", "Bearer wrong"}}).status, 401);
+  EXPECT_EQ(request(server.port(), http::verb::get, "/v1/jobs", "", {{"Authorization", "Bearer s3cret"}}).status, 200);
+  EXPECT_EQ(request(server.port(), http::verb::get, "/healthz").status, 200);
+}
+
+TEST(Server, CancelStopsARunningJob) {
+  ServerProcess server(temp_dir("cancel"), {"--workers", "1"});
+  const Reply posted = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.000001&aeps=0.00002", cornell(), kGltf);
+  const std::string id = posted.js()["id"];
+  for (int i = 0; i < 100 && request(server.port(), http::verb::get, "/v1/jobs/" + id).js()["state"] != "running"; ++i)
+    std::this_thread::sleep_for(50ms);
+  const Reply cancelled = request(server.port(), http::verb::delete_, "/v1/jobs/" + id);
+  EXPECT_EQ(cancelled.status, 200);
+  EXPECT_EQ(cancelled.js()["state"], "cancelled");
+  EXPECT_EQ(request(server.port(), http::verb::get, "/v1/jobs/" + id + "/result").status, 409);
+  EXPECT_EQ(request(server.port(), http::verb::delete_, "/v1/jobs/" + id).status, 409);
+  // The worker is free again: a new job runs to the end.
+  const Reply next = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.2", cornell(), kGltf);
+  EXPECT_EQ(wait_finished(server.port(), next.js()["id"])["state"], "succeeded");
+}
+
+TEST(Server, QueueLimitAnswers429WithRetryAfter) {
+  ServerProcess server(temp_dir("queue"), {"--workers", "1", "--max-queue", "1"});
+  std::vector<std::string> ids;
+  int refused = 0;
+  for (int i = 0; i < 5; ++i) {
+    const Reply r = request(server.port(), http::verb::post,
+                            "/v1/jobs?convergence=0.000001&aeps=0.00002&max_shots=" + std::to_string(100000 + i), cornell(), kGltf);
+    if (r.status == 429) {
+      ++refused;
+      EXPECT_TRUE(r.headers.count("retry-after"));
+    } else {
+      ASSERT_EQ(r.status, 202) << r.body;
+      ids.push_back(r.js()["id"]);
+    }
+  }
+  EXPECT_GE(refused, 2);
+  for (const auto& id : ids) request(server.port(), http::verb::delete_, "/v1/jobs/" + id);
+}
+
+// An accepted job is never lost: SIGKILL while it runs, start again on the same data directory,
+// and it completes.
+TEST(Server, JobSurvivesSigkillAndCompletesAfterRestart) {
+  const std::string dir = temp_dir("crash");
+  std::string id;
+  {
+    ServerProcess server(dir, {"--workers", "1"});
+    const Reply posted = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.0001", cornell(), kGltf);
+    ASSERT_EQ(posted.status, 202);
+    id = posted.js()["id"];
+    for (int i = 0; i < 100 && request(server.port(), http::verb::get, "/v1/jobs/" + id).js()["state"] != "running"; ++i)
+      std::this_thread::sleep_for(20ms);
+    std::this_thread::sleep_for(300ms);
+    ASSERT_EQ(request(server.port(), http::verb::get, "/v1/jobs/" + id).js()["state"], "running");
+    server.stop(SIGKILL);
+  }
+  ServerProcess again(dir, {"--workers", "1"});
+  const json done = wait_finished(again.port(), id);
+  EXPECT_EQ(done["state"], "succeeded") << done.dump();
+  EXPECT_EQ(done["attempts"].get<int>(), 2);  // killed in its first run, finished in the second
+  const Reply result = request(again.port(), http::verb::get, "/v1/jobs/" + id + "/result");
+  EXPECT_EQ(result.status, 200);
+  EXPECT_EQ(result.body.substr(0, 4), "glTF");
+}
+
+// Many clients at once, bounded in number and time: every request answered, no error.
+TEST(Server, ManyConcurrentClientsAndStreams) {
+  ServerProcess server(temp_dir("load"), {"--workers", "2"});
+  const Reply posted = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.01", cornell(), kGltf);
+  const std::string id = posted.js()["id"];
+  std::atomic<int> failures{0};
+  std::vector<std::thread> clients;
+  for (int c = 0; c < 16; ++c) {
+    clients.emplace_back([&, c] {
+      try {
+        if (c % 4 == 0) {
+          const auto evs = events(server.port(), id);
+          if (evs.empty() || json::parse(std::get<2>(evs.back()))["state"] != "succeeded") ++failures;
+          return;
+        }
+        for (int i = 0; i < 20; ++i) {
+          const Reply r = request(server.port(), http::verb::get, i % 2 ? "/v1/jobs" : "/v1/jobs/" + id);
+          if (r.status != 200) ++failures;
+        }
+      } catch (const std::exception&) {
+        ++failures;
+      }
+    });
+  }
+  for (auto& t : clients) t.join();
+  EXPECT_EQ(failures.load(), 0);
+}
+
+}  // namespace
