@@ -1,12 +1,18 @@
 #!/usr/bin/env bash
-# Sets up (Debian packages), builds Release, and runs hemibake's main job: a bake of the bundled
-# Cornell box (data/cornell-box.gltf) to build/cornell-box.glb, with renders of the result in
-# build/cornell.png (Gouraud) and build/cornell-mesh.png (the adaptive mesh).
+# Sets up (Debian packages), builds Release, and runs the hemibake service on 127.0.0.1:8080 with
+# its embedded job store in ./hemibake-data. Options after ./run.sh go to hemibake-server
+# (see build/bin/hemibake-server --help). To bake one file without the service:
+#   build/bin/hemibake bake data/cornell-box.gltf -o cornell.glb
 set -euo pipefail
 cd "$(dirname "$0")"
 scripts/setup.sh
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release >/dev/null
-cmake --build build -j"$(nproc)" --target hemibake
-exec build/bin/hemibake bake data/cornell-box.gltf -o build/cornell-box.glb \
-  --render build/cornell.png --wireframe build/cornell-mesh.png \
-  --camera 0.278,0.273,-0.8:0.278,0.273,0 "$@"
+cmake --build build -j"$(nproc)" --target hemibake hemibake-server
+cat <<'TXT'
+Try, from another terminal:
+  curl -sS -X POST --data-binary @data/cornell-box.gltf -H 'Content-Type: model/gltf+json' \
+       http://127.0.0.1:8080/v1/jobs                      # -> 202 with the job's id
+  curl -sS -N http://127.0.0.1:8080/v1/jobs/ID/events     # live progress
+  curl -sS -o cornell.glb http://127.0.0.1:8080/v1/jobs/ID/result
+TXT
+exec build/bin/hemibake-server --listen 127.0.0.1:8080 --data hemibake-data "$@"
