@@ -2,6 +2,7 @@
 // everything it does not check (accessor ranges, strides, index values, node cycles, image sizes,
 // external paths) is checked here before use, with an error that names the object at fault.
 #include "document.h"
+#include "precheck.h"
 
 #include "hemibake/solver/solver.h"
 
@@ -41,7 +42,19 @@ struct LoaderContext {
   std::vector<std::string>* warnings = nullptr;
 };
 
-bool fs_exists(const std::string& path, void*) {
+// Whether `path` lies inside the folder of the glTF file.
+bool inside_base(const LoaderContext& ctx, const std::string& path) {
+  std::error_code ec;
+  const fs::path base = fs::weakly_canonical(ctx.base_dir.empty() ? fs::path(".") : fs::path(ctx.base_dir), ec);
+  const fs::path target = fs::weakly_canonical(fs::path(path), ec);
+  const auto rel = target.lexically_relative(base);
+  return !ec && !rel.empty() && *rel.begin() != "..";
+}
+
+bool fs_exists(const std::string& path, void* user) {
+  // Only files that may be read exist: the answer must not reveal anything else on the machine.
+  const auto& ctx = *static_cast<const LoaderContext*>(user);
+  if (!ctx.allow_external || !inside_base(ctx, path)) return false;
   std::error_code ec;
   return fs::exists(path, ec);
 }
@@ -58,13 +71,11 @@ bool fs_read(std::vector<unsigned char>* out, std::string* err, const std::strin
   }
   // The file must lie inside the folder of the .gltf file.
   std::error_code ec;
-  const fs::path base = fs::weakly_canonical(ctx->base_dir.empty() ? fs::path(".") : fs::path(ctx->base_dir), ec);
-  const fs::path target = fs::weakly_canonical(fs::path(path), ec);
-  const auto rel = target.lexically_relative(base);
-  if (ec || rel.empty() || *rel.begin() == "..") {
-    if (err) *err = "external file '" + path + "' lies outside the folder of the glTF file";
+  if (!inside_base(*ctx, path)) {
+    if (err) *err = "an external file lies outside the folder of the glTF file";
     return false;
   }
+  const fs::path target = fs::weakly_canonical(fs::path(path), ec);
   const auto size = fs::file_size(target, ec);
   if (ec) {
     if (err) *err = "cannot read external file '" + path + "'";
@@ -386,6 +397,13 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
   ctx.doc = doc.get();
   ctx.warnings = &result.warnings;
 
+  {
+    PrecheckResult pre;
+    if (std::string e = precheck_gltf(bytes, limits.allow_external_files, pre); !e.empty()) {
+      result.error = e;
+      return result;
+    }
+  }
   tinygltf::TinyGLTF loader;
   tinygltf::FsCallbacks callbacks{&fs_exists, &fs_expand, &fs_read, &fs_write, &ctx};
   loader.SetFsCallbacks(callbacks);
@@ -404,6 +422,7 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
   }
   if (!ok) {
     while (!err.empty() && (err.back() == '\n' || err.back() == ' ')) err.pop_back();
+    if (err.size() > 300) err = err.substr(0, 300) + "...";
     result.error = "not a valid glTF file: " + (err.empty() ? std::string("unreadable") : err);
     return result;
   }
@@ -523,16 +542,6 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
           return result;
         }
       }
-      std::vector<glm::dvec3> points(pos.count);
-      for (size_t i = 0; i < pos.count; ++i) {
-        const glm::dvec3 p(read_component(pos, i, 0), read_component(pos, i, 1), read_component(pos, i, 2));
-        if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) {
-          result.error = "accessor " + std::to_string(pos_it->second) + " (POSITION of " + where +
-                         ") has a non-finite value at element " + std::to_string(i);
-          return result;
-        }
-        points[i] = glm::dvec3(world * glm::dvec4(p, 1.0));
-      }
       // Indices.
       std::vector<uint32_t> idx;
       if (prim.indices >= 0) {
@@ -563,6 +572,23 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
       } else {
         idx.resize(pos.count);
         for (size_t i = 0; i < pos.count; ++i) idx[i] = static_cast<uint32_t>(i);
+      }
+      // Positions of the vertices the triangles use, in world space (a vertex no triangle uses is
+      // neither checked nor transformed: instances of a large mesh cost only what they use).
+      std::vector<glm::dvec3> points(pos.count);
+      {
+        std::vector<uint8_t> used(pos.count, 0);
+        for (uint32_t i : idx) used[i] = 1;
+        for (size_t i = 0; i < pos.count; ++i) {
+          if (!used[i]) continue;
+          const glm::dvec3 p(read_component(pos, i, 0), read_component(pos, i, 1), read_component(pos, i, 2));
+          if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) {
+            result.error = "accessor " + std::to_string(pos_it->second) + " (POSITION of " + where +
+                           ") has a non-finite value at element " + std::to_string(i);
+            return result;
+          }
+          points[i] = glm::dvec3(world * glm::dvec4(p, 1.0));
+        }
       }
       // Material and texture coordinates.
       MaterialInfo mat;
@@ -682,7 +708,9 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
         for (int k = 0; k < 3 && !merged; ++k) {
           // This triangle is (p, q, r) with the shared edge q -> r; the neighbour runs r -> q -> s.
           const uint32_t q = tv[k], r = tv[(k + 1) % 3], p = tv[(k + 2) % 3];
-          for (uint32_t u : by_edge[edge_key(q, r)]) {
+          const auto& sharing = by_edge[edge_key(q, r)];
+          if (sharing.size() != 2) continue;  // only an edge between exactly two triangles
+          for (uint32_t u : sharing) {
             if (u == t || tris[u].used) continue;
             const auto& uv = tris[u].v;
             int j = -1;
