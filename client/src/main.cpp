@@ -1,4 +1,5 @@
 // The `hemibake` command line.
+#include "remote.h"
 #include "render.h"
 
 #include "hemibake/protocol/gltf.h"
@@ -43,6 +44,12 @@ void usage(FILE* out) {
                "usage:\n"
                "  hemibake bake IN.glb|IN.gltf -o OUT.glb [options]   bake a glTF scene\n"
                "  hemibake cornell [options]                          bake the built-in Cornell box\n"
+               "  hemibake bake --server URL IN -o OUT.glb [options]  bake on a hemibake-server\n"
+               "  hemibake submit IN [options]                        submit to the server; prints the job id\n"
+               "  hemibake status ID | watch ID | cancel ID           a job's state, live progress, cancel it\n"
+               "  hemibake fetch ID -o OUT.glb                        download a job's result\n"
+               "  hemibake list [--state S]                           the server's jobs, newest first\n"
+               "  (the server: --server URL or HEMIBAKE_SERVER; a bearer token from HEMIBAKE_TOKEN)\n"
                "\n%s"
                "output options (bake):\n"
                "  --no-draco              write plain accessors instead of KHR_draco_mesh_compression\n"
@@ -67,7 +74,7 @@ struct Options {
   Params params;
   hemibake::protocol::WriteOptions write;
   hemibake::protocol::LoadLimits limits;
-  std::string input, output, render_path, wire_path;
+  std::string input, output, render_path, wire_path, server, state;
   std::optional<hemibake::client::Camera> camera;
 };
 
@@ -97,7 +104,7 @@ std::string parse(int argc, char** argv, int first, bool bake, Options& o) {
       continue;
     }
     if (opt.empty() || opt[0] != '-') {
-      if (!bake || !o.input.empty()) return "unexpected argument '" + opt + "'";
+      if (!bake || !o.input.empty()) return "unexpected argument '" + opt + "'";  // one positional
       o.input = opt;
       continue;
     }
@@ -105,6 +112,14 @@ std::string parse(int argc, char** argv, int first, bool bake, Options& o) {
     const char* val = argv[++i];
     if (opt == "-o" || opt == "--output") {
       o.output = val;
+      continue;
+    }
+    if (opt == "--server") {
+      o.server = val;
+      continue;
+    }
+    if (opt == "--state") {
+      o.state = val;
       continue;
     }
     if (opt == "--render" || opt == "--wireframe") {
@@ -276,14 +291,54 @@ int main(int argc, char** argv) {
     return argc < 2 ? 2 : 0;
   }
   const std::string command = argv[1];
-  if (command != "cornell" && command != "bake") {
+  const bool remote_command = command == "submit" || command == "status" || command == "watch" ||
+                              command == "fetch" || command == "cancel" || command == "list";
+  if (command != "cornell" && command != "bake" && !remote_command) {
     std::fprintf(stderr, "hemibake: unknown command '%s' (try --help)\n", argv[1]);
     return 2;
   }
   Options o;
-  if (std::string err = parse(argc, argv, 2, command == "bake", o); !err.empty()) {
+  if (std::string err = parse(argc, argv, 2, command != "cornell" && command != "list", o); !err.empty()) {
     std::fprintf(stderr, "hemibake: %s\n", err.c_str());
     return 2;
   }
-  return command == "bake" ? bake(o) : cornell(o);
+  if (command == "cornell") return cornell(o);
+  if (command == "bake" && o.server.empty() && !std::getenv("HEMIBAKE_SERVER")) return bake(o);
+  if (command == "bake" && o.server.empty()) o.server = std::getenv("HEMIBAKE_SERVER");
+  // The commands that talk to a server.
+  if (o.server.empty() && std::getenv("HEMIBAKE_SERVER")) o.server = std::getenv("HEMIBAKE_SERVER");
+  if (o.server.empty()) {
+    std::fprintf(stderr, "hemibake: %s needs a server: --server http://HOST:PORT or HEMIBAKE_SERVER\n", command.c_str());
+    return 2;
+  }
+  hemibake::client::Remote remote;
+  if (std::string err = hemibake::client::parse_server(o.server, remote); !err.empty()) {
+    std::fprintf(stderr, "hemibake: %s\n", err.c_str());
+    return 2;
+  }
+  if (const char* token = std::getenv("HEMIBAKE_TOKEN")) remote.token = token;
+  hemibake::protocol::JobSpec spec;
+  spec.params = o.params;
+  spec.write = o.write;
+  if (command != "list" && o.input.empty()) {
+    std::fprintf(stderr, "hemibake: %s needs %s\n", command.c_str(), command == "submit" || command == "bake" ? "an input file" : "a job id");
+    return 2;
+  }
+  if (command == "bake") {
+    if (o.output.empty()) {
+      std::fputs("hemibake: bake needs -o OUT.glb\n", stderr);
+      return 2;
+    }
+    return hemibake::client::remote_bake(remote, o.input, o.output, spec);
+  }
+  if (command == "submit") return hemibake::client::remote_submit(remote, o.input, spec);
+  if (command == "status") return hemibake::client::remote_status(remote, o.input);
+  if (command == "watch") return hemibake::client::remote_watch(remote, o.input);
+  if (command == "cancel") return hemibake::client::remote_cancel(remote, o.input);
+  if (command == "list") return hemibake::client::remote_list(remote, o.state);
+  if (o.output.empty()) {
+    std::fputs("hemibake: fetch needs -o OUT.glb\n", stderr);
+    return 2;
+  }
+  return hemibake::client::remote_fetch(remote, o.input, o.output);
 }

@@ -315,6 +315,23 @@ TEST(Server, JobSurvivesSigkillAndCompletesAfterRestart) {
   EXPECT_EQ(result.body.substr(0, 4), "glTF");
 }
 
+// The hemibake command against the server: bake --server submits, follows and downloads; the
+// other subcommands report the server's errors with a non-zero exit status.
+TEST(Client, BakesOnTheServerAndReportsErrors) {
+  ServerProcess server(temp_dir("client"), {"--workers", "1"});
+  const std::string url = "http://127.0.0.1:" + std::to_string(server.port());
+  const std::string out = temp_dir("client-out") + ".glb";
+  const std::string bake = std::string(HEMIBAKE_CLIENT) + " bake --server " + url + " " HEMIBAKE_SOURCE_DIR
+                           "/data/cornell-box.gltf -o " + out + " --convergence 0.05 2>/dev/null >/dev/null";
+  ASSERT_EQ(std::system(bake.c_str()), 0) << bake;
+  EXPECT_EQ(read_file(out).substr(0, 4), "glTF");
+  std::filesystem::remove(out);
+  const std::string missing = std::string(HEMIBAKE_CLIENT) + " status nope --server " + url + " 2>/dev/null";
+  EXPECT_NE(std::system(missing.c_str()), 0);
+  const std::string unreachable = std::string(HEMIBAKE_CLIENT) + " list --server http://127.0.0.1:1 2>/dev/null";
+  EXPECT_NE(std::system(unreachable.c_str()), 0);
+}
+
 // Many clients at once, bounded in number and time: every request answered, no error.
 TEST(Server, ManyConcurrentClientsAndStreams) {
   ServerProcess server(temp_dir("load"), {"--workers", "2"});
