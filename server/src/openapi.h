@@ -86,7 +86,9 @@ inline constexpr const char* kOpenApi = R"json({
     },
     "/v1/jobs/{id}/preview": {
       "parameters": [{"$ref": "#/components/parameters/id"}],
-      "get": {"summary": "The current state of a running job as GLB (not implemented yet: 501)", "responses": {"501": {"description": "Not implemented"}}}
+      "get": {"summary": "The current, unconverged state of a running job as GLB (with the ambient term), made between two shots",
+        "responses": {"200": {"description": "A preview", "content": {"model/gltf-binary": {"schema": {"type": "string", "format": "binary"}}}},
+                      "404": {"description": "No such job"}, "409": {"description": "The job is not running"}}}
     },
     "/healthz": {"get": {"summary": "Liveness", "security": [{}], "responses": {"200": {"description": "Alive"}}}},
     "/readyz": {"get": {"summary": "Readiness", "security": [{}], "responses": {"200": {"description": "Ready"}, "503": {"description": "Not ready"}}}},

@@ -138,7 +138,7 @@ void Service::stop() {
     std::lock_guard lock(mutex_);
     if (!running_) return;
     running_ = false;
-    for (auto& [id, token] : active_) token->cancel();
+    for (auto& [id, a] : active_) a.token->cancel();
   }
   wake_.notify_all();
   for (auto& w : workers_) w.join();
@@ -154,6 +154,10 @@ void Service::worker_loop() {
   while (running_) {
     std::string id, scene, params;
     if (!store_->claim(id, scene, params)) {
+      // Idle: now and then, delete finished jobs past their time.
+      const double now = unix_now();
+      double last = last_expiry_.load();
+      if (now - last > 600.0 && last_expiry_.compare_exchange_strong(last, now)) store_->expire(options_.expire_seconds);
       std::unique_lock lock(mutex_);
       wake_.wait_for(lock, std::chrono::milliseconds(250), [&] { return !running_; });
       continue;
@@ -164,6 +168,27 @@ void Service::worker_loop() {
 
 void Service::bake(const std::string& id, const std::string& scene, const std::string& params) {
   const auto t0 = std::chrono::steady_clock::now();
+  // Registered from the start: a cancellation or a preview request may come while it loads.
+  solver::CancelToken token;
+  {
+    std::lock_guard lock(mutex_);
+    if (!running_) {
+      store_->requeue(id);
+      return;
+    }
+    active_[id].token = &token;
+  }
+  struct Unregister {
+    Service* s;
+    const std::string& id;
+    ~Unregister() {
+      {
+        std::lock_guard lock(s->mutex_);
+        s->active_.erase(id);
+      }
+      s->preview_ready_.notify_all();
+    }
+  } unregister{this, id};
   store_->add_event(id, "state", json{{"state", "running"}}.dump());
   protocol::JobSpec spec;
   if (std::string e = protocol::parse_params_json(params, spec); !e.empty()) {
@@ -185,15 +210,6 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
     return;
   }
   solver::Solver solver(protocol::scene_of(*loaded.document), spec.params);
-  solver::CancelToken token;
-  {
-    std::lock_guard lock(mutex_);
-    if (!running_) {
-      store_->requeue(id);
-      return;
-    }
-    active_[id] = &token;
-  }
   bool over_budget = false;
   double last_report = -1.0;
   solver.run(
@@ -201,6 +217,24 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
         if (p.elapsed_seconds > options_.job_seconds) {
           over_budget = true;
           token.cancel();
+        }
+        // A preview asked for: the current state, with the ambient term so it is displayable.
+        {
+          std::unique_lock lock(mutex_);
+          auto it = active_.find(id);
+          if (it != active_.end() && it->second.preview_wanted) {
+            it->second.preview_wanted = false;
+            lock.unlock();
+            const auto written = protocol::write_baked_glb(*loaded.document, solver.mesh(true), spec.params,
+                                                           solver.stats(), spec.write);
+            lock.lock();
+            it = active_.find(id);
+            if (it != active_.end()) {
+              it->second.preview.assign(written.glb.begin(), written.glb.end());
+              ++it->second.preview_serial;
+            }
+            preview_ready_.notify_all();
+          }
         }
         if (p.elapsed_seconds - last_report < 0.5) return;
         last_report = p.elapsed_seconds;
@@ -216,10 +250,6 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
         store_->add_event(id, "progress", progress.dump());
       },
       &token);
-  {
-    std::lock_guard lock(mutex_);
-    active_.erase(id);
-  }
   const solver::Stats& st = solver.stats();
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const json final_progress = {{"shots", st.shots}, {"unshot_fraction", st.unshot_fraction}, {"elements", st.elements},
@@ -406,6 +436,39 @@ Response Service::metrics() {
   return r;
 }
 
+// The running job's current state as GLB, made by its worker between two shots.
+Response Service::preview(const std::string& id) {
+  const auto state = store_->get(id);
+  std::unique_lock lock(mutex_);
+  auto it = active_.find(id);
+  if (it == active_.end() || !state || state->state != JobState::kRunning) {
+    lock.unlock();
+    const auto& rec = state;
+    Response r = error(409, std::string("the job is ") + (rec ? to_string(rec->state) : "unknown") +
+                                "; previews exist while it runs (a finished job has its result)");
+    if (rec && rec->state == JobState::kQueued) r.headers.emplace_back("Retry-After", "5");
+    return r;
+  }
+  const uint64_t serial = it->second.preview_serial;
+  it->second.preview_wanted = true;
+  const bool made = preview_ready_.wait_for(lock, std::chrono::seconds(30), [&] {
+    auto a = active_.find(id);
+    return a == active_.end() || a->second.preview_serial != serial;
+  });
+  auto a = active_.find(id);
+  if (!made || a == active_.end() || a->second.preview.empty()) {
+    lock.unlock();
+    Response r = error(409, "the job finished (or is between long shots) before a preview was made; ask again or fetch the result");
+    r.headers.emplace_back("Retry-After", "1");
+    return r;
+  }
+  Response r;
+  r.body = a->second.preview;
+  r.content_type = "model/gltf-binary";
+  r.headers.emplace_back("Cache-Control", "no-store");
+  return r;
+}
+
 Response Service::handle(const Request& req) {
   if (auto denied = check_auth(req)) return *denied;
   const size_t q = req.target.find('?');
@@ -465,7 +528,7 @@ Response Service::handle(const Request& req) {
         store_->cancel(id);
         {
           std::lock_guard lock(mutex_);
-          if (auto it = active_.find(id); it != active_.end()) it->second->cancel();
+          if (auto it = active_.find(id); it != active_.end()) it->second.token->cancel();
         }
         if (rec->state == JobState::kQueued) store_->add_event(id, "state", json{{"state", "cancelled"}}.dump());
         return job_json(*store_->get(id), 200);
@@ -495,8 +558,7 @@ Response Service::handle(const Request& req) {
       r.headers.emplace_back("Content-Disposition", "attachment; filename=\"" + id + ".glb\"");
       return r;
     }
-    if (sub == "preview" && req.method == "GET")
-      return error(501, "previews of running jobs are not implemented yet; the result is available when the job succeeds");
+    if (sub == "preview" && req.method == "GET") return preview(id);
     return error(404, "no such resource: " + path);
   }
   return error(404, "no such resource: " + path);

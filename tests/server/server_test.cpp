@@ -315,6 +315,41 @@ TEST(Server, JobSurvivesSigkillAndCompletesAfterRestart) {
   EXPECT_EQ(result.body.substr(0, 4), "glTF");
 }
 
+// While a job runs, /preview gives its current state as a GLB; before and after, 409.
+TEST(Server, PreviewOfARunningJob) {
+  ServerProcess server(temp_dir("preview"), {"--workers", "1"});
+  const Reply posted = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.00001&aeps=0.00002", cornell(), kGltf);
+  const std::string id = posted.js()["id"];
+  for (int i = 0; i < 100 && request(server.port(), http::verb::get, "/v1/jobs/" + id).js()["state"] != "running"; ++i)
+    std::this_thread::sleep_for(20ms);
+  const Reply preview = request(server.port(), http::verb::get, "/v1/jobs/" + id + "/preview");
+  ASSERT_EQ(preview.status, 200) << preview.body;
+  EXPECT_EQ(preview.headers.at("content-type"), "model/gltf-binary");
+  EXPECT_EQ(preview.body.substr(0, 4), "glTF");
+  request(server.port(), http::verb::delete_, "/v1/jobs/" + id);
+  EXPECT_EQ(wait_finished(server.port(), id)["state"], "cancelled");
+  EXPECT_EQ(request(server.port(), http::verb::get, "/v1/jobs/" + id + "/preview").status, 409);
+}
+
+// SIGTERM: the running job goes back to the queue and completes after the restart.
+TEST(Server, SigtermRequeuesTheRunningJob) {
+  const std::string dir = temp_dir("term");
+  std::string id;
+  {
+    ServerProcess server(dir, {"--workers", "1"});
+    id = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.0001", cornell(), kGltf).js()["id"];
+    for (int i = 0; i < 100 && request(server.port(), http::verb::get, "/v1/jobs/" + id).js()["state"] != "running"; ++i)
+      std::this_thread::sleep_for(20ms);
+    std::this_thread::sleep_for(200ms);
+    ASSERT_EQ(request(server.port(), http::verb::get, "/v1/jobs/" + id).js()["state"], "running");
+    server.stop(SIGTERM);
+  }
+  ServerProcess again(dir, {"--workers", "1"});
+  const json done = wait_finished(again.port(), id);
+  EXPECT_EQ(done["state"], "succeeded") << done.dump();
+  EXPECT_EQ(done["attempts"].get<int>(), 2);
+}
+
 // The hemibake command against the server: bake --server submits, follows and downloads; the
 // other subcommands report the server's errors with a non-zero exit status.
 TEST(Client, BakesOnTheServerAndReportsErrors) {

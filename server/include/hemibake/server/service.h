@@ -76,6 +76,7 @@ class Service {
   Response submit(const Request& request, const std::string& query);
   Response job_json(const JobRecord& r, int status);
   Response metrics();
+  Response preview(const std::string& id);
 
   ServiceOptions options_;
   std::unique_ptr<Store> store_;
@@ -83,7 +84,16 @@ class Service {
   std::atomic<bool> running_{false};
   std::mutex mutex_;
   std::condition_variable wake_;
-  std::map<std::string, solver::CancelToken*> active_;  // running job -> its cancellation token
+  // A running job: its cancellation token, and previews asked for and made between its shots.
+  struct Active {
+    solver::CancelToken* token = nullptr;
+    bool preview_wanted = false;
+    uint64_t preview_serial = 0;
+    std::string preview;  // GLB
+  };
+  std::map<std::string, Active> active_;
+  std::condition_variable preview_ready_;
+  std::atomic<double> last_expiry_{0.0};
   // Metrics.
   std::mutex metrics_mutex_;
   std::map<int, uint64_t> responses_;
