@@ -1,0 +1,99 @@
+// The request handler as a function of the request: no sockets, a store in a temporary folder.
+#include "hemibake/server/service.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <thread>
+#include <unistd.h>
+
+namespace hemibake::server {
+namespace {
+
+using nlohmann::json;
+
+struct Fixture {
+  std::string dir;
+  std::unique_ptr<Service> service;
+  explicit Fixture(ServiceOptions o = {}) {
+    dir = (std::filesystem::temp_directory_path() / ("hemibake-handler-" + std::to_string(getpid()))).string();
+    std::filesystem::remove_all(dir);
+    o.data_dir = dir;
+    o.workers = 1;
+    std::string error;
+    service = Service::start(o, error);
+    EXPECT_TRUE(service) << error;
+  }
+  ~Fixture() {
+    service.reset();
+    std::filesystem::remove_all(dir);
+  }
+  Response call(const std::string& method, const std::string& target, const std::string& body = {},
+                std::map<std::string, std::string> headers = {}) {
+    Request r;
+    r.method = method;
+    r.target = target;
+    r.body = body;
+    r.headers = std::move(headers);
+    return service->handle(r);
+  }
+};
+
+std::string cornell() {
+  std::ifstream in(HEMIBAKE_SOURCE_DIR "/data/cornell-box.gltf");
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+TEST(Handler, AnswersWithoutANetwork) {
+  Fixture f;
+  EXPECT_EQ(f.call("GET", "/healthz").status, 200);
+  EXPECT_EQ(f.call("GET", "/readyz").status, 200);
+  EXPECT_EQ(f.call("GET", "/nowhere").status, 404);
+  EXPECT_EQ(f.call("PUT", "/v1/jobs").status, 405);
+  EXPECT_EQ(f.call("GET", "/v1/jobs?state=bogus").status, 400);
+  EXPECT_EQ(f.call("GET", "/v1/jobs?limit=0").status, 400);
+  const Response posted = f.call("POST", "/v1/jobs?convergence=0.2", cornell(), {{"content-type", "model/gltf+json"}});
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = json::parse(posted.body)["id"];
+  json job;
+  for (int i = 0; i < 300; ++i) {
+    job = json::parse(f.call("GET", "/v1/jobs/" + id).body);
+    if (job["state"] == "succeeded") break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  EXPECT_EQ(job["state"], "succeeded");
+  const Response result = f.call("GET", "/v1/jobs/" + id + "/result");
+  EXPECT_EQ(result.status, 200);
+  EXPECT_EQ(result.content_type, "model/gltf-binary");
+  // Query strings are decoded: a percent-encoded parameter name is still checked (7 is odd: refused).
+  EXPECT_EQ(f.call("POST", "/v1/jobs?resolut%69on=7", cornell(), {{"content-type", "model/gltf+json"}}).status, 400);
+}
+
+TEST(Handler, TokensProtectEverythingButHealthChecks) {
+  ServiceOptions o;
+  o.tokens = {"t0ken"};
+  Fixture f(o);
+  EXPECT_EQ(f.call("GET", "/healthz").status, 200);
+  const Response denied = f.call("GET", "/v1/jobs");
+  EXPECT_EQ(denied.status, 401);
+  EXPECT_EQ(f.call("GET", "/v1/jobs", "", {{"authorization", "Bearer t0ke"}}).status, 401);
+  EXPECT_EQ(f.call("GET", "/v1/jobs", "", {{"authorization", "Bearer t0ken"}}).status, 200);
+  EXPECT_EQ(f.call("GET", "/metrics", "", {{"authorization", "Bearer t0ken"}}).status, 200);
+}
+
+TEST(Handler, QueryStringsDecode) {
+  const auto q = parse_query("a=1&b=x%20y&c=&d&e=%2F%2f+z");
+  EXPECT_EQ(q.at("a"), "1");
+  EXPECT_EQ(q.at("b"), "x y");
+  EXPECT_EQ(q.at("c"), "");
+  EXPECT_EQ(q.at("d"), "");
+  EXPECT_EQ(q.at("e"), "// z");
+}
+
+}  // namespace
+}  // namespace hemibake::server
