@@ -664,8 +664,22 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
       }
       // Exporters split quads into triangle pairs. Pairs that form a planar convex quad become one
       // quad patch again: its elements are then quads, and its light is not cut along the diagonal.
+      // Vertices are matched by position (bitwise), so unindexed triangle lists pair up too.
+      std::vector<uint32_t> canon(points.size());
+      {
+        std::unordered_map<std::string, uint32_t> first;
+        for (const Tri& t : tris)
+          for (uint32_t v : t.v) {
+            std::string key(reinterpret_cast<const char*>(&points[v]), sizeof(glm::dvec3));
+            canon[v] = first.try_emplace(std::move(key), v).first->second;
+          }
+      }
       std::unordered_map<uint64_t, std::vector<uint32_t>> by_edge;
-      auto edge_key = [](uint32_t a, uint32_t b) { return (static_cast<uint64_t>(std::min(a, b)) << 32) | std::max(a, b); };
+      auto edge_key = [&](uint32_t a, uint32_t b) {
+        a = canon[a];
+        b = canon[b];
+        return (static_cast<uint64_t>(std::min(a, b)) << 32) | std::max(a, b);
+      };
       for (uint32_t t = 0; t < tris.size(); ++t)
         for (int k = 0; k < 3; ++k) by_edge[edge_key(tris[t].v[k], tris[t].v[(k + 1) % 3])].push_back(t);
       auto emit = [&](const std::array<uint32_t, 4>& v, uint32_t count, const glm::dvec3& base, const glm::dvec3& emission) {
@@ -715,10 +729,12 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
             const auto& uv = tris[u].v;
             int j = -1;
             for (int i = 0; i < 3; ++i)
-              if (uv[i] == r && uv[(i + 1) % 3] == q) j = i;
+              if (canon[uv[i]] == canon[r] && canon[uv[(i + 1) % 3]] == canon[q]) j = i;
             if (j < 0) continue;
             const uint32_t s4 = uv[(j + 2) % 3];
-            if (s4 == p) continue;
+            if (canon[s4] == canon[p]) continue;
+            // Texture coordinates must agree along the shared edge (no UV seam inside a quad).
+            if (!uv0.empty() && (uv0[uv[j]] != uv0[r] || uv0[uv[(j + 1) % 3]] != uv0[q])) continue;
             const std::array<uint32_t, 4> quad{p, q, s4, r};
             // Planar and strictly convex, seen along this triangle's normal.
             const double size = glm::length(points[s4] - points[p]) + glm::length(points[r] - points[q]);

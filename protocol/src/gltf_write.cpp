@@ -8,6 +8,7 @@
 #include <stb_image_write.h>
 
 #include <glm/geometric.hpp>
+#include <glm/mat3x3.hpp>
 #include <glm/matrix.hpp>
 
 #include <algorithm>
@@ -251,6 +252,10 @@ WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, 
       for (uint32_t k = 0; k < nb; ++k) data.indices.insert(data.indices.end(), {c, loop[k], loop[(k + 1) % nb]});
     }
 
+    // Elements run counter-clockwise in world space; under a mirroring node transform glTF reverses
+    // the winding rule, so the triangles are written the other way round.
+    if (glm::determinant(glm::dmat3(doc.node_world[node_index])) < 0.0)
+      for (size_t t = 0; t + 2 < data.indices.size(); t += 3) std::swap(data.indices[t + 1], data.indices[t + 2]);
     tinygltf::Primitive prim;
     prim.mode = TINYGLTF_MODE_TRIANGLES;
     prim.material = in_prim.material;

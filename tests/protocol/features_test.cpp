@@ -1,0 +1,1072 @@
+// Loader and writer features, each checked against a truth from outside the code under test:
+// triangle strips and fans (the glTF 2.0 specification's topology formulas, section 3.7.2.1, expanded
+// here into plain triangles), points and lines, mirrored transforms (the specification's winding
+// rule for negative determinants), double-sided materials (against single-sided quads facing each
+// way), base colour textures (a PNG written here, the sRGB transfer function written here), material
+// extras, emissiveStrength as an integer, KHR_lights_punctual, and TEXCOORD_0 against the closed form
+// of an affine UV map. Scenes are built here as glTF JSON; results are read back from the baked GLB
+// with Draco's own decoder or straight from plain accessors.
+#include "gltf_builder.h"
+
+#include "hemibake/protocol/gltf.h"
+#include "hemibake/solver/solver.h"
+
+#include <draco/compression/decode.h>
+#include <draco/core/decoder_buffer.h>
+#include <draco/mesh/mesh.h>
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+// stb_image_write's implementation is compiled into hemibake::protocol (tinygltf_impl.cpp).
+#include <stb/stb_image_write.h>
+
+#include <glm/geometric.hpp>
+#include <glm/gtc/matrix_transform.hpp>
+#include <glm/gtc/quaternion.hpp>
+#include <glm/gtc/type_ptr.hpp>
+#include <glm/mat3x3.hpp>
+#include <glm/mat4x4.hpp>
+#include <glm/matrix.hpp>
+#include <glm/vec2.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <string>
+#include <vector>
+
+namespace hemibake::protocol {
+namespace {
+
+using nlohmann::json;
+using V = glm::dvec3;
+using UV = glm::dvec2;
+
+constexpr int kTriangles = 4, kTriangleStrip = 5, kTriangleFan = 6;
+constexpr int kFloat = 5126, kUnsignedShort = 5123, kUnsignedInt = 5125;
+
+// The sRGB electro-optical transfer function (IEC 61966-2-1), as glTF specifies for colour textures.
+double srgb_to_linear(double c) { return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4); }
+
+// A glTF document assembled in memory, with one binary buffer.
+struct Doc {
+  json gltf = {{"asset", {{"version", "2.0"}}},
+               {"scene", 0},
+               {"scenes", json::array({json{{"nodes", json::array()}}})},
+               {"nodes", json::array()},
+               {"meshes", json::array()},
+               {"materials", json::array()},
+               {"accessors", json::array()},
+               {"bufferViews", json::array()}};
+  std::vector<uint8_t> bin;
+
+  int view(const void* data, size_t size) {
+    while (bin.size() % 4) bin.push_back(0);
+    const size_t at = bin.size();
+    bin.insert(bin.end(), static_cast<const uint8_t*>(data), static_cast<const uint8_t*>(data) + size);
+    gltf["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", at}, {"byteLength", size}});
+    return static_cast<int>(gltf["bufferViews"].size()) - 1;
+  }
+  int accessor(json a) {
+    gltf["accessors"].push_back(std::move(a));
+    return static_cast<int>(gltf["accessors"].size()) - 1;
+  }
+  int positions(const std::vector<V>& p) {
+    std::vector<float> f;
+    std::vector<double> lo(3, 1e300), hi(3, -1e300);
+    for (const V& v : p)
+      for (int k = 0; k < 3; ++k) {
+        f.push_back(static_cast<float>(v[k]));
+        lo[k] = std::min(lo[k], static_cast<double>(f.back()));
+        hi[k] = std::max(hi[k], static_cast<double>(f.back()));
+      }
+    return accessor({{"bufferView", view(f.data(), f.size() * 4)}, {"componentType", kFloat}, {"count", p.size()},
+                     {"type", "VEC3"}, {"min", lo}, {"max", hi}});
+  }
+  int texcoords(const std::vector<UV>& uv) {
+    std::vector<float> f;
+    for (const UV& t : uv) f.insert(f.end(), {static_cast<float>(t.x), static_cast<float>(t.y)});
+    return accessor({{"bufferView", view(f.data(), f.size() * 4)}, {"componentType", kFloat}, {"count", uv.size()}, {"type", "VEC2"}});
+  }
+  int indices(const std::vector<uint32_t>& idx) {
+    std::vector<uint16_t> s(idx.begin(), idx.end());
+    return accessor({{"bufferView", view(s.data(), s.size() * 2)}, {"componentType", kUnsignedShort}, {"count", s.size()}, {"type", "SCALAR"}});
+  }
+  int material(json m) {
+    gltf["materials"].push_back(std::move(m));
+    return static_cast<int>(gltf["materials"].size()) - 1;
+  }
+  int mesh(json primitives) {
+    gltf["meshes"].push_back({{"primitives", std::move(primitives)}});
+    return static_cast<int>(gltf["meshes"].size()) - 1;
+  }
+  int node(json n, bool root = true) {
+    gltf["nodes"].push_back(std::move(n));
+    const int i = static_cast<int>(gltf["nodes"].size()) - 1;
+    if (root) gltf["scenes"][0]["nodes"].push_back(i);
+    return i;
+  }
+  // A primitive of `points` in `mode`, indexed when `idx` is not empty.
+  json primitive(const std::vector<V>& points, const std::vector<uint32_t>& idx, int mode, int mat,
+                 const std::vector<UV>& uv = {}) {
+    json p = {{"attributes", {{"POSITION", positions(points)}}}, {"mode", mode}, {"material", mat}};
+    if (!idx.empty()) p["indices"] = indices(idx);
+    if (!uv.empty()) p["attributes"]["TEXCOORD_0"] = texcoords(uv);
+    return p;
+  }
+  // A node with a mesh of one convex quad (corners counter-clockwise from its front) as two triangles.
+  int quad_node(const std::vector<V>& corners, int mat, json node = json::object(), const std::vector<UV>& uv = {}) {
+    node["mesh"] = mesh(json::array({primitive(corners, {0, 1, 2, 0, 2, 3}, kTriangles, mat, uv)}));
+    return this->node(node);
+  }
+  std::vector<uint8_t> gltf_bytes() const {
+    json j = gltf;
+    j["buffers"] = json::array({json{{"byteLength", bin.size()},
+                                     {"uri", "data:application/octet-stream;base64," + test::base64_encode(bin)}}});
+    const std::string s = j.dump();
+    return {s.begin(), s.end()};
+  }
+  std::vector<uint8_t> glb_bytes() const {
+    json j = gltf;
+    j["buffers"] = json::array({json{{"byteLength", bin.size()}}});
+    return test::make_glb(j, bin);
+  }
+};
+
+json plain_material(const V& base, const std::string& name = "") {
+  json m = {{"pbrMetallicRoughness", {{"baseColorFactor", {base.x, base.y, base.z, 1.0}}}}};
+  if (!name.empty()) m["name"] = name;
+  return m;
+}
+
+// A lamp: black (reflects nothing, so that only direct light is compared) and emitting `e`.
+json lamp_material(const V& e) {
+  const double top = std::max({e.x, e.y, e.z});
+  json m = plain_material(V(0.0), "lamp");
+  m["emissiveFactor"] = {e.x / top, e.y / top, e.z / top};
+  m["extensions"]["KHR_materials_emissive_strength"]["emissiveStrength"] = top;
+  return m;
+}
+
+// The horizontal rectangle [x0, x1] x [z0, z1] at height y, corners counter-clockwise seen from +y
+// (z before x: cross((0,0,dz), (dx,0,dz)) = (0, dz dx, 0)) when `up`, else seen from -y.
+std::vector<V> rect(double x0, double x1, double z0, double z1, double y, bool up) {
+  std::vector<V> q = {V(x0, y, z0), V(x0, y, z1), V(x1, y, z1), V(x1, y, z0)};
+  if (!up) std::reverse(q.begin(), q.end());
+  return q;
+}
+
+solver::Params quick_params() {
+  solver::Params p;
+  p.convergence = 0.02;
+  p.resolution = 60;
+  return p;
+}
+
+// ---- Reading the baked GLB back -------------------------------------------------------------
+
+struct Output {
+  json doc;
+  std::vector<uint8_t> bin;
+};
+
+struct Primitive {
+  std::vector<V> positions, radiosity;
+  std::vector<UV> uv;
+  std::vector<uint32_t> indices;
+};
+
+// Reads a primitive with Draco's decoder (compressed) or from its accessors (plain).
+Primitive read_primitive(const Output& g, const json& prim) {
+  Primitive d;
+  if (prim.contains("extensions") && prim["extensions"].contains("KHR_draco_mesh_compression")) {
+    const json& ext = prim["extensions"]["KHR_draco_mesh_compression"];
+    const json& view = g.doc["bufferViews"][ext["bufferView"].get<int>()];
+    draco::DecoderBuffer buffer;
+    buffer.Init(reinterpret_cast<const char*>(g.bin.data()) + view.value("byteOffset", 0), view["byteLength"].get<size_t>());
+    draco::Decoder decoder;
+    auto mesh = decoder.DecodeMeshFromBuffer(&buffer);
+    EXPECT_TRUE(mesh.ok());
+    if (!mesh.ok()) return d;
+    const draco::Mesh& m = *mesh.value();
+    auto read = [&](const char* name, int n, auto&& put) {
+      if (!ext["attributes"].contains(name)) return;
+      const auto* att = m.GetAttributeByUniqueId(ext["attributes"][name].get<uint32_t>());
+      ASSERT_NE(att, nullptr) << name;
+      for (draco::PointIndex p(0); p < m.num_points(); ++p) {
+        float v[3] = {0, 0, 0};
+        ASSERT_TRUE(att->ConvertValue<float>(att->mapped_index(p), static_cast<int8_t>(n), v));
+        put(v);
+      }
+    };
+    read("POSITION", 3, [&](const float* v) { d.positions.emplace_back(v[0], v[1], v[2]); });
+    read("_RADIOSITY", 3, [&](const float* v) { d.radiosity.emplace_back(v[0], v[1], v[2]); });
+    read("TEXCOORD_0", 2, [&](const float* v) { d.uv.emplace_back(v[0], v[1]); });
+    for (draco::FaceIndex f(0); f < m.num_faces(); ++f)
+      for (int k = 0; k < 3; ++k) d.indices.push_back(m.face(f)[k].value());
+    return d;
+  }
+  auto floats = [&](int a, int n) {
+    const json& ac = g.doc["accessors"][a];
+    EXPECT_EQ(ac["componentType"], kFloat);
+    const json& view = g.doc["bufferViews"][ac["bufferView"].get<int>()];
+    const size_t base = view.value("byteOffset", 0) + ac.value("byteOffset", 0);
+    const size_t stride = view.value("byteStride", 4 * n);
+    std::vector<double> out;
+    for (size_t i = 0; i < ac["count"].get<size_t>(); ++i)
+      for (int k = 0; k < n; ++k) {
+        float f;
+        std::memcpy(&f, g.bin.data() + base + i * stride + 4 * k, 4);
+        out.push_back(f);
+      }
+    return out;
+  };
+  const json& attrs = prim["attributes"];
+  const auto p = floats(attrs["POSITION"], 3), r = floats(attrs["_RADIOSITY"], 3);
+  for (size_t i = 0; i + 2 < p.size(); i += 3) d.positions.emplace_back(p[i], p[i + 1], p[i + 2]);
+  for (size_t i = 0; i + 2 < r.size(); i += 3) d.radiosity.emplace_back(r[i], r[i + 1], r[i + 2]);
+  if (attrs.contains("TEXCOORD_0")) {
+    const auto t = floats(attrs["TEXCOORD_0"], 2);
+    for (size_t i = 0; i + 1 < t.size(); i += 2) d.uv.emplace_back(t[i], t[i + 1]);
+  }
+  const json& ia = g.doc["accessors"][prim["indices"].get<int>()];
+  const json& iview = g.doc["bufferViews"][ia["bufferView"].get<int>()];
+  const size_t at = iview.value("byteOffset", 0) + ia.value("byteOffset", 0);
+  for (size_t i = 0; i < ia["count"].get<size_t>(); ++i) {
+    if (ia["componentType"] == kUnsignedShort) {
+      uint16_t s;
+      std::memcpy(&s, g.bin.data() + at + 2 * i, 2);
+      d.indices.push_back(s);
+    } else {
+      EXPECT_EQ(ia["componentType"], kUnsignedInt);
+      uint32_t u;
+      std::memcpy(&u, g.bin.data() + at + 4 * i, 4);
+      d.indices.push_back(u);
+    }
+  }
+  return d;
+}
+
+// A node's local matrix: `matrix` (column-major) or T * R * S (glTF 2.0, section 3.5.3).
+glm::dmat4 local_matrix(const json& n) {
+  if (n.contains("matrix")) {
+    glm::dmat4 m;
+    for (int i = 0; i < 16; ++i) glm::value_ptr(m)[i] = n["matrix"][i].get<double>();
+    return m;
+  }
+  glm::dmat4 m(1.0);
+  if (n.contains("translation")) m = glm::translate(m, V(n["translation"][0], n["translation"][1], n["translation"][2]));
+  if (n.contains("rotation"))
+    m = m * glm::mat4_cast(glm::dquat(n["rotation"][3].get<double>(), n["rotation"][0].get<double>(),
+                                      n["rotation"][1].get<double>(), n["rotation"][2].get<double>()));
+  if (n.contains("scale")) m = glm::scale(m, V(n["scale"][0], n["scale"][1], n["scale"][2]));
+  return m;
+}
+
+glm::dmat4 world_matrix(const json& doc, int node) {
+  glm::dmat4 m = local_matrix(doc["nodes"][node]);
+  for (bool found = true; found;) {
+    found = false;
+    for (size_t p = 0; p < doc["nodes"].size() && !found; ++p) {
+      for (const auto& c : doc["nodes"][p].value("children", json::array())) {
+        if (c.get<int>() != node) continue;
+        m = local_matrix(doc["nodes"][p]) * m;
+        node = static_cast<int>(p);
+        found = true;
+        break;
+      }
+    }
+  }
+  return m;
+}
+
+// A baked triangle in world space. `front` is its front side's normal (times twice its area) by the
+// glTF rule: counter-clockwise in the node's frame, clockwise in the world when the node's world
+// matrix has a negative determinant (glTF 2.0, section 3.7.2.1).
+struct Tri {
+  std::array<V, 3> p, b;
+  std::array<UV, 3> uv;
+  V front;
+  double area() const { return 0.5 * glm::length(front); }
+};
+
+// The baked triangles of `node`, one list per output primitive.
+std::vector<std::vector<Tri>> baked_node(const Output& g, int node) {
+  std::vector<std::vector<Tri>> out;
+  const json& n = g.doc["nodes"][node];
+  if (!n.contains("mesh")) return out;
+  const glm::dmat4 world = world_matrix(g.doc, node);
+  const double sign = glm::determinant(glm::dmat3(world)) < 0.0 ? -1.0 : 1.0;
+  for (const json& prim : g.doc["meshes"][n["mesh"].get<int>()]["primitives"]) {
+    EXPECT_EQ(prim.value("mode", kTriangles), kTriangles);
+    const Primitive d = read_primitive(g, prim);
+    EXPECT_EQ(d.radiosity.size(), d.positions.size());
+    std::vector<Tri> tris;
+    for (size_t t = 0; t + 2 < d.indices.size(); t += 3) {
+      Tri tri;
+      for (int k = 0; k < 3; ++k) {
+        const uint32_t i = d.indices[t + k];
+        tri.p[k] = V(world * glm::dvec4(d.positions.at(i), 1.0));
+        tri.b[k] = d.radiosity.at(i);
+        tri.uv[k] = d.uv.empty() ? UV(0.0) : d.uv.at(i);
+      }
+      tri.front = sign * glm::cross(tri.p[1] - tri.p[0], tri.p[2] - tri.p[0]);
+      tris.push_back(tri);
+    }
+    out.push_back(std::move(tris));
+  }
+  return out;
+}
+
+double total_area(const std::vector<Tri>& tris) {
+  double a = 0.0;
+  for (const Tri& t : tris) a += t.area();
+  return a;
+}
+
+// Area of the triangles whose front side faces along `dir`.
+double area_facing(const std::vector<Tri>& tris, const V& dir) {
+  double a = 0.0;
+  for (const Tri& t : tris)
+    if (glm::dot(t.front, dir) > 0.0) a += t.area();
+  return a;
+}
+
+// The mean radiosity over the surface (vertex radiosity is linear over each triangle).
+V mean_radiosity(const std::vector<Tri>& tris) {
+  V sum(0.0);
+  double area = 0.0;
+  for (const Tri& t : tris) {
+    sum += t.area() * (t.b[0] + t.b[1] + t.b[2]) / 3.0;
+    area += t.area();
+  }
+  return area > 0.0 ? sum / area : V(0.0);
+}
+
+std::vector<Tri> all_of(const std::vector<std::vector<Tri>>& prims) {
+  std::vector<Tri> out;
+  for (const auto& p : prims) out.insert(out.end(), p.begin(), p.end());
+  return out;
+}
+
+struct Baked {
+  LoadResult loaded;
+  Output out;
+};
+
+Baked bake(const std::vector<uint8_t>& bytes, bool draco = false, solver::Params params = quick_params()) {
+  Baked r;
+  r.loaded = load_gltf_memory(bytes, ".");
+  EXPECT_TRUE(r.loaded.document) << r.loaded.error;
+  if (!r.loaded.document) return r;
+  solver::Solver solver(scene_of(*r.loaded.document), params);
+  solver.run();
+  WriteOptions options;
+  options.draco = draco;
+  const WriteResult w = write_baked_glb(*r.loaded.document, solver.mesh(), params, solver.stats(), options);
+  EXPECT_EQ(w.error, "");
+  const auto parts = test::split_glb(w.glb);
+  EXPECT_TRUE(parts.has_value()) << "the output is not a well-formed GLB";
+  if (parts) r.out = {parts->gltf, parts->bin};
+  return r;
+}
+
+bool mentions(const std::vector<std::string>& warnings, const std::string& word) {
+  for (const auto& w : warnings)
+    if (w.find(word) != std::string::npos) return true;
+  return false;
+}
+
+std::string joined(const std::vector<std::string>& warnings) {
+  std::string s;
+  for (const auto& w : warnings) s += "[" + w + "] ";
+  return s;
+}
+
+// ---- 1. Triangle strips and fans --------------------------------------------------------------
+
+// The floor [0, 2]^2 at y = 0 as a 3 x 3 vertex grid, facing +y.
+V grid(int i, int j) { return V(i, 0.0, j); }
+
+struct Topology {
+  std::vector<V> vertices;     // the vertex list the indices refer to
+  std::vector<uint32_t> order; // the primitive's index sequence
+  int mode;
+};
+
+// Two rows of a strip joined by degenerate triangles (as exporters stitch strips): triangle t is
+// (t, t+1, t+2) for even t and (t, t+2, t+1) for odd t, so every real triangle faces +y.
+Topology floor_strip() {
+  Topology s{{}, {}, kTriangleStrip};
+  for (int j = 0; j < 3; ++j)
+    for (int i = 0; i < 3; ++i) s.vertices.push_back(grid(i, j));
+  auto at = [](int i, int j) { return static_cast<uint32_t>(3 * j + i); };
+  s.order = {at(0, 0), at(0, 1), at(1, 0), at(1, 1), at(2, 0), at(2, 1),  // row 0: four triangles
+             at(2, 1), at(0, 1),                                          // four degenerate ones
+             at(0, 1), at(0, 2), at(1, 1), at(1, 2), at(2, 1), at(2, 2)}; // row 1
+  return s;
+}
+
+// A fan about the floor's centre through the eight points of its border, counter-clockwise from +y.
+Topology floor_fan() {
+  Topology f{{grid(1, 1)}, {0}, kTriangleFan};
+  const int ring[8][2] = {{0, 0}, {0, 1}, {0, 2}, {1, 2}, {2, 2}, {2, 1}, {2, 0}, {1, 0}};
+  for (const auto& r : ring) f.vertices.push_back(grid(r[0], r[1]));
+  for (uint32_t k = 1; k <= 8; ++k) f.order.push_back(k);
+  f.order.push_back(1);  // closes the ring
+  return f;
+}
+
+// The same triangles as a TRIANGLES index list over the same vertices, by the specification's
+// formulas (degenerate ones kept): the equivalent plain primitive.
+std::vector<uint32_t> as_triangles(const std::vector<uint32_t>& order, int mode) {
+  std::vector<uint32_t> out;
+  for (size_t i = 0; i + 2 < order.size(); ++i) {
+    if (mode == kTriangleStrip) {
+      const size_t a = i, b = i + 1 + i % 2, c = i + 2 - i % 2;  // p_i = {v_i, v_{i+(1+i%2)}, v_{i+(2-i%2)}}
+      out.insert(out.end(), {order[a], order[b], order[c]});
+    } else {
+      out.insert(out.end(), {order[i + 1], order[i + 2], order[0]});  // p_i = {v_{i+1}, v_{i+2}, v_0}
+    }
+  }
+  return out;
+}
+
+// The floor as a primitive in the topology's mode (indexed, or one vertex per index without
+// indices) or, `as_list`, as the equivalent TRIANGLES primitive over the same vertex buffer.
+json floor_primitive(Doc& d, const Topology& t, bool indexed, bool as_list, int mat) {
+  std::vector<V> vertices = t.vertices;
+  std::vector<uint32_t> order = t.order;
+  if (!indexed) {
+    vertices.clear();
+    for (uint32_t i : t.order) vertices.push_back(t.vertices[i]);
+    for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+  }
+  if (as_list) return d.primitive(vertices, as_triangles(order, t.mode), kTriangles, mat);
+  return d.primitive(vertices, indexed ? order : std::vector<uint32_t>{}, t.mode, mat);
+}
+
+struct LitFloor {
+  std::vector<uint8_t> bytes;
+  int floor_node = 0;
+};
+
+// The floor lit by a lamp 1 above it (facing down) or 1 below it (facing up).
+LitFloor lit_floor(const Topology& t, bool indexed, bool as_list, bool lamp_above) {
+  Doc d;
+  const int grey = d.material(plain_material(V(0.6)));
+  const int lamp = d.material(lamp_material(V(4.0)));
+  const json prim = floor_primitive(d, t, indexed, as_list, grey);
+  LitFloor s;
+  s.floor_node = d.node({{"name", "floor"}, {"mesh", d.mesh(json::array({prim}))}});
+  d.quad_node(lamp_above ? rect(0.5, 1.5, 0.5, 1.5, 1.0, false) : rect(0.5, 1.5, 0.5, 1.5, -1.0, true), lamp, {{"name", "lamp"}});
+  s.bytes = d.gltf_bytes();
+  return s;
+}
+
+// The patches of the floor (material 1 here is the grey one: patch.material is the glTF index + 1),
+// each as (centroid, area, unit normal), sorted: the same list means the same surface.
+std::vector<std::array<double, 7>> floor_patches(const solver::Scene& scene) {
+  std::vector<std::array<double, 7>> out;
+  for (const auto& p : scene.patches) {
+    if (p.material != 1) continue;
+    V c(0.0), n(0.0);
+    for (uint32_t k = 0; k < p.corner_count; ++k) c += p.corners[k] / static_cast<double>(p.corner_count);
+    for (uint32_t k = 1; k + 1 < p.corner_count; ++k) n += 0.5 * glm::cross(p.corners[k] - p.corners[0], p.corners[k + 1] - p.corners[0]);
+    const double a = glm::length(n);
+    n /= a;
+    out.push_back({c.x, c.y, c.z, a, n.x, n.y, n.z});
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+struct TopologyCase {
+  const char* name;
+  Topology (*make)();
+  bool indexed;
+};
+
+class StripAndFanFeature : public ::testing::TestWithParam<TopologyCase> {};
+
+// The test's own expansion faces +y everywhere (so that the loader is compared to a sound truth).
+TEST_P(StripAndFanFeature, SpecExpansionUsedAsTruthFacesUp) {
+  const Topology t = GetParam().make();
+  const auto list = as_triangles(t.order, t.mode);
+  double area = 0.0;
+  for (size_t i = 0; i < list.size(); i += 3) {
+    const V n = glm::cross(t.vertices[list[i + 1]] - t.vertices[list[i]], t.vertices[list[i + 2]] - t.vertices[list[i]]);
+    EXPECT_GE(n.y, 0.0) << "triangle " << i / 3;
+    EXPECT_NEAR(n.x, 0.0, 1e-12);
+    EXPECT_NEAR(n.z, 0.0, 1e-12);
+    area += 0.5 * glm::length(n);
+  }
+  EXPECT_DOUBLE_EQ(area, 4.0);
+}
+
+// The loader turns the strip or fan into the same patches as the equivalent TRIANGLES list: same
+// count, same centroids, areas and facing (+y), covering the 2 x 2 floor.
+TEST_P(StripAndFanFeature, LoadsTheSamePatchesAsTheEquivalentTriangleList) {
+  const Topology t = GetParam().make();
+  const LoadResult as_mode = load_gltf_memory(lit_floor(t, GetParam().indexed, false, true).bytes, ".");
+  const LoadResult as_list = load_gltf_memory(lit_floor(t, GetParam().indexed, true, true).bytes, ".");
+  ASSERT_TRUE(as_mode.document) << as_mode.error;
+  ASSERT_TRUE(as_list.document) << as_list.error;
+  const auto a = floor_patches(scene_of(*as_mode.document)), b = floor_patches(scene_of(*as_list.document));
+  ASSERT_EQ(a.size(), b.size());
+  double area = 0.0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    for (int k = 0; k < 7; ++k) EXPECT_NEAR(a[i][k], b[i][k], 1e-9) << "patch " << i << " component " << k;
+    EXPECT_NEAR(a[i][5], 1.0, 1e-12) << "patch " << i << " does not face +y";
+    area += a[i][3];
+  }
+  EXPECT_NEAR(area, 4.0, 1e-9);
+  EXPECT_EQ(triangle_count(*as_mode.document), triangle_count(*as_list.document));
+}
+
+// Baked under a lamp in front of it, every output triangle of the floor faces the lamp and is lit
+// (a flipped odd strip triangle would face away and stay black), the triangles cover exactly the
+// floor's 4 m^2, and the light equals that of the equivalent TRIANGLES primitive.
+TEST_P(StripAndFanFeature, BakesToTheFloorAreaLitLikeTheTriangleList) {
+  const Topology t = GetParam().make();
+  const LitFloor s = lit_floor(t, GetParam().indexed, false, true);
+  const Baked mode = bake(s.bytes);
+  const Baked list = bake(lit_floor(t, GetParam().indexed, true, true).bytes);
+  const auto tris = all_of(baked_node(mode.out, s.floor_node));
+  ASSERT_FALSE(tris.empty());
+  EXPECT_NEAR(total_area(tris), 4.0, 1e-5);
+  EXPECT_NEAR(area_facing(tris, V(0, 1, 0)), 4.0, 1e-5);
+  for (size_t i = 0; i < tris.size(); ++i)
+    for (int k = 0; k < 3; ++k) ASSERT_GT(tris[i].b[k].x, 0.0) << "triangle " << i << " vertex " << k << " is dark";
+  const V lit = mean_radiosity(tris), ref = mean_radiosity(all_of(baked_node(list.out, s.floor_node)));
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(lit[c] / ref[c], 1.0, 1e-3) << "channel " << c;
+}
+
+// With the lamp behind the floor (on its back side), no light reaches it: winding decides.
+TEST_P(StripAndFanFeature, StaysDarkWhenTheLampIsBehindIt) {
+  const LitFloor s = lit_floor(GetParam().make(), GetParam().indexed, false, false);
+  const Baked b = bake(s.bytes);
+  const auto tris = all_of(baked_node(b.out, s.floor_node));
+  ASSERT_FALSE(tris.empty());
+  EXPECT_NEAR(area_facing(tris, V(0, 1, 0)), 4.0, 1e-5);
+  for (const Tri& tri : tris)
+    for (int k = 0; k < 3; ++k) ASSERT_EQ(tri.b[k], V(0.0));
+}
+
+INSTANTIATE_TEST_SUITE_P(Protocol, StripAndFanFeature,
+                         ::testing::Values(TopologyCase{"StripIndexed", floor_strip, true},
+                                           TopologyCase{"StripUnindexed", floor_strip, false},
+                                           TopologyCase{"FanIndexed", floor_fan, true},
+                                           TopologyCase{"FanUnindexed", floor_fan, false}),
+                         [](const auto& p) { return std::string(p.param.name); });
+
+// FINDING (README "glTF in": "Triangle pairs that form a planar convex quad (as exporters split
+// quads) become one quad patch"): the loader pairs triangles by shared vertex *indices*
+// (gltf_load.cpp, by_edge/edge_key), so a non-indexed TRIANGLES primitive, where every triangle has
+// vertices of its own, is never merged: a quad given as 6 unindexed vertices stays two triangle
+// patches, while the same quad indexed becomes one (and an unindexed strip or fan does merge, since
+// consecutive triangles share vertices by position in the sequence). Repro: this test. Bakes differ
+// slightly (the unindexed fan above against the same triangles as an unindexed TRIANGLES list: 0.4%
+// in the floor's mean light). Enable if pairs should also be found by equal positions (or narrow the
+// README's claim to indexed primitives).
+TEST(QuadMergeFeature, UnindexedTrianglePairBecomesOneQuadPatchLikeTheIndexedOne) {
+  for (bool indexed : {true, false}) {
+    SCOPED_TRACE(indexed ? "indexed" : "unindexed");
+    Doc d;
+    const std::vector<V> q = rect(0, 1, 0, 1, 0, true);
+    const json prim = indexed ? d.primitive(q, {0, 1, 2, 0, 2, 3}, kTriangles, d.material(plain_material(V(0.5))))
+                              : d.primitive({q[0], q[1], q[2], q[0], q[2], q[3]}, {}, kTriangles, d.material(plain_material(V(0.5))));
+    d.node({{"mesh", d.mesh(json::array({prim}))}});
+    const LoadResult r = load_gltf_memory(d.gltf_bytes(), ".");
+    ASSERT_TRUE(r.document) << r.error;
+    ASSERT_EQ(scene_of(*r.document).patches.size(), 1u);
+    EXPECT_EQ(scene_of(*r.document).patches[0].corner_count, 4u);
+  }
+}
+
+// ---- 2. Points and lines ------------------------------------------------------------------------
+
+// A mesh with POINTS, LINES, LINE_LOOP and LINE_STRIP primitives besides a quad: the four are skipped
+// with a warning that says so, and the quad is loaded and baked alone.
+TEST(PrimitiveModeFeature, PointsAndLinesAreSkippedWithAWarning) {
+  Doc d;
+  const int grey = d.material(plain_material(V(0.6)));
+  const int lamp = d.material(lamp_material(V(4.0)));
+  const std::vector<V> pts = {V(0, 0.5, 0), V(1, 0.5, 0), V(1, 0.5, 1), V(0, 0.5, 1)};
+  json prims = json::array({d.primitive(pts, {}, 0, grey)});
+  prims.push_back(d.primitive(pts, {0, 1, 2, 3}, 1, grey));
+  prims.push_back(d.primitive(pts, {}, 2, grey));
+  prims.push_back(d.primitive(pts, {0, 1, 2}, 3, grey));
+  const std::vector<V> floor = rect(0, 2, 0, 2, 0, true);
+  prims.push_back(d.primitive(floor, {0, 1, 2, 0, 2, 3}, kTriangles, grey));
+  const int node = d.node({{"name", "mixed"}, {"mesh", d.mesh(prims)}});
+  d.quad_node(rect(0.5, 1.5, 0.5, 1.5, 1.0, false), lamp);
+  const Baked b = bake(d.gltf_bytes());
+  ASSERT_TRUE(b.loaded.document);
+  EXPECT_TRUE(mentions(b.loaded.warnings, "points") || mentions(b.loaded.warnings, "lines")) << joined(b.loaded.warnings);
+  const auto& patches = scene_of(*b.loaded.document).patches;
+  EXPECT_EQ(patches.size(), 2u);  // the floor and the lamp, one quad each
+  const auto out = baked_node(b.out, node);
+  ASSERT_EQ(out.size(), 1u);      // the quad's primitive only
+  EXPECT_NEAR(total_area(out[0]), 4.0, 1e-5);
+  EXPECT_GT(mean_radiosity(out[0]).x, 0.0);
+}
+
+// A file with nothing but lines loads to an error (nothing to bake), not to an empty bake.
+TEST(PrimitiveModeFeature, AFileOfOnlyLinesIsRefusedAsHavingNoTriangles) {
+  Doc d;
+  d.node({{"mesh", d.mesh(json::array({d.primitive({V(0, 0, 0), V(1, 0, 0)}, {}, 1, d.material(plain_material(V(0.5))))}))}});
+  const LoadResult r = load_gltf_memory(d.gltf_bytes(), ".");
+  EXPECT_FALSE(r.document);
+  EXPECT_NE(r.error.find("no triangles"), std::string::npos) << r.error;
+}
+
+// ---- 3. Mirrored transforms ---------------------------------------------------------------------
+
+// A floor authored in x in [-2, 0] and mirrored into [0, 2] by its node (scale, a matrix, or a
+// mirroring parent): its front side (by the glTF rule for negative determinants) still faces the
+// lamp, so it is lit exactly like the same floor authored unmirrored in place.
+struct MirrorCase {
+  const char* name;
+  int how;  // 0: scale (-1, 1, 1); 1: matrix diag(-1, 1, 1); 2: parent scale (-1, 1, 1), child identity
+};
+
+struct MirrorScene {
+  std::vector<uint8_t> bytes;
+  int floor_node = 0;
+};
+
+MirrorScene mirror_scene(int how) {
+  Doc d;
+  const int grey = d.material(plain_material(V(0.6)));
+  const int lamp = d.material(lamp_material(V(4.0)));
+  MirrorScene s;
+  if (how < 0) {
+    s.floor_node = d.quad_node(rect(0, 2, 0, 2, 0, true), grey, {{"name", "floor"}});
+  } else {
+    // Authored counter-clockwise seen from +y in its own frame: the mirror keeps that side the front.
+    const std::vector<V> local = rect(-2, 0, 0, 2, 0, true);
+    json n = {{"name", "floor"}};
+    if (how == 0) n["scale"] = {-1.0, 1.0, 1.0};
+    if (how == 1) n["matrix"] = {-1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+    if (how == 2) {
+      n["mesh"] = d.mesh(json::array({d.primitive(local, {0, 1, 2, 0, 2, 3}, kTriangles, grey)}));
+      s.floor_node = d.node(n, false);
+      d.node({{"name", "mirror"}, {"scale", {-1.0, 1.0, 1.0}}, {"children", {s.floor_node}}});
+    } else {
+      s.floor_node = d.quad_node(local, grey, n);
+    }
+  }
+  d.quad_node(rect(0.5, 1.5, 0.5, 1.5, 1.0, false), lamp, {{"name", "lamp"}});
+  s.bytes = d.gltf_bytes();
+  return s;
+}
+
+class MirroredFloorFeature : public ::testing::TestWithParam<MirrorCase> {};
+
+TEST_P(MirroredFloorFeature, IsLitLikeTheSameFloorUnmirrored) {
+  const MirrorScene s = mirror_scene(GetParam().how), ref_scene = mirror_scene(-1);
+  const Baked b = bake(s.bytes), ref = bake(ref_scene.bytes);
+  ASSERT_TRUE(b.loaded.document);
+  // The loader's patch for the floor faces +y in the world.
+  for (const auto& p : scene_of(*b.loaded.document).patches)
+    if (p.material == 1) {
+      EXPECT_GT(glm::cross(p.corners[1] - p.corners[0], p.corners[2] - p.corners[0]).y, 0.0);
+    }
+  const auto tris = all_of(baked_node(b.out, s.floor_node));
+  ASSERT_FALSE(tris.empty());
+  // The baked geometry is where the mirror puts it, and covers the floor.
+  for (const Tri& t : tris)
+    for (const V& p : t.p) {
+      ASSERT_GE(p.x, -1e-6);
+      ASSERT_LE(p.x, 2.0 + 1e-6);
+    }
+  EXPECT_NEAR(total_area(tris), 4.0, 1e-5);
+  const V lit = mean_radiosity(tris), expected = mean_radiosity(all_of(baked_node(ref.out, ref_scene.floor_node)));
+  ASSERT_GT(expected.x, 0.05);
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(lit[c] / expected[c], 1.0, 1e-3) << "channel " << c;
+}
+
+// BUG (repro: this test, or: bake a floor quad wound counter-clockwise from +y in its node's frame,
+// node "scale": [-1, 1, 1], lamp above; read the output triangles back and apply the node's matrix):
+// write_baked_glb writes every element counter-clockwise in the *world* (the solver's front) and
+// only transforms positions back into the node's frame, so under a mirroring node matrix the output
+// triangles are clockwise in the node's frame and, by the glTF rule for negative determinants, their
+// front faces away from the light: viewers with back-face culling hide the lit side. The loader swaps
+// the winding for mirrored nodes (gltf_load.cpp, `if (mirrored) std::swap(v[1], v[2])`); the writer
+// needs the same swap for nodes whose world matrix has a negative determinant. Checked: swapping
+// indices 1 and 2 of every output triangle when det(mat3(doc.node_world[node])) < 0, just before the
+// primitive is encoded in write_baked_glb, makes this test pass and keeps the rest of protocol_tests
+// passing.
+TEST_P(MirroredFloorFeature, OutputTrianglesFrontFacesTheLampByTheGltfWindingRule) {
+  const MirrorScene s = mirror_scene(GetParam().how);
+  const Baked b = bake(s.bytes);
+  const auto tris = all_of(baked_node(b.out, s.floor_node));
+  ASSERT_FALSE(tris.empty());
+  EXPECT_NEAR(area_facing(tris, V(0, 1, 0)), 4.0, 1e-5);
+}
+
+INSTANTIATE_TEST_SUITE_P(Protocol, MirroredFloorFeature,
+                         ::testing::Values(MirrorCase{"Scale", 0}, MirrorCase{"Matrix", 1}, MirrorCase{"Parent", 2}),
+                         [](const auto& p) { return std::string(p.param.name); });
+
+// ---- 4. Double-sided materials ----------------------------------------------------------------
+
+// A unit quad at y = 0 between a lamp above (emitting (4, 2, 1)) and a lamp below ((1, 2, 4)):
+// `sides` 2 makes it double-sided, 1 single-sided facing up, -1 single-sided facing down.
+struct Sandwich {
+  std::vector<uint8_t> bytes;
+  int quad_node = 0, quad_material = 0;
+};
+
+Sandwich sandwich(int sides) {
+  Doc d;
+  Sandwich s;
+  json m = plain_material(V(0.7, 0.6, 0.5), "two-faced");
+  if (sides == 2) m["doubleSided"] = true;
+  s.quad_material = d.material(m);
+  const int above = d.material(lamp_material(V(4.0, 2.0, 1.0)));
+  const int below = d.material(lamp_material(V(1.0, 2.0, 4.0)));
+  s.quad_node = d.quad_node(rect(0, 1, 0, 1, 0, sides != -1), s.quad_material, {{"name", "quad"}});
+  d.quad_node(rect(0, 1, 0, 1, 0.5, false), above, {{"name", "above"}});
+  d.quad_node(rect(0, 1, 0, 1, -0.5, true), below, {{"name", "below"}});
+  s.bytes = d.gltf_bytes();
+  return s;
+}
+
+// Both sides are lit, each by its own lamp, as much as a single-sided quad facing that lamp; the
+// output has a front and a back primitive (each covering the quad and facing its lamp), and no
+// output material is double-sided (each side is its own primitive).
+TEST(DoubleSidedFeature, BothSidesAreLitLikeSingleSidedQuadsFacingEachLamp) {
+  const Sandwich two = sandwich(2), up = sandwich(1), down = sandwich(-1);
+  const Baked b = bake(two.bytes), ref_up = bake(up.bytes), ref_down = bake(down.bytes);
+  const auto prims = baked_node(b.out, two.quad_node);
+  ASSERT_EQ(prims.size(), 2u);
+  const json& out_prims = b.out.doc["meshes"][b.out.doc["nodes"][two.quad_node]["mesh"].get<int>()]["primitives"];
+  for (const json& p : out_prims) EXPECT_EQ(p["material"], two.quad_material);
+  for (const json& m : b.out.doc["materials"]) EXPECT_FALSE(m.value("doubleSided", false)) << m.dump();
+  // Which primitive is which, by the way its triangles face.
+  const bool first_up = area_facing(prims[0], V(0, 1, 0)) > 0.0;
+  const std::vector<Tri>& top = prims[first_up ? 0 : 1];
+  const std::vector<Tri>& bottom = prims[first_up ? 1 : 0];
+  EXPECT_NEAR(area_facing(top, V(0, 1, 0)), 1.0, 1e-5);
+  EXPECT_NEAR(area_facing(bottom, V(0, -1, 0)), 1.0, 1e-5);
+  const V top_b = mean_radiosity(top), bottom_b = mean_radiosity(bottom);
+  const V up_b = mean_radiosity(all_of(baked_node(ref_up.out, up.quad_node)));
+  const V down_b = mean_radiosity(all_of(baked_node(ref_down.out, down.quad_node)));
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_GT(top_b[c], 0.0);
+    EXPECT_GT(bottom_b[c], 0.0);
+    EXPECT_NEAR(top_b[c] / up_b[c], 1.0, 0.03) << "channel " << c;
+    EXPECT_NEAR(bottom_b[c] / down_b[c], 1.0, 0.03) << "channel " << c;
+  }
+  // The lamps differ, so the sides are not interchangeable: the top is red-heavy, the bottom blue.
+  EXPECT_GT(top_b.x / top_b.z, 2.0);
+  EXPECT_GT(bottom_b.z / bottom_b.x, 2.0);
+}
+
+// ---- 5. Base colour textures --------------------------------------------------------------------
+
+constexpr uint8_t kTexel[3] = {200, 120, 60};  // sRGB bytes
+
+std::vector<uint8_t> uniform_png() {
+  std::vector<uint8_t> pixels;
+  for (int i = 0; i < 4 * 4; ++i) pixels.insert(pixels.end(), {kTexel[0], kTexel[1], kTexel[2], 255});
+  std::vector<uint8_t> png;
+  stbi_write_png_to_func(
+      [](void* ctx, void* data, int size) {
+        auto* out = static_cast<std::vector<uint8_t>*>(ctx);
+        out->insert(out->end(), static_cast<uint8_t*>(data), static_cast<uint8_t*>(data) + size);
+      },
+      &png, 4, 4, 4, pixels.data(), 16);
+  return png;
+}
+
+struct TexturedScene {
+  std::vector<uint8_t> bytes;
+  int floor_node = 0;
+};
+
+// A floor with UVs under a lamp; its base colour from the PNG (factor 1) or from a factor alone.
+TexturedScene textured_floor(bool textured, const std::vector<uint8_t>& png) {
+  Doc d;
+  TexturedScene s;
+  json m;
+  if (textured) {
+    const int view = d.view(png.data(), png.size());
+    d.gltf["images"] = json::array({json{{"bufferView", view}, {"mimeType", "image/png"}, {"name", "swatch"}}});
+    d.gltf["samplers"] = json::array({json{{"magFilter", 9728}, {"minFilter", 9728}}});
+    d.gltf["textures"] = json::array({json{{"source", 0}, {"sampler", 0}}});
+    m = {{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}};
+  } else {
+    m = plain_material(V(srgb_to_linear(kTexel[0] / 255.0), srgb_to_linear(kTexel[1] / 255.0), srgb_to_linear(kTexel[2] / 255.0)));
+  }
+  const int floor_mat = d.material(m);
+  const int lamp = d.material(lamp_material(V(4.0)));
+  s.floor_node = d.quad_node(rect(0, 2, 0, 2, 0, true), floor_mat, {{"name", "floor"}}, {UV(0, 0), UV(0, 1), UV(1, 1), UV(1, 0)});
+  d.quad_node(rect(0.5, 1.5, 0.5, 1.5, 1.0, false), lamp, {{"name", "lamp"}});
+  s.bytes = d.gltf_bytes();
+  return s;
+}
+
+// A uniform texture reflects like the factor of its sRGB-decoded colour (the light on the floor
+// agrees within 1% per channel; taking the bytes as linear would be 36% to 5 times off).
+TEST(BaseColorTextureFeature, UniformTextureReflectsLikeItsDecodedColourAsAFactor) {
+  const std::vector<uint8_t> png = uniform_png();
+  const TexturedScene tex = textured_floor(true, png), plain = textured_floor(false, png);
+  const Baked a = bake(tex.bytes), b = bake(plain.bytes);
+  ASSERT_TRUE(a.loaded.document && b.loaded.document);
+  const V ta = mean_radiosity(all_of(baked_node(a.out, tex.floor_node)));
+  const V tb = mean_radiosity(all_of(baked_node(b.out, plain.floor_node)));
+  for (int c = 0; c < 3; ++c) {
+    ASSERT_GT(tb[c], 0.0);
+    EXPECT_NEAR(ta[c] / tb[c], 1.0, 0.01) << "channel " << c;
+  }
+  // The reflectance itself, as the solver sees it.
+  for (const auto& p : scene_of(*a.loaded.document).patches)
+    if (p.material == 1) {
+      for (int c = 0; c < 3; ++c) EXPECT_NEAR(p.reflectance[c], srgb_to_linear(kTexel[c] / 255.0), 1e-9);
+    }
+}
+
+// The output keeps the image (its bytes unchanged, in the GLB), the texture, the sampler, the
+// material's reference to it, and TEXCOORD_0 on the baked primitive, plain and Draco-compressed.
+TEST(BaseColorTextureFeature, OutputKeepsTheImageBytesTextureSamplerAndUvs) {
+  const std::vector<uint8_t> png = uniform_png();
+  const TexturedScene tex = textured_floor(true, png);
+  for (bool draco : {false, true}) {
+    SCOPED_TRACE(draco ? "draco" : "plain");
+    const Baked b = bake(tex.bytes, draco);
+    const json& g = b.out.doc;
+    ASSERT_EQ(g.value("images", json::array()).size(), 1u);
+    ASSERT_EQ(g.value("textures", json::array()).size(), 1u);
+    ASSERT_EQ(g.value("samplers", json::array()).size(), 1u);
+    EXPECT_EQ(g["textures"][0]["source"], 0);
+    EXPECT_EQ(g["textures"][0]["sampler"], 0);
+    EXPECT_EQ(g["samplers"][0].value("magFilter", 0), 9728);
+    const json& image = g["images"][0];
+    EXPECT_FALSE(image.contains("uri"));
+    EXPECT_EQ(image.value("mimeType", ""), "image/png");
+    ASSERT_TRUE(image.contains("bufferView"));
+    const json& view = g["bufferViews"][image["bufferView"].get<int>()];
+    const size_t at = view.value("byteOffset", 0), len = view["byteLength"].get<size_t>();
+    ASSERT_LE(at + len, b.out.bin.size());
+    EXPECT_EQ(std::vector<uint8_t>(b.out.bin.begin() + at, b.out.bin.begin() + at + len), png);
+    const json& node = g["nodes"][tex.floor_node];
+    const json& prim = g["meshes"][node["mesh"].get<int>()]["primitives"][0];
+    EXPECT_EQ(g["materials"][prim["material"].get<int>()]["pbrMetallicRoughness"]["baseColorTexture"]["index"], 0);
+    ASSERT_TRUE(prim["attributes"].contains("TEXCOORD_0"));
+    const Primitive d = read_primitive(b.out, prim);
+    EXPECT_EQ(d.uv.size(), d.positions.size());
+  }
+}
+
+// ---- 6. Material extras -------------------------------------------------------------------------
+
+struct PanelScene {
+  std::vector<uint8_t> bytes;
+  int floor_node = 0;
+};
+
+// A floor under a panel; `panel` and `floor` are the two materials.
+PanelScene panel_scene(const json& floor, const json& panel) {
+  Doc d;
+  PanelScene s;
+  const int f = d.material(floor);
+  const int p = d.material(panel);
+  s.floor_node = d.quad_node(rect(0, 2, 0, 2, 0, true), f, {{"name", "floor"}});
+  d.quad_node(rect(0.5, 1.5, 0.5, 1.5, 1.0, false), p, {{"name", "panel"}});
+  s.bytes = d.gltf_bytes();
+  return s;
+}
+
+json with_extras(json m, const json& hemibake) {
+  m["extras"]["hemibake"] = hemibake;
+  return m;
+}
+
+// A plain, non-emissive panel with extras.hemibake.emission lights the floor exactly as the same
+// emission given by emissiveFactor x emissiveStrength.
+TEST(MaterialExtrasFeature, EmissionOverrideMakesAPlainMaterialALight) {
+  const json floor = plain_material(V(0.6));
+  const PanelScene over = panel_scene(floor, with_extras(plain_material(V(0.0), "panel"), {{"emission", {3.0, 2.0, 1.0}}}));
+  const PanelScene ref = panel_scene(floor, lamp_material(V(3.0, 2.0, 1.0)));
+  const Baked a = bake(over.bytes), b = bake(ref.bytes);
+  const V la = mean_radiosity(all_of(baked_node(a.out, over.floor_node)));
+  const V lb = mean_radiosity(all_of(baked_node(b.out, ref.floor_node)));
+  for (int c = 0; c < 3; ++c) {
+    ASSERT_GT(lb[c], 0.0);
+    EXPECT_NEAR(la[c] / lb[c], 1.0, 0.01) << "channel " << c;
+  }
+}
+
+// extras.hemibake.reflectance replaces the base colour for the bake: a white floor overridden to
+// (0.2, 0.4, 0.6) is lit like a floor of that base colour.
+TEST(MaterialExtrasFeature, ReflectanceOverrideReplacesTheBaseColourInTheBake) {
+  const json lamp = lamp_material(V(4.0));
+  const PanelScene over = panel_scene(with_extras(plain_material(V(0.9), "floor"), {{"reflectance", {0.2, 0.4, 0.6}}}), lamp);
+  const PanelScene ref = panel_scene(plain_material(V(0.2, 0.4, 0.6)), lamp);
+  const Baked a = bake(over.bytes), b = bake(ref.bytes);
+  ASSERT_TRUE(a.loaded.document);
+  for (const auto& p : scene_of(*a.loaded.document).patches)
+    if (p.material == 1) {
+      EXPECT_EQ(p.reflectance, V(0.2, 0.4, 0.6));
+    }
+  const V la = mean_radiosity(all_of(baked_node(a.out, over.floor_node)));
+  const V lb = mean_radiosity(all_of(baked_node(b.out, ref.floor_node)));
+  for (int c = 0; c < 3; ++c) {
+    ASSERT_GT(lb[c], 0.0);
+    EXPECT_NEAR(la[c] / lb[c], 1.0, 0.01) << "channel " << c;
+  }
+}
+
+struct BadExtras {
+  const char* name;
+  const char* hemibake;  // JSON of extras.hemibake
+};
+
+class MalformedExtrasFeature : public ::testing::TestWithParam<BadExtras> {};
+
+// A malformed override is refused, and the error names the material (index and name) and the field.
+TEST_P(MalformedExtrasFeature, IsRefusedWithAnErrorNamingTheMaterial) {
+  const json panel = with_extras(lamp_material(V(2.0)), json::parse(GetParam().hemibake));
+  json named = panel;
+  named["name"] = "glowing panel";
+  const PanelScene s = panel_scene(plain_material(V(0.6)), named);
+  const LoadResult r = load_gltf_memory(s.bytes, ".");
+  EXPECT_FALSE(r.document);
+  EXPECT_NE(r.error.find("material 1"), std::string::npos) << r.error;
+  EXPECT_NE(r.error.find("glowing panel"), std::string::npos) << r.error;
+  const std::string field = json::parse(GetParam().hemibake).begin().key();
+  EXPECT_NE(r.error.find(field), std::string::npos) << r.error;
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Protocol, MalformedExtrasFeature,
+    ::testing::Values(BadExtras{"ReflectanceTooShort", R"({"reflectance": [0.5, 0.5]})"},
+                      BadExtras{"ReflectanceTooLong", R"({"reflectance": [0.5, 0.5, 0.5, 1.0]})"},
+                      BadExtras{"ReflectanceNotNumbers", R"({"reflectance": ["red", 0.5, 0.5]})"},
+                      BadExtras{"ReflectanceNotAnArray", R"({"reflectance": 0.5})"},
+                      BadExtras{"EmissionTooShort", R"({"emission": [1.0, 1.0]})"},
+                      BadExtras{"EmissionTooLong", R"({"emission": [1.0, 1.0, 1.0, 1.0]})"},
+                      BadExtras{"EmissionNegative", R"({"emission": [1.0, -0.5, 1.0]})"},
+                      BadExtras{"EmissionNotNumbers", R"({"emission": [1.0, null, 1.0]})"}),
+    [](const auto& p) { return std::string(p.param.name); });
+
+// ---- 7. emissiveStrength as an integer; KHR_lights_punctual -------------------------------------
+
+solver::Scene lamp_patches(const json& strength) {
+  Doc d;
+  json m = plain_material(V(0.5));
+  m["emissiveFactor"] = {1.0, 0.5, 0.25};
+  m["extensions"]["KHR_materials_emissive_strength"]["emissiveStrength"] = strength;
+  d.quad_node(rect(0, 1, 0, 1, 0, true), d.material(m));
+  const LoadResult r = load_gltf_memory(d.gltf_bytes(), ".");
+  EXPECT_TRUE(r.document) << r.error;
+  return r.document ? scene_of(*r.document) : solver::Scene{};
+}
+
+// JSON has one number type: "emissiveStrength": 3 is the same as 3.0 (emission = factor x 3).
+TEST(EmissiveStrengthFeature, IntegerStrengthWorksLikeTheSameRealNumber) {
+  ASSERT_EQ(json(3).dump(), "3");
+  ASSERT_EQ(json(3.0).dump(), "3.0");
+  const solver::Scene as_int = lamp_patches(json(3)), as_real = lamp_patches(json(3.0));
+  ASSERT_EQ(as_int.patches.size(), 1u);
+  ASSERT_EQ(as_real.patches.size(), 1u);
+  EXPECT_EQ(as_int.patches[0].emission, V(3.0, 1.5, 0.75));
+  EXPECT_EQ(as_real.patches[0].emission, V(3.0, 1.5, 0.75));
+}
+
+// A KHR_lights_punctual light is named as not supported in a warning; the file still loads, and the
+// output does not refer to the light (no extension on the node, none declared).
+TEST(PunctualLightsFeature, LightsAreReportedAsNotSupportedAndDropped) {
+  Doc d;
+  const int lamp = d.material(lamp_material(V(4.0)));
+  const int floor = d.quad_node(rect(0, 2, 0, 2, 0, true), d.material(plain_material(V(0.6))), {{"name", "floor"}});
+  d.quad_node(rect(0.5, 1.5, 0.5, 1.5, 1.0, false), lamp, {{"name", "lamp"}});
+  d.gltf["extensionsUsed"] = {"KHR_lights_punctual"};
+  d.gltf["extensions"]["KHR_lights_punctual"]["lights"] = json::array(
+      {json{{"type", "point"}, {"intensity", 10.0}, {"color", {1.0, 1.0, 1.0}}, {"name", "bulb"}}});
+  const int bulb = d.node({{"name", "bulb"}, {"translation", {1.0, 0.5, 1.0}}, {"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}});
+  const Baked b = bake(d.gltf_bytes());
+  ASSERT_TRUE(b.loaded.document);
+  EXPECT_TRUE(mentions(b.loaded.warnings, "KHR_lights_punctual")) << joined(b.loaded.warnings);
+  EXPECT_TRUE(mentions(b.loaded.warnings, "not supported")) << joined(b.loaded.warnings);
+  // The light adds nothing: the floor is lit by the lamp alone (checked to be lit at all).
+  EXPECT_GT(mean_radiosity(all_of(baked_node(b.out, floor))).x, 0.0);
+  const json& g = b.out.doc;
+  EXPECT_FALSE(g["nodes"][bulb].contains("extensions") && g["nodes"][bulb]["extensions"].contains("KHR_lights_punctual"));
+  const json used = g.value("extensionsUsed", json::array());
+  EXPECT_EQ(std::find(used.begin(), used.end(), "KHR_lights_punctual"), used.end());
+}
+
+// ---- 8. TEXCOORD_0 against the closed form ------------------------------------------------------
+
+// A quad over x, z in [0, 2] with UVs (0,0), (1,0), (1,1), (0,1) at its corners (u = x/2, v = z/2),
+// lit from close by so that it is subdivided: every output vertex's UV is (x/2, z/2) of its position
+// in the node's frame, exactly in plain output and within Draco's quantization otherwise.
+TEST(TexcoordFeature, OutputUvsInterpolateTheInputUvsOverSubdividedElements) {
+  Doc d;
+  const int floor_mat = d.material(plain_material(V(0.6)));
+  const int lamp = d.material(lamp_material(V(4.0)));
+  const std::vector<V> corners = {V(0, 0, 0), V(0, 0, 2), V(2, 0, 2), V(2, 0, 0)};  // faces +y
+  std::vector<UV> uv;
+  for (const V& c : corners) uv.emplace_back(c.x / 2.0, c.z / 2.0);
+  const int floor = d.quad_node(corners, floor_mat, {{"name", "floor"}, {"translation", {3.0, 1.0, -2.0}}}, uv);
+  d.quad_node(rect(3.6, 4.4, -1.4, -0.6, 1.3, false), lamp, {{"name", "lamp"}});
+  const std::vector<uint8_t> bytes = d.gltf_bytes();
+  for (bool draco : {false, true}) {
+    SCOPED_TRACE(draco ? "draco" : "plain");
+    const Baked b = bake(bytes, draco);
+    const json& node = b.out.doc["nodes"][floor];
+    const Primitive p = read_primitive(b.out, b.out.doc["meshes"][node["mesh"].get<int>()]["primitives"][0]);
+    ASSERT_EQ(p.uv.size(), p.positions.size());
+    EXPECT_GT(p.positions.size(), 16u) << "the floor was not subdivided; the check would be trivial";
+    const double tol = draco ? 1e-3 : 1e-4;
+    for (size_t i = 0; i < p.positions.size(); ++i) {
+      ASSERT_NEAR(p.uv[i].x, p.positions[i].x / 2.0, tol) << "vertex " << i;
+      ASSERT_NEAR(p.uv[i].y, p.positions[i].z / 2.0, tol) << "vertex " << i;
+    }
+  }
+}
+
+// UVs that are not an affine function of position (a quad's UVs are linear over each of its two
+// source triangles, not over the quad): every output vertex's UV is the barycentric interpolation of
+// the corner UVs over the source triangle that holds it, as computed here.
+TEST(TexcoordFeature, OutputUvsAreLinearOverEachSourceTriangleOfAQuad) {
+  Doc d;
+  const int floor_mat = d.material(plain_material(V(0.6)));
+  const int lamp = d.material(lamp_material(V(4.0)));
+  const std::vector<V> c = {V(0, 0, 0), V(0, 0, 2), V(2, 0, 2), V(2, 0, 0)};  // faces +y; triangles 012, 023
+  const std::vector<UV> uv = {UV(0.0, 0.0), UV(0.1, 0.9), UV(1.0, 0.6), UV(0.7, 0.0)};
+  const int floor = d.quad_node(c, floor_mat, {{"name", "floor"}}, uv);
+  d.quad_node(rect(0.6, 1.4, 0.6, 1.4, 0.3, false), lamp, {{"name", "lamp"}});
+  const Baked b = bake(d.gltf_bytes());
+  const json& node = b.out.doc["nodes"][floor];
+  const Primitive p = read_primitive(b.out, b.out.doc["meshes"][node["mesh"].get<int>()]["primitives"][0]);
+  ASSERT_EQ(p.uv.size(), p.positions.size());
+  EXPECT_GT(p.positions.size(), 16u);
+  // In the (x, z) plane: barycentric coordinates of q in triangle (a, b, c).
+  auto bary = [](const V& q, const V& a, const V& bb, const V& cc) {
+    const double det = (bb.x - a.x) * (cc.z - a.z) - (cc.x - a.x) * (bb.z - a.z);
+    const double l1 = ((q.x - a.x) * (cc.z - a.z) - (cc.x - a.x) * (q.z - a.z)) / det;
+    const double l2 = ((bb.x - a.x) * (q.z - a.z) - (q.x - a.x) * (bb.z - a.z)) / det;
+    return glm::dvec3(1.0 - l1 - l2, l1, l2);
+  };
+  size_t off_diagonal = 0;
+  for (size_t i = 0; i < p.positions.size(); ++i) {
+    const V& q = p.positions[i];
+    const glm::dvec3 w1 = bary(q, c[0], c[1], c[2]), w2 = bary(q, c[0], c[2], c[3]);
+    const bool first = std::min({w1.x, w1.y, w1.z}) >= std::min({w2.x, w2.y, w2.z});
+    const UV expected = first ? w1.x * uv[0] + w1.y * uv[1] + w1.z * uv[2] : w2.x * uv[0] + w2.y * uv[2] + w2.z * uv[3];
+    ASSERT_NEAR(p.uv[i].x, expected.x, 1e-5) << "vertex " << i << " at " << q.x << ", " << q.z;
+    ASSERT_NEAR(p.uv[i].y, expected.y, 1e-5) << "vertex " << i << " at " << q.x << ", " << q.z;
+    // The other triangle's plane would give a different UV off the diagonal (the check is not vacuous).
+    const UV other = first ? w2.x * uv[0] + w2.y * uv[2] + w2.z * uv[3] : w1.x * uv[0] + w1.y * uv[1] + w1.z * uv[2];
+    if (glm::length(other - expected) > 1e-3) ++off_diagonal;
+  }
+  EXPECT_GT(off_diagonal, p.positions.size() / 2);
+}
+
+}  // namespace
+}  // namespace hemibake::protocol
