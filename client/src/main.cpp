@@ -49,6 +49,8 @@ void usage(FILE* out) {
                "  hemibake status ID | watch ID | cancel ID           a job's state, live progress, cancel it\n"
                "  hemibake fetch ID -o OUT.glb                        download a job's result\n"
                "  hemibake list [--state S]                           the server's jobs, newest first\n"
+               "  hemibake render IN.glb -o OUT.png [--camera ...] [--wireframe] [--flat]\n"
+               "                                                      software render of a baked file\n"
                "  (the server: --server URL or HEMIBAKE_SERVER; a bearer token from HEMIBAKE_TOKEN)\n"
                "\n%s"
                "output options (bake):\n"
@@ -75,6 +77,7 @@ struct Options {
   hemibake::protocol::WriteOptions write;
   hemibake::protocol::LoadLimits limits;
   std::string input, output, render_path, wire_path, server, state;
+  bool flat = false, wire_flag = false;
   std::optional<hemibake::client::Camera> camera;
 };
 
@@ -101,6 +104,10 @@ std::string parse(int argc, char** argv, int first, bool bake, Options& o) {
     }
     if (opt == "--no-draco") {
       o.write.draco = false;
+      continue;
+    }
+    if (opt == "--flat" || (opt == "--wireframe" && (i + 1 >= argc || argv[i + 1][0] == '-'))) {
+      (opt == "--flat" ? o.flat : o.wire_flag) = true;
       continue;
     }
     if (opt.empty() || opt[0] != '-') {
@@ -244,6 +251,28 @@ int cornell(const Options& o) {
   return render_pngs(mesh, o, o.camera.value_or(cam)) ? 0 : 1;
 }
 
+int render_file(const Options& o) {
+  if (o.input.empty() || o.output.empty()) {
+    std::fputs("hemibake: render needs IN.glb -o OUT.png\n", stderr);
+    return 2;
+  }
+  hemibake::solver::Mesh mesh;
+  if (std::string err = hemibake::protocol::read_baked_mesh(o.input, mesh); !err.empty()) {
+    std::fprintf(stderr, "hemibake: %s: %s\n", o.input.c_str(), err.c_str());
+    return 1;
+  }
+  hemibake::client::RenderOptions ro;
+  ro.gouraud = !o.flat;
+  ro.wireframe = o.wire_flag;
+  const auto rgb = hemibake::client::render(mesh, o.camera.value_or(frame(mesh)), ro);
+  if (!hemibake::client::write_png(o.output, rgb, ro.width, ro.height)) {
+    std::fprintf(stderr, "hemibake: cannot write %s\n", o.output.c_str());
+    return 1;
+  }
+  std::printf("wrote %s (%zu triangles)\n", o.output.c_str(), mesh.elements.size());
+  return 0;
+}
+
 int bake(const Options& o) {
   if (o.input.empty()) {
     std::fputs("hemibake: bake needs an input file\n", stderr);
@@ -293,7 +322,7 @@ int main(int argc, char** argv) {
   const std::string command = argv[1];
   const bool remote_command = command == "submit" || command == "status" || command == "watch" ||
                               command == "fetch" || command == "cancel" || command == "list";
-  if (command != "cornell" && command != "bake" && !remote_command) {
+  if (command != "cornell" && command != "bake" && command != "render" && !remote_command) {
     std::fprintf(stderr, "hemibake: unknown command '%s' (try --help)\n", argv[1]);
     return 2;
   }
@@ -303,6 +332,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   if (command == "cornell") return cornell(o);
+  if (command == "render") return render_file(o);
   if (command == "bake" && o.server.empty() && !std::getenv("HEMIBAKE_SERVER")) return bake(o);
   if (command == "bake" && o.server.empty()) o.server = std::getenv("HEMIBAKE_SERVER");
   // The commands that talk to a server.

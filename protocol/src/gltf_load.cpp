@@ -796,4 +796,93 @@ LoadResult load_gltf_file(const std::string& path, const LoadLimits& limits) {
   return load_gltf_memory(bytes, dir.empty() ? "." : dir, limits);
 }
 
+std::string read_baked_mesh(const std::string& path, solver::Mesh& out) {
+  out = solver::Mesh();
+  std::error_code ec;
+  const auto size = fs::file_size(path, ec);
+  if (ec) return "cannot read '" + path + "': " + ec.message();
+  std::vector<uint8_t> bytes(size);
+  std::ifstream in(path, std::ios::binary);
+  if (!in.read(reinterpret_cast<char*>(bytes.data()), static_cast<std::streamsize>(size))) return "cannot read '" + path + "'";
+  PrecheckResult pre;
+  if (std::string e = precheck_gltf(bytes, true, pre); !e.empty()) return e;
+  SceneDocument doc;
+  std::vector<std::string> warnings;
+  LoaderContext ctx;
+  ctx.base_dir = fs::path(path).parent_path().string();
+  ctx.allow_external = true;
+  ctx.max_bytes = size;
+  ctx.max_image_pixels = 1;  // images are not needed here
+  ctx.doc = &doc;
+  ctx.warnings = &warnings;
+  tinygltf::TinyGLTF loader;
+  loader.SetFsCallbacks(tinygltf::FsCallbacks{&fs_exists, &fs_expand, &fs_read, &fs_write, &ctx});
+  loader.SetImageLoader(&load_image, &ctx);
+  tinygltf::Model& m = doc.model;
+  std::string err, warn;
+  const bool glb = size >= 4 && std::memcmp(bytes.data(), "glTF", 4) == 0;
+  const bool ok = glb ? loader.LoadBinaryFromMemory(&m, &err, &warn, bytes.data(), static_cast<unsigned>(size), ctx.base_dir)
+                      : loader.LoadASCIIFromString(&m, &err, &warn, reinterpret_cast<const char*>(bytes.data()),
+                                                   static_cast<unsigned>(size), ctx.base_dir);
+  if (!ok) return "not a valid glTF file: " + err.substr(0, 300);
+  if (m.scenes.empty()) return "the file has no scene";
+  // Walk the default scene (the pre-check refused cycles) with world matrices.
+  std::vector<std::pair<int, glm::dmat4>> stack;
+  for (int root : m.scenes[m.defaultScene >= 0 ? m.defaultScene : 0].nodes) stack.emplace_back(root, glm::dmat4(1.0));
+  while (!stack.empty()) {
+    const auto [n, parent] = stack.back();
+    stack.pop_back();
+    const tinygltf::Node& node = m.nodes[n];
+    const glm::dmat4 world = parent * local_matrix(node);
+    for (int c : node.children) stack.emplace_back(c, world);
+    if (node.mesh < 0) continue;
+    for (size_t pi = 0; pi < m.meshes[node.mesh].primitives.size(); ++pi) {
+      const tinygltf::Primitive& prim = m.meshes[node.mesh].primitives[pi];
+      if (prim.mode >= 0 && prim.mode != TINYGLTF_MODE_TRIANGLES) continue;
+      const std::string where = "mesh " + std::to_string(node.mesh) + " primitive " + std::to_string(pi);
+      const auto pos_it = prim.attributes.find("POSITION");
+      auto rad_it = prim.attributes.find("_RADIOSITY");
+      if (rad_it == prim.attributes.end()) rad_it = prim.attributes.find("COLOR_0");
+      if (pos_it == prim.attributes.end() || rad_it == prim.attributes.end())
+        return where + " has no POSITION and _RADIOSITY (or COLOR_0): is it a hemibake result?";
+      View pos, rad, idx;
+      if (std::string e = view_accessor(m, pos_it->second, "POSITION of " + where, pos); !e.empty()) return e;
+      if (std::string e = view_accessor(m, rad_it->second, rad_it->first + " of " + where, rad); !e.empty()) return e;
+      if (pos.components != 3 || rad.components < 3 || rad.count != pos.count) return where + ": unexpected attribute layout";
+      const uint32_t base = static_cast<uint32_t>(out.positions.size());
+      for (size_t i = 0; i < pos.count; ++i) {
+        const glm::dvec3 p(read_component(pos, i, 0), read_component(pos, i, 1), read_component(pos, i, 2));
+        out.positions.push_back(glm::dvec3(world * glm::dvec4(p, 1.0)));
+        out.radiosity.emplace_back(read_component(rad, i, 0), read_component(rad, i, 1), read_component(rad, i, 2));
+      }
+      std::vector<uint32_t> tri;
+      if (prim.indices >= 0) {
+        if (std::string e = view_accessor(m, prim.indices, "indices of " + where, idx); !e.empty()) return e;
+        idx.normalized = false;
+        for (size_t i = 0; i < idx.count; ++i) {
+          const double v = read_component(idx, i, 0);
+          if (v >= static_cast<double>(pos.count)) return "accessor " + std::to_string(prim.indices) + " has an index out of range";
+          tri.push_back(static_cast<uint32_t>(v));
+        }
+      } else {
+        for (uint32_t i = 0; i < pos.count; ++i) tri.push_back(i);
+      }
+      const bool mirrored = glm::determinant(glm::dmat3(world)) < 0.0;
+      for (size_t t = 0; t + 2 < tri.size(); t += 3) {
+        solver::Mesh::Element el;
+        el.patch = static_cast<uint32_t>(pi);
+        el.corner_count = 3;
+        el.corners = {base + tri[t], base + tri[t + (mirrored ? 2 : 1)], base + tri[t + (mirrored ? 1 : 2)], 0};
+        el.radiosity = (out.radiosity[el.corners[0]] + out.radiosity[el.corners[1]] + out.radiosity[el.corners[2]]) / 3.0;
+        el.boundary_begin = static_cast<uint32_t>(out.boundary.size());
+        out.boundary.insert(out.boundary.end(), el.corners.begin(), el.corners.begin() + 3);
+        el.boundary_end = static_cast<uint32_t>(out.boundary.size());
+        out.elements.push_back(el);
+      }
+    }
+  }
+  if (out.elements.empty()) return "the file has no triangles";
+  return {};
+}
+
 }  // namespace hemibake::protocol

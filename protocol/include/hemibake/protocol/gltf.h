@@ -70,4 +70,9 @@ WriteResult write_baked_glb(const SceneDocument& document, const solver::Mesh& m
                             const solver::Params& params, const solver::Stats& stats,
                             const WriteOptions& options = {});
 
+/// Reads a baked file (this writer's, or any glTF with POSITION and _RADIOSITY or COLOR_0) into a
+/// mesh of triangles in world space with per-vertex radiosity, for rendering. Returns an empty
+/// string or an error message.
+std::string read_baked_mesh(const std::string& path, solver::Mesh& out);
+
 }  // namespace hemibake::protocol
