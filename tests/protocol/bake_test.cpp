@@ -369,6 +369,33 @@ TEST(BakedGlb, InstancesGetTheirOwnMeshesInTheirNodesFrames) {
   EXPECT_GT(brightest, 0.1);
 }
 
+// A baked file reads back as world-space triangles with their radiosity (what `hemibake render`
+// draws): the closed box's walls, all at E / (1 - rho).
+TEST(BakedGlb, ReadsBackAsTrianglesWithRadiosity) {
+  const glm::dvec3 rho(0.5), e(0.4);
+  GltfBuilder b;
+  b.node({{"name", "room"}, {"mesh", b.mesh(box_walls(2.0, 1), b.material(rho, e))}, {"translation", {5.0, 0.0, 0.0}}});
+  const Baked baked = bake(b.gltf(), true);
+  const auto path = std::filesystem::temp_directory_path() / ("hemibake-read-" + std::to_string(getpid()) + ".glb");
+  std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(baked.glb.data()),
+                                              static_cast<std::streamsize>(baked.glb.size()));
+  solver::Mesh m;
+  ASSERT_EQ(read_baked_mesh(path.string(), m), "");
+  std::filesystem::remove(path);
+  double area = 0.0;
+  for (const auto& el : m.elements) {
+    const glm::dvec3 a = m.positions[el.corners[0]], p1 = m.positions[el.corners[1]], p2 = m.positions[el.corners[2]];
+    area += 0.5 * glm::length(glm::cross(p1 - a, p2 - a));
+    for (uint32_t k = 0; k < 3; ++k) {
+      EXPECT_NEAR(m.positions[el.corners[k]].x, 6.0, 1.0 + 1e-3);  // the node's translation applied
+      EXPECT_NEAR(m.radiosity[el.corners[k]].x, 0.8, 0.8 * 0.02);
+    }
+  }
+  EXPECT_NEAR(area, 24.0, 0.03);
+  solver::Mesh none;
+  EXPECT_NE(read_baked_mesh("/nonexistent.glb", none), "");
+}
+
 // Two independent decoders agree on the baked file: Draco's own C++ decoder (read here) and
 // gltf-transform with draco3d under node (tests/e2e/decode.mjs) give the same vertices, colours and
 // radiosity.
