@@ -1,0 +1,179 @@
+// Path-traced radiosity: B(x) = E(x) + rho(x) * integral over surfaces y of B(y) cos cos' V / (pi r^2).
+// At every path vertex the emitters are sampled directly (a point on an emitting triangle, chosen by
+// emitted power, and a shadow ray: next-event estimation); the path goes on in a cosine-weighted
+// direction, counting only reflected light where it lands (emission there was already sampled), and
+// ends by Russian roulette on the reflectance.
+#include "hemibake/bench/reference.h"
+
+#include <embree3/rtcore.h>
+#include <glm/geometric.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <random>
+
+namespace hemibake::bench {
+
+struct Reference::Impl {
+  RTCDevice device = nullptr;
+  RTCScene scene = nullptr;
+  std::vector<uint32_t> tri_patch;  // triangle -> patch
+  std::vector<glm::dvec3> normal;   // per patch
+  const solver::Scene* input = nullptr;
+  double eps = 1e-6;
+  // Emitting triangles: corners, patch, and the cumulative distribution of their emitted power.
+  struct Emitter {
+    glm::dvec3 a, b, c;
+    uint32_t patch;
+    double area;
+  };
+  std::vector<Emitter> emitters;
+  std::vector<double> cdf;
+  double total_power = 0.0;
+};
+
+Reference::Reference(const solver::Scene& scene) : impl_(std::make_unique<Impl>()) {
+  Impl& s = *impl_;
+  s.input = &scene;
+  s.device = rtcNewDevice(nullptr);
+  s.scene = rtcNewScene(s.device);
+  std::vector<float> vertices;
+  std::vector<uint32_t> indices;
+  glm::dvec3 lo(1e300), hi(-1e300);
+  for (uint32_t p = 0; p < scene.patches.size(); ++p) {
+    const auto& patch = scene.patches[p];
+    const uint32_t base = static_cast<uint32_t>(vertices.size() / 3);
+    for (uint32_t c = 0; c < patch.corner_count; ++c) {
+      for (int k = 0; k < 3; ++k) vertices.push_back(static_cast<float>(patch.corners[c][k]));
+      lo = glm::min(lo, patch.corners[c]);
+      hi = glm::max(hi, patch.corners[c]);
+    }
+    for (uint32_t t = 1; t + 1 < patch.corner_count; ++t) {
+      indices.insert(indices.end(), {base, base + t, base + t + 1});
+      s.tri_patch.push_back(p);
+      const double power = (patch.emission.x + patch.emission.y + patch.emission.z);
+      if (power > 0.0) {
+        const double area = 0.5 * glm::length(glm::cross(patch.corners[t] - patch.corners[0], patch.corners[t + 1] - patch.corners[0]));
+        s.emitters.push_back({patch.corners[0], patch.corners[t], patch.corners[t + 1], p, area});
+        s.total_power += power * area;
+        s.cdf.push_back(s.total_power);
+      }
+    }
+    const glm::dvec3 n = glm::cross(patch.corners[1] - patch.corners[0], patch.corners[2] - patch.corners[0]);
+    s.normal.push_back(glm::normalize(n));
+  }
+  s.eps = 1e-5 * glm::length(hi - lo);
+  RTCGeometry geom = rtcNewGeometry(s.device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                                         3 * sizeof(float), vertices.size() / 3));
+  std::copy(vertices.begin(), vertices.end(), vb);
+  auto* ib = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                            3 * sizeof(uint32_t), indices.size() / 3));
+  std::copy(indices.begin(), indices.end(), ib);
+  rtcCommitGeometry(geom);
+  rtcAttachGeometry(s.scene, geom);
+  rtcReleaseGeometry(geom);
+  rtcCommitScene(s.scene);
+}
+
+Reference::~Reference() {
+  rtcReleaseScene(impl_->scene);
+  rtcReleaseDevice(impl_->device);
+}
+
+ReferencePoint Reference::radiosity_at(uint32_t patch, const glm::dvec3& x0, uint32_t samples, uint64_t seed) const {
+  const Impl& s = *impl_;
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  glm::dvec3 sum(0.0), sum2(0.0);
+  const auto& p0 = s.input->patches[patch];
+  for (uint32_t i = 0; i < samples; ++i) {
+    // One path: the light reaching x0's surface, weighted by the reflectances along the way.
+    glm::dvec3 value(0.0), weight = p0.reflectance;
+    glm::dvec3 x = x0;
+    glm::dvec3 n = s.normal[patch];
+    for (int bounce = 0; bounce < 64; ++bounce) {
+      // Direct light: a point on an emitter, chosen by power, seen through a shadow ray.
+      if (!s.emitters.empty()) {
+        const double pick = uni(rng) * s.total_power;
+        const size_t k = std::min<size_t>(std::lower_bound(s.cdf.begin(), s.cdf.end(), pick) - s.cdf.begin(), s.emitters.size() - 1);
+        const auto& em = s.emitters[k];
+        double u = uni(rng), v = uni(rng);
+        if (u + v > 1.0) {
+          u = 1.0 - u;
+          v = 1.0 - v;
+        }
+        const glm::dvec3 y = em.a + u * (em.b - em.a) + v * (em.c - em.a);
+        const glm::dvec3 to = y - x;
+        const double r2 = glm::dot(to, to);
+        const glm::dvec3 dir = to / std::sqrt(r2);
+        const double cos_x = glm::dot(n, dir), cos_y = -glm::dot(s.normal[em.patch], dir);
+        if (cos_x > 0.0 && cos_y > 0.0) {
+          RTCIntersectContext sctx;
+          rtcInitIntersectContext(&sctx);
+          RTCRay sr{};
+          sr.org_x = static_cast<float>(x.x + n.x * s.eps);
+          sr.org_y = static_cast<float>(x.y + n.y * s.eps);
+          sr.org_z = static_cast<float>(x.z + n.z * s.eps);
+          sr.dir_x = static_cast<float>(dir.x);
+          sr.dir_y = static_cast<float>(dir.y);
+          sr.dir_z = static_cast<float>(dir.z);
+          sr.tnear = 0.0f;
+          sr.tfar = static_cast<float>(std::sqrt(r2) * (1.0 - 1e-4));
+          sr.mask = 0xffffffffu;
+          rtcOccluded1(s.scene, &sctx, &sr);
+          if (sr.tfar >= 0.0f) {  // not occluded
+            const auto& pe = s.input->patches[em.patch];
+            const double power = (pe.emission.x + pe.emission.y + pe.emission.z) * em.area;
+            const double prob = power / s.total_power;  // of choosing this triangle
+            value += weight * pe.emission * (cos_x * cos_y * em.area / (std::numbers::pi * r2 * prob));
+          }
+        }
+      }
+      // Cosine-weighted direction about n.
+      const double r1 = uni(rng), r2 = uni(rng);
+      const double phi = 2.0 * std::numbers::pi * r1, r = std::sqrt(r2);
+      const glm::dvec3 t = glm::normalize(std::abs(n.x) < 0.9 ? glm::cross(n, glm::dvec3(1, 0, 0)) : glm::cross(n, glm::dvec3(0, 1, 0)));
+      const glm::dvec3 b = glm::cross(n, t);
+      const glm::dvec3 d = r * std::cos(phi) * t + r * std::sin(phi) * b + std::sqrt(1.0 - r2) * n;
+      RTCIntersectContext ctx;
+      rtcInitIntersectContext(&ctx);
+      RTCRayHit rh{};
+      rh.ray.org_x = static_cast<float>(x.x + n.x * s.eps);
+      rh.ray.org_y = static_cast<float>(x.y + n.y * s.eps);
+      rh.ray.org_z = static_cast<float>(x.z + n.z * s.eps);
+      rh.ray.dir_x = static_cast<float>(d.x);
+      rh.ray.dir_y = static_cast<float>(d.y);
+      rh.ray.dir_z = static_cast<float>(d.z);
+      rh.ray.tnear = 0.0f;
+      rh.ray.tfar = std::numeric_limits<float>::infinity();
+      rh.ray.mask = 0xffffffffu;
+      rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+      rtcIntersect1(s.scene, &ctx, &rh);
+      if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) break;  // escaped
+      const uint32_t q = s.tri_patch[rh.hit.primID];
+      const glm::dvec3 nq = s.normal[q];
+      if (glm::dot(nq, d) >= 0.0) break;  // the back of a one-sided surface: black
+      const auto& pq = s.input->patches[q];
+      // Russian roulette on the reflectance's mean keeps the estimate unbiased.
+      const double keep = std::min(0.95, (pq.reflectance.x + pq.reflectance.y + pq.reflectance.z) / 3.0);
+      if (keep <= 0.0 || uni(rng) >= keep) break;
+      weight *= pq.reflectance / keep;
+      x = x + d * static_cast<double>(rh.ray.tfar);
+      n = nq;
+    }
+    sum += value;
+    sum2 += value * value;
+  }
+  ReferencePoint out;
+  const double ns = samples;
+  const glm::dvec3 mean = sum / ns;
+  out.radiosity = p0.emission + mean;
+  const glm::dvec3 var = glm::max(sum2 / ns - mean * mean, glm::dvec3(0.0));
+  out.std_error = glm::sqrt(var / ns);
+  return out;
+}
+
+}  // namespace hemibake::bench
