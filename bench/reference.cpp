@@ -121,7 +121,8 @@ ReferencePoint Reference::radiosity_at(uint32_t patch, const glm::dvec3& x0, uin
           sr.dir_y = static_cast<float>(dir.y);
           sr.dir_z = static_cast<float>(dir.z);
           sr.tnear = 0.0f;
-          sr.tfar = static_cast<float>(std::sqrt(r2) * (1.0 - 1e-4));
+          // Stop short of the emitter itself (the origin is lifted off the surface by eps).
+          sr.tfar = static_cast<float>(glm::length(y - (x + n * s.eps)) * (1.0 - 1e-4) - s.eps);
           sr.mask = 0xffffffffu;
           rtcOccluded1(s.scene, &sctx, &sr);
           if (sr.tfar >= 0.0f) {  // not occluded

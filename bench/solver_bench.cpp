@@ -2,6 +2,7 @@
 // cost of re-projecting against reusing the parent's pixels, and how the cost of one hemicube grows
 // with the number of elements. Each configuration runs in a child process so that its peak memory
 // is its own. Prints markdown tables (see bench/README.md).
+#include "hemibake/bench/hierarchical.h"
 #include "hemibake/bench/reference.h"
 #include "hemibake/solver/scenes.h"
 #include "hemibake/solver/solver.h"
@@ -103,15 +104,11 @@ int main(int argc, char** argv) {
     std::printf("| method | elements | RMS error / mean radiosity | RMS error, reference noise removed | max abs error / mean | reference standard error (RMS) / mean | energy (sum B A) / reference's |\n");
     std::printf("|---|---|---|---|---|---|---|\n");
     const hemibake::bench::Reference reference(cornell);
-    for (Method m : {Method::kAntiAliased, Method::kClassical}) {
-      Params p;
-      p.method = m;
-      Solver solver(cornell, p);
-      solver.run();
-      const Mesh mesh = solver.mesh();
-      double se2 = 0.0, err2 = 0.0, worst = 0.0, sum_ref = 0.0, sum_b = 0.0, sum_refa = 0.0, sum_ba = 0.0;
-      uint64_t seed = 1;
+    auto compare = [&](const char* name, const Mesh& mesh) {
+      double se2 = 0.0, err2 = 0.0, worst = 0.0, sum_ref = 0.0, sum_refa = 0.0, sum_ba = 0.0;
+      uint64_t seed = 1, n = 0;
       for (const auto& el : mesh.elements) {
+        if (cornell.patches[el.patch].emission.x > 0.0) continue;  // the light itself is exact
         glm::dvec3 c(0.0);
         for (uint32_t k = 0; k < el.corner_count; ++k) c += mesh.positions[el.corners[k]];
         c /= static_cast<double>(el.corner_count);
@@ -119,22 +116,34 @@ int main(int argc, char** argv) {
         const double rl = (r.radiosity.x + r.radiosity.y + r.radiosity.z) / 3.0;
         const double bl = (el.radiosity.x + el.radiosity.y + el.radiosity.z) / 3.0;
         const double sel = std::sqrt((r.std_error.x * r.std_error.x + r.std_error.y * r.std_error.y + r.std_error.z * r.std_error.z) / 3.0);
-        if (cornell.patches[el.patch].emission.x > 0.0) continue;  // the light itself is exact
         err2 += (bl - rl) * (bl - rl);
         se2 += sel * sel;
         worst = std::max(worst, std::abs(bl - rl));
         sum_ref += rl;
-        sum_b += bl;
         sum_refa += rl * el.area;
         sum_ba += bl * el.area;
+        ++n;
       }
-      const double n = static_cast<double>(mesh.elements.size());
-      const double mean_ref = sum_ref / n;
-      std::printf("| %s | %zu | %.4f | %.4f | %.4f | %.4f | %.4f |\n", m == Method::kAntiAliased ? "aa" : "classical",
-                  mesh.elements.size(), std::sqrt(err2 / n) / mean_ref, std::sqrt(std::max(0.0, err2 - se2) / n) / mean_ref,
-                  worst / mean_ref, std::sqrt(se2 / n) / mean_ref, sum_ba / sum_refa);
+      const double mean_ref = sum_ref / static_cast<double>(n);
+      std::printf("| %s | %zu | %.4f | %.4f | %.4f | %.4f | %.4f |\n", name, mesh.elements.size(),
+                  std::sqrt(err2 / n) / mean_ref, std::sqrt(std::max(0.0, err2 - se2) / n) / mean_ref, worst / mean_ref,
+                  std::sqrt(se2 / n) / mean_ref, sum_ba / sum_refa);
       std::fflush(stdout);
+    };
+    for (Method m : {Method::kAntiAliased, Method::kClassical}) {
+      Params p;
+      p.method = m;
+      Solver solver(cornell, p);
+      solver.run();
+      compare(m == Method::kAntiAliased ? "aa" : "classical", solver.mesh());
     }
+    hemibake::bench::HierarchicalStats hs;
+    const Mesh hr = hemibake::bench::solve_hierarchical(cornell, {}, hs);
+    compare("hr", hr);
+    std::printf("\nHierarchical radiosity (FEPS 0.001, AEPS 0.0001, 4 rays per link, 1 thread): %.3f s "
+                "(%.3f s linking), %llu links, %llu elements, %u iterations\n",
+                hs.seconds, hs.seconds_linking, static_cast<unsigned long long>(hs.links),
+                static_cast<unsigned long long>(hs.elements), hs.iterations);
   }
 
   std::printf("\n## Cost of one hemicube against elements (closed box, no subdivision, aa, all threads)\n\n");

@@ -1,0 +1,65 @@
+// The baselines against closed forms: the path-traced reference and hierarchical radiosity.
+#include "hemibake/bench/hierarchical.h"
+#include "hemibake/bench/reference.h"
+#include "hemibake/solver/scenes.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+namespace hemibake::bench {
+namespace {
+
+// In a closed box of uniform emission E and reflectance rho, B = E / (1 - rho) everywhere: the
+// reference must find it within its own standard error.
+TEST(Reference, ClosedBoxRadiosityWithinItsStandardError) {
+  const glm::dvec3 rho(0.5, 0.3, 0.7), e(1.0, 2.0, 0.5);
+  const solver::Scene scene = solver::make_closed_box(2.0, 2, rho, e, true);
+  const Reference reference(scene);
+  const glm::dvec3 expected = e / (glm::dvec3(1.0) - rho);
+  for (uint32_t p = 0; p < scene.patches.size(); p += 5) {
+    const auto& patch = scene.patches[p];
+    const glm::dvec3 x = 0.25 * (patch.corners[0] + patch.corners[1] + patch.corners[2] + patch.corners[3]);
+    const ReferencePoint r = reference.radiosity_at(p, x, 4000, 17 + p);
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_GT(r.std_error[c], 0.0);
+      EXPECT_NEAR(r.radiosity[c], expected[c], 4.0 * r.std_error[c] + 1e-9) << "patch " << p << " channel " << c;
+    }
+  }
+}
+
+// Radiosity from one small emitter onto a large parallel floor far below: at the floor's centre,
+// B = rho * E * F(point -> emitter), with F for a small square A at height h straight above:
+// F = A / (pi h^2) (to first order in A / h^2).
+TEST(Reference, DirectLightMatchesThePointFormFactor) {
+  solver::Scene scene;
+  const glm::dvec3 none(0.0);
+  solver::add_quad(scene, {-50, 0, -50}, {-50, 0, 50}, {50, 0, 50}, {50, 0, -50}, glm::dvec3(0.5), none, 0);
+  solver::add_quad(scene, {-0.05, 10, -0.05}, {0.05, 10, -0.05}, {0.05, 10, 0.05}, {-0.05, 10, 0.05}, glm::dvec3(0.0),
+                   glm::dvec3(100.0), 1);
+  const Reference reference(scene);
+  const ReferencePoint r = reference.radiosity_at(0, {0, 0, 0}, 4000, 3);
+  const double expected = 0.5 * 100.0 * 0.01 / (M_PI * 100.0);
+  EXPECT_NEAR(r.radiosity.x, expected, 0.01 * expected);
+}
+
+TEST(Hierarchical, ClosedBoxConvergesToEOverOneMinusRho) {
+  const glm::dvec3 rho(0.5, 0.3, 0.7), e(1.0, 2.0, 0.5);
+  const solver::Scene scene = solver::make_closed_box(2.0, 2, rho, e, true);
+  HierarchicalParams params;
+  params.feps = 3e-3;
+  HierarchicalStats stats;
+  const solver::Mesh mesh = solve_hierarchical(scene, params, stats);
+  EXPECT_GT(stats.links, 0u);
+  const glm::dvec3 expected = e / (glm::dvec3(1.0) - rho);
+  double ba = 0.0, a = 0.0;
+  for (const auto& el : mesh.elements) {
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(el.radiosity[c] / expected[c], 1.0, 0.08);
+    ba += (el.radiosity.x + el.radiosity.y + el.radiosity.z) * el.area;
+    a += el.area;
+  }
+  EXPECT_NEAR(ba / a / (expected.x + expected.y + expected.z), 1.0, 0.02);
+}
+
+}  // namespace
+}  // namespace hemibake::bench
