@@ -2,10 +2,9 @@
 // geometry survives, the radiosity is the closed form, COLOR_0 is in [0, 1].
 #include "hemibake/protocol/gltf.h"
 #include "hemibake/solver/solver.h"
+#include "glb_reader.h"
+#include "gltf_builder.h"
 
-#include <draco/compression/decode.h>
-#include <draco/core/decoder_buffer.h>
-#include <draco/mesh/mesh.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -27,19 +26,6 @@ namespace hemibake::protocol {
 namespace {
 
 using nlohmann::json;
-
-std::string base64(const std::vector<uint8_t>& data) {
-  static const char* k = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-  std::string out;
-  for (size_t i = 0; i < data.size(); i += 3) {
-    const uint32_t b = (data[i] << 16) | (i + 1 < data.size() ? data[i + 1] << 8 : 0) | (i + 2 < data.size() ? data[i + 2] : 0);
-    out += k[(b >> 18) & 63];
-    out += k[(b >> 12) & 63];
-    out += i + 1 < data.size() ? k[(b >> 6) & 63] : '=';
-    out += i + 2 < data.size() ? k[b & 63] : '=';
-  }
-  return out;
-}
 
 // A glTF document built in memory: quads (two triangles each) in one primitive per material.
 struct GltfBuilder {
@@ -105,7 +91,7 @@ struct GltfBuilder {
   }
   std::vector<uint8_t> gltf() {
     json d = doc;
-    d["buffers"] = json::array({json{{"byteLength", blob.size()}, {"uri", "data:application/octet-stream;base64," + base64(blob)}}});
+    d["buffers"] = json::array({json{{"byteLength", blob.size()}, {"uri", "data:application/octet-stream;base64," + test::base64_encode(blob)}}});
     const std::string s = d.dump();
     return std::vector<uint8_t>(s.begin(), s.end());
   }
@@ -166,87 +152,9 @@ Glb parse_glb(const std::vector<uint8_t>& bytes) {
   return g;
 }
 
-struct Decoded {
-  std::vector<glm::dvec3> positions, colors, radiosity;
-  std::vector<uint32_t> indices;
-};
+using test::Decoded;
 
-// Reads a primitive with Draco's decoder (compressed) or straight from its accessors (plain).
-Decoded read_primitive(const Glb& g, const json& prim) {
-  Decoded d;
-  const json& acc = g.doc["accessors"];
-  if (prim.contains("extensions") && prim["extensions"].contains("KHR_draco_mesh_compression")) {
-    const json& ext = prim["extensions"]["KHR_draco_mesh_compression"];
-    const json& view = g.doc["bufferViews"][ext["bufferView"].get<int>()];
-    draco::DecoderBuffer buffer;
-    buffer.Init(reinterpret_cast<const char*>(g.bin.data()) + view.value("byteOffset", 0), view["byteLength"].get<size_t>());
-    draco::Decoder decoder;
-    auto mesh = decoder.DecodeMeshFromBuffer(&buffer);
-    EXPECT_TRUE(mesh.ok());
-    if (!mesh.ok()) return d;
-    const draco::Mesh& m = *mesh.value();
-    auto read = [&](const char* name, std::vector<glm::dvec3>& out) {
-      const auto* att = m.GetAttributeByUniqueId(ext["attributes"][name].get<uint32_t>());
-      ASSERT_NE(att, nullptr) << name;
-      for (draco::PointIndex p(0); p < m.num_points(); ++p) {
-        float v[3];
-        ASSERT_TRUE(att->ConvertValue<float>(att->mapped_index(p), 3, v));
-        out.emplace_back(v[0], v[1], v[2]);
-      }
-    };
-    read("POSITION", d.positions);
-    read("COLOR_0", d.colors);
-    read("_RADIOSITY", d.radiosity);
-    for (draco::FaceIndex f(0); f < m.num_faces(); ++f)
-      for (int k = 0; k < 3; ++k) d.indices.push_back(m.face(f)[k].value());
-    // The fallback accessors describe the decoded data.
-    EXPECT_EQ(acc[prim["attributes"]["POSITION"].get<int>()]["count"].get<size_t>(), d.positions.size());
-    EXPECT_EQ(acc[prim["indices"].get<int>()]["count"].get<size_t>(), d.indices.size());
-    return d;
-  }
-  auto read = [&](int a, std::vector<glm::dvec3>& out) {
-    const json& ac = acc[a];
-    const json& view = g.doc["bufferViews"][ac["bufferView"].get<int>()];
-    const size_t base = view.value("byteOffset", 0) + ac.value("byteOffset", 0);
-    const int ct = ac["componentType"];
-    const size_t csize = ct == 5126 ? 4 : 2;
-    const size_t stride = view.value("byteStride", 3 * csize);
-    for (size_t i = 0; i < ac["count"].get<size_t>(); ++i) {
-      glm::dvec3 v;
-      for (int k = 0; k < 3; ++k) {
-        const uint8_t* p = g.bin.data() + base + i * stride + k * csize;
-        if (ct == 5126) {
-          float f;
-          std::memcpy(&f, p, 4);
-          v[k] = f;
-        } else {
-          uint16_t s;
-          std::memcpy(&s, p, 2);
-          v[k] = s / 65535.0;
-        }
-      }
-      out.push_back(v);
-    }
-  };
-  read(prim["attributes"]["POSITION"], d.positions);
-  read(prim["attributes"]["COLOR_0"], d.colors);
-  read(prim["attributes"]["_RADIOSITY"], d.radiosity);
-  const json& ia = acc[prim["indices"].get<int>()];
-  const json& iview = g.doc["bufferViews"][ia["bufferView"].get<int>()];
-  for (size_t i = 0; i < ia["count"].get<size_t>(); ++i) {
-    const size_t at = iview.value("byteOffset", 0) + ia.value("byteOffset", 0);
-    if (ia["componentType"] == 5123) {
-      uint16_t s;
-      std::memcpy(&s, g.bin.data() + at + 2 * i, 2);
-      d.indices.push_back(s);
-    } else {
-      uint32_t u;
-      std::memcpy(&u, g.bin.data() + at + 4 * i, 4);
-      d.indices.push_back(u);
-    }
-  }
-  return d;
-}
+Decoded read_primitive(const Glb& g, const json& prim) { return test::read_primitive(g.doc, g.bin, prim); }
 
 glm::dmat4 node_matrix(const json& n) {
   glm::dmat4 m(1.0);

@@ -7,13 +7,11 @@
 // of an affine UV map. Scenes are built here as glTF JSON; results are read back from the baked GLB
 // with Draco's own decoder or straight from plain accessors.
 #include "gltf_builder.h"
+#include "glb_reader.h"
 
 #include "hemibake/protocol/gltf.h"
 #include "hemibake/solver/solver.h"
 
-#include <draco/compression/decode.h>
-#include <draco/core/decoder_buffer.h>
-#include <draco/mesh/mesh.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 // stb_image_write's implementation is compiled into hemibake::protocol (tinygltf_impl.cpp).
@@ -170,82 +168,9 @@ struct Output {
   std::vector<uint8_t> bin;
 };
 
-struct Primitive {
-  std::vector<V> positions, radiosity;
-  std::vector<UV> uv;
-  std::vector<uint32_t> indices;
-};
+using Primitive = test::Decoded;
 
-// Reads a primitive with Draco's decoder (compressed) or from its accessors (plain).
-Primitive read_primitive(const Output& g, const json& prim) {
-  Primitive d;
-  if (prim.contains("extensions") && prim["extensions"].contains("KHR_draco_mesh_compression")) {
-    const json& ext = prim["extensions"]["KHR_draco_mesh_compression"];
-    const json& view = g.doc["bufferViews"][ext["bufferView"].get<int>()];
-    draco::DecoderBuffer buffer;
-    buffer.Init(reinterpret_cast<const char*>(g.bin.data()) + view.value("byteOffset", 0), view["byteLength"].get<size_t>());
-    draco::Decoder decoder;
-    auto mesh = decoder.DecodeMeshFromBuffer(&buffer);
-    EXPECT_TRUE(mesh.ok());
-    if (!mesh.ok()) return d;
-    const draco::Mesh& m = *mesh.value();
-    auto read = [&](const char* name, int n, auto&& put) {
-      if (!ext["attributes"].contains(name)) return;
-      const auto* att = m.GetAttributeByUniqueId(ext["attributes"][name].get<uint32_t>());
-      ASSERT_NE(att, nullptr) << name;
-      for (draco::PointIndex p(0); p < m.num_points(); ++p) {
-        float v[3] = {0, 0, 0};
-        ASSERT_TRUE(att->ConvertValue<float>(att->mapped_index(p), static_cast<int8_t>(n), v));
-        put(v);
-      }
-    };
-    read("POSITION", 3, [&](const float* v) { d.positions.emplace_back(v[0], v[1], v[2]); });
-    read("_RADIOSITY", 3, [&](const float* v) { d.radiosity.emplace_back(v[0], v[1], v[2]); });
-    read("TEXCOORD_0", 2, [&](const float* v) { d.uv.emplace_back(v[0], v[1]); });
-    for (draco::FaceIndex f(0); f < m.num_faces(); ++f)
-      for (int k = 0; k < 3; ++k) d.indices.push_back(m.face(f)[k].value());
-    return d;
-  }
-  auto floats = [&](int a, int n) {
-    const json& ac = g.doc["accessors"][a];
-    EXPECT_EQ(ac["componentType"], kFloat);
-    const json& view = g.doc["bufferViews"][ac["bufferView"].get<int>()];
-    const size_t base = view.value("byteOffset", 0) + ac.value("byteOffset", 0);
-    const size_t stride = view.value("byteStride", 4 * n);
-    std::vector<double> out;
-    for (size_t i = 0; i < ac["count"].get<size_t>(); ++i)
-      for (int k = 0; k < n; ++k) {
-        float f;
-        std::memcpy(&f, g.bin.data() + base + i * stride + 4 * k, 4);
-        out.push_back(f);
-      }
-    return out;
-  };
-  const json& attrs = prim["attributes"];
-  const auto p = floats(attrs["POSITION"], 3), r = floats(attrs["_RADIOSITY"], 3);
-  for (size_t i = 0; i + 2 < p.size(); i += 3) d.positions.emplace_back(p[i], p[i + 1], p[i + 2]);
-  for (size_t i = 0; i + 2 < r.size(); i += 3) d.radiosity.emplace_back(r[i], r[i + 1], r[i + 2]);
-  if (attrs.contains("TEXCOORD_0")) {
-    const auto t = floats(attrs["TEXCOORD_0"], 2);
-    for (size_t i = 0; i + 1 < t.size(); i += 2) d.uv.emplace_back(t[i], t[i + 1]);
-  }
-  const json& ia = g.doc["accessors"][prim["indices"].get<int>()];
-  const json& iview = g.doc["bufferViews"][ia["bufferView"].get<int>()];
-  const size_t at = iview.value("byteOffset", 0) + ia.value("byteOffset", 0);
-  for (size_t i = 0; i < ia["count"].get<size_t>(); ++i) {
-    if (ia["componentType"] == kUnsignedShort) {
-      uint16_t s;
-      std::memcpy(&s, g.bin.data() + at + 2 * i, 2);
-      d.indices.push_back(s);
-    } else {
-      EXPECT_EQ(ia["componentType"], kUnsignedInt);
-      uint32_t u;
-      std::memcpy(&u, g.bin.data() + at + 4 * i, 4);
-      d.indices.push_back(u);
-    }
-  }
-  return d;
-}
+Primitive read_primitive(const Output& g, const json& prim) { return test::read_primitive(g.doc, g.bin, prim); }
 
 // A node's local matrix: `matrix` (column-major) or T * R * S (glTF 2.0, section 3.5.3).
 glm::dmat4 local_matrix(const json& n) {
