@@ -6,6 +6,8 @@
 //
 // Random inputs use a fresh seed each run, printed on failure; HEMIBAKE_TEST_SEED=N repeats a run,
 // HEMIBAKE_TEST_VERBOSE=1 prints the measured errors (also recorded as test properties).
+#include "test_seed.h"
+
 #include "hemibake/solver/hemicube.h"
 
 #include <gtest/gtest.h>
@@ -30,18 +32,8 @@ using glm::dvec3;
 using Poly = std::vector<dvec3>;
 constexpr double kPi = std::numbers::pi;
 
-// A fresh seed per run (HEMIBAKE_TEST_SEED=N reproduces a run), recorded in the test's output.
-uint64_t test_seed() {
-  if (const char* env = std::getenv("HEMIBAKE_TEST_SEED")) return std::strtoull(env, nullptr, 10);
-  std::random_device rd;
-  return (static_cast<uint64_t>(rd()) << 32) | rd();
-}
-
-std::string seed_note(uint64_t seed) {
-  ::testing::Test::RecordProperty("seed", std::to_string(seed));
-  return "seed " + std::to_string(seed) + " (rerun with HEMIBAKE_TEST_SEED=" +
-         std::to_string(seed) + ")";
-}
+using test::seed_note;
+using test::test_seed;
 
 void record(const char* key, double value) {
   char buf[64];

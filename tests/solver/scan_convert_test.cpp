@@ -5,6 +5,8 @@
 // otherwise) and the shoelace formula and its moment analogue.
 //
 // Random inputs use a fresh seed each run, printed on failure; HEMIBAKE_TEST_SEED=N repeats a run.
+#include "test_seed.h"
+
 #include "hemibake/solver/scan_convert.h"
 
 #include <gtest/gtest.h>
@@ -27,18 +29,8 @@ namespace {
 
 using Poly = std::vector<glm::dvec2>;
 
-// A fresh seed per run (HEMIBAKE_TEST_SEED=N reproduces a run), recorded in the test's output.
-uint64_t test_seed() {
-  if (const char* env = std::getenv("HEMIBAKE_TEST_SEED")) return std::strtoull(env, nullptr, 10);
-  std::random_device rd;
-  return (static_cast<uint64_t>(rd()) << 32) | rd();
-}
-
-std::string seed_note(uint64_t seed) {
-  ::testing::Test::RecordProperty("seed", std::to_string(seed));
-  return "seed " + std::to_string(seed) + " (rerun with HEMIBAKE_TEST_SEED=" +
-         std::to_string(seed) + ")";
-}
+using test::seed_note;
+using test::test_seed;
 
 // Twice the signed area, by the shoelace formula (positive counter-clockwise).
 double shoelace2(const Poly& p) {
