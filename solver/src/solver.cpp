@@ -132,6 +132,7 @@ struct Solver::Impl {
   void shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers, bool whole_scene);
   void replace_split(std::vector<uint32_t>& list) const;
   void grow_scratch();
+  int coarser_levels(double power) const;
   void project(uint32_t shooter_patch, std::span<const uint32_t> elements);
   void project_children(const std::vector<uint32_t>& parents);
   void sum_form_factors(std::span<const uint32_t> elements);
@@ -162,8 +163,9 @@ struct Solver::Impl {
   std::vector<uint8_t> p_front;  // per patch: faces the current hemicube
 
   // Per-hemicube scratch.
-  // One hemicube per near-field depth: a quarter-size shooting area serves receivers half as far,
-  // which project as large, so its hemicube needs half the resolution (at least kMinResolution).
+  // Hemicubes of halving resolution (at least kMinResolution): a quarter-size shooting area serves
+  // receivers half as far, which project as large, so its hemicube needs half the resolution; weak
+  // shots may use coarser ones still (coarser_levels).
   std::vector<detail::Hemicube> cubes;
   detail::Hemicube* cube = nullptr;  // the one in use
   detail::ThreadPool pool;
@@ -187,7 +189,7 @@ Solver::Impl::Impl(const Scene& scene, const Params& p)
       prep(detail::prepare(scene)),
 
       pool(p.threads != 0 ? p.threads : std::max(1u, std::thread::hardware_concurrency())) {
-  for (int d = 0; d <= kMaxShooterDepth; ++d) {
+  for (int d = 0; d <= kMaxShooterDepth + 2; ++d) {
     const uint32_t res = std::max(kMinResolution, ((params.resolution >> d) + 1) & ~1u);
     cubes.emplace_back(std::min(res, params.resolution));
   }
@@ -392,6 +394,16 @@ void Solver::Impl::project_children(const std::vector<uint32_t>& parents) {
   stats.seconds_reusing += seconds_since(t0);
 }
 
+// How many times coarser than its depth's hemicube a shooting piece's hemicube may be. Weak shots
+// carry little of the light: with fractional coverage a hemicube of half the resolution keeps its
+// form factors within a few tenths of a percent, so pieces under 5 % (and again under 0.5 %) of the
+// emitted power use half (a quarter of) the resolution. The classical hemicube's point sampling
+// loses energy at lower resolution, so it always keeps its own.
+int Solver::Impl::coarser_levels(double power) const {
+  if (params.method != Method::kAntiAliased) return 0;
+  return (power < 0.05 * emitted_power ? 1 : 0) + (power < 0.005 * emitted_power ? 1 : 0);
+}
+
 void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers,
                               bool whole_scene) {
   const uint32_t n = patches[p].corner_count;
@@ -429,7 +441,7 @@ void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<u
 
   ++stats.hemicubes;
   ++stamp;
-  cube = &cubes[static_cast<size_t>(node.depth)];
+  cube = &cubes[static_cast<size_t>(node.depth) + coarser_levels(power)];
   cube->place(centre, prep.normal[p], node.c[1] - node.c[0]);
   project(p, seen);
 
