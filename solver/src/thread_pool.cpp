@@ -4,6 +4,10 @@
 
 namespace hemibake::solver::detail {
 
+namespace {
+constexpr size_t kMinParallelItems = 256;
+}
+
 ThreadPool::ThreadPool(unsigned threads) : threads_(std::max(1u, threads)) {
   for (unsigned i = 1; i < threads_; ++i) workers_.emplace_back([this] { worker_loop(); });
 }
@@ -19,9 +23,10 @@ ThreadPool::~ThreadPool() {
 
 size_t ThreadPool::chunk_count(size_t n) const {
   if (n == 0) return 0;
-  // A few chunks per thread balance uneven work (hemicube faces differ in size and depth).
-  const size_t want = threads_ == 1 ? 1 : static_cast<size_t>(threads_) * 4;
-  return std::min(n, want);
+  // A few chunks per thread balance uneven work (hemicube faces differ in size and depth); small
+  // loops run on the calling thread, where waking the workers would cost more than it saves.
+  if (threads_ == 1 || n < kMinParallelItems) return 1;
+  return std::min(n, static_cast<size_t>(threads_) * 4);
 }
 
 void ThreadPool::run_chunks(std::unique_lock<std::mutex>& lock) {
