@@ -2,8 +2,8 @@
 // cost of re-projecting against reusing the parent's pixels, and how the cost of one hemicube grows
 // with the number of elements. Each configuration runs in a child process so that its peak memory
 // is its own. Prints markdown tables (see bench/README.md).
-#include "hemibake/bench/hierarchical.h"
-#include "hemibake/bench/reference.h"
+#include "hemibake/baselines/hierarchical.h"
+#include "hemibake/baselines/reference.h"
 #include "hemibake/solver/scenes.h"
 #include "hemibake/solver/solver.h"
 
@@ -103,7 +103,7 @@ int main(int argc, char** argv) {
     std::printf("\n## Error against a path-traced reference (Cornell box, %u paths per element centre)\n\n", samples);
     std::printf("| method | elements | RMS error / mean radiosity | RMS error, reference noise removed | max abs error / mean | reference standard error (RMS) / mean | energy (sum B A) / reference's |\n");
     std::printf("|---|---|---|---|---|---|---|\n");
-    const hemibake::bench::Reference reference(cornell);
+    const hemibake::baselines::Reference reference(cornell);
     auto compare = [&](const char* name, const Mesh& mesh) {
       double se2 = 0.0, err2 = 0.0, worst = 0.0, sum_ref = 0.0, sum_refa = 0.0, sum_ba = 0.0;
       uint64_t seed = 1, n = 0;
@@ -137,8 +137,8 @@ int main(int argc, char** argv) {
       solver.run();
       compare(m == Method::kAntiAliased ? "aa" : "classical", solver.mesh());
     }
-    hemibake::bench::HierarchicalStats hs;
-    const Mesh hr = hemibake::bench::solve_hierarchical(cornell, {}, hs);
+    hemibake::baselines::HierarchicalStats hs;
+    const Mesh hr = hemibake::baselines::solve_hierarchical(cornell, {}, hs);
     compare("hr", hr);
     std::printf("\nHierarchical radiosity (FEPS 0.001, AEPS 0.0001, 4 rays per link, 1 thread): %.3f s "
                 "(%.3f s linking), %llu links, %llu elements, %u iterations\n",

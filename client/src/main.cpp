@@ -2,6 +2,8 @@
 #include "remote.h"
 #include "render.h"
 
+#include "hemibake/baselines/hierarchical.h"
+#include "hemibake/baselines/reference.h"
 #include "hemibake/protocol/gltf.h"
 #include "hemibake/solver/scenes.h"
 #include "hemibake/solver/solver.h"
@@ -29,6 +31,10 @@ using hemibake::solver::Params;
 constexpr const char* kSolverOptions =
     "solver options (the paper's names):\n"
     "  --method aa|classical   form factors: anti-aliased (default) or classical hemicube\n"
+    "           hr             (bake only) hierarchical radiosity with ray-cast visibility (baseline)\n"
+    "           reference      (bake only) the aa mesh with path-traced radiosity at its vertices\n"
+    "  --rays N                hr: visibility rays per link (default 4)\n"
+    "  --samples N             reference: paths per vertex (default 256)\n"
     "  --resolution N          hemicube resolution (default 100)\n"
     "  --feps X                form-factor tolerance (default 0.001)\n"
     "  --aeps X                minimum element area / scene area (default 0.0001)\n"
@@ -78,6 +84,8 @@ struct Options {
   hemibake::protocol::LoadLimits limits;
   std::string input, output, render_path, wire_path, server, state;
   bool flat = false, wire_flag = false;
+  std::string baseline;  // "hr" or "reference", else empty
+  uint32_t rays = 4, samples = 256;
   std::optional<hemibake::client::Camera> camera;
 };
 
@@ -139,9 +147,11 @@ std::string parse(int argc, char** argv, int first, bool bake, Options& o) {
       continue;
     }
     if (opt == "--method") {
+      o.baseline.clear();
       if (std::strcmp(val, "aa") == 0) o.params.method = Method::kAntiAliased;
       else if (std::strcmp(val, "classical") == 0) o.params.method = Method::kClassical;
-      else return std::string("--method must be aa or classical (got '") + val + "')";
+      else if (std::strcmp(val, "hr") == 0 || std::strcmp(val, "reference") == 0) o.baseline = val;
+      else return std::string("--method must be aa, classical, hr or reference (got '") + val + "')";
       continue;
     }
     double x = 0.0;
@@ -160,9 +170,11 @@ std::string parse(int argc, char** argv, int first, bool bake, Options& o) {
     else if (opt == "--draco-speed" && whole && x <= 10) o.write.encode_speed = o.write.decode_speed = static_cast<int>(x);
     else if (opt == "--exposure" && x > 0) o.write.exposure = x;
     else if (opt == "--max-triangles" && whole) o.limits.max_triangles = static_cast<uint64_t>(x);
+    else if (opt == "--rays" && whole && x >= 1 && x <= 1024) o.rays = static_cast<uint32_t>(x);
+    else if (opt == "--samples" && whole && x >= 1 && x <= 1000000) o.samples = static_cast<uint32_t>(x);
     else if (opt == "--resolution" || opt == "--max-shots" || opt == "--max-elements" || opt == "--threads" ||
              opt == "--position-bits" || opt == "--texcoord-bits" || opt == "--draco-speed" ||
-             opt == "--exposure" || opt == "--max-triangles")
+             opt == "--exposure" || opt == "--max-triangles" || opt == "--rays" || opt == "--samples")
       return opt + " is out of range (got '" + val + "')";
     else return "unknown option '" + opt + "'";
   }
@@ -291,12 +303,54 @@ int bake(const Options& o) {
   const auto& scene = hemibake::protocol::scene_of(*loaded.document);
   std::printf("%s: %llu triangles, %zu patches\n", o.input.c_str(),
               static_cast<unsigned long long>(hemibake::protocol::triangle_count(*loaded.document)), scene.patches.size());
-  hemibake::solver::Solver solver(scene, o.params);
-  solve(solver);
-  const auto& st = solver.stats();
-  print_stats(st);
-  const auto mesh = solver.mesh();
-  const auto written = hemibake::protocol::write_baked_glb(*loaded.document, mesh, o.params, st, o.write);
+  hemibake::solver::Mesh mesh;
+  hemibake::solver::Stats st;
+  auto write = o.write;
+  if (o.baseline == "hr") {
+    hemibake::baselines::HierarchicalParams hp;
+    hp.feps = o.params.feps;
+    hp.aeps = o.params.aeps;
+    hp.rays = o.rays;
+    hemibake::baselines::HierarchicalStats hs;
+    mesh = hemibake::baselines::solve_hierarchical(scene, hp, hs);
+    st.elements = hs.elements;
+    st.patches = scene.patches.size();
+    st.seconds = hs.seconds;
+    st.converged = true;
+    st.unshot_fraction = 0.0;
+    write.method = "hr";
+    std::printf("  hierarchical radiosity: %.3f s (%.3f s linking), %llu links, %llu elements, %u iterations\n", hs.seconds,
+                hs.seconds_linking, static_cast<unsigned long long>(hs.links), static_cast<unsigned long long>(hs.elements),
+                hs.iterations);
+  } else {
+    hemibake::solver::Solver solver(scene, o.params);
+    solve(solver);
+    st = solver.stats();
+    print_stats(st);
+    mesh = solver.mesh();
+    if (o.baseline == "reference") {
+      // The same mesh, its vertex radiosity replaced by path-traced estimates (each vertex on the
+      // patch of an element it bounds); elements take the mean of their corners.
+      const hemibake::baselines::Reference reference(scene);
+      std::vector<uint32_t> patch_of(mesh.positions.size(), UINT32_MAX);
+      for (const auto& el : mesh.elements)
+        for (uint32_t i = el.boundary_begin; i < el.boundary_end; ++i) patch_of[mesh.boundary[i]] = el.patch;
+      double worst_se = 0.0;
+      for (size_t v = 0; v < mesh.positions.size(); ++v) {
+        if (patch_of[v] == UINT32_MAX) continue;
+        const auto r = reference.radiosity_at(patch_of[v], mesh.positions[v], o.samples, v + 1);
+        mesh.radiosity[v] = r.radiosity;
+        worst_se = std::max(worst_se, (r.std_error.x + r.std_error.y + r.std_error.z) / 3.0);
+      }
+      for (auto& el : mesh.elements) {
+        el.radiosity = glm::dvec3(0.0);
+        for (uint32_t k = 0; k < el.corner_count; ++k) el.radiosity += mesh.radiosity[el.corners[k]] / static_cast<double>(el.corner_count);
+      }
+      write.method = "reference";
+      std::printf("  reference: %u paths per vertex, largest standard error %.4g\n", o.samples, worst_se);
+    }
+  }
+  const auto written = hemibake::protocol::write_baked_glb(*loaded.document, mesh, o.params, st, write);
   if (!written.error.empty()) {
     std::fprintf(stderr, "hemibake: %s\n", written.error.c_str());
     return 1;
@@ -329,6 +383,10 @@ int main(int argc, char** argv) {
   Options o;
   if (std::string err = parse(argc, argv, 2, command != "cornell" && command != "list", o); !err.empty()) {
     std::fprintf(stderr, "hemibake: %s\n", err.c_str());
+    return 2;
+  }
+  if (!o.baseline.empty() && !(command == "bake" && o.server.empty() && !std::getenv("HEMIBAKE_SERVER"))) {
+    std::fprintf(stderr, "hemibake: --method %s is for local bakes only\n", o.baseline.c_str());
     return 2;
   }
   if (command == "cornell") return cornell(o);

@@ -360,7 +360,8 @@ WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, 
 
   // How it was made.
   Value::Object p;
-  p["method"] = Value(std::string(params.method == solver::Method::kAntiAliased ? "aa" : "classical"));
+  p["method"] = Value(!options.method.empty() ? options.method
+                                               : std::string(params.method == solver::Method::kAntiAliased ? "aa" : "classical"));
   p["resolution"] = Value(static_cast<int>(params.resolution));
   p["feps"] = Value(params.feps);
   p["aeps"] = Value(params.aeps);

@@ -1,13 +1,13 @@
 // The baselines against closed forms: the path-traced reference and hierarchical radiosity.
-#include "hemibake/bench/hierarchical.h"
-#include "hemibake/bench/reference.h"
+#include "hemibake/baselines/hierarchical.h"
+#include "hemibake/baselines/reference.h"
 #include "hemibake/solver/scenes.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 
-namespace hemibake::bench {
+namespace hemibake::baselines {
 namespace {
 
 // In a closed box of uniform emission E and reflectance rho, B = E / (1 - rho) everywhere: the
@@ -62,4 +62,4 @@ TEST(Hierarchical, ClosedBoxConvergesToEOverOneMinusRho) {
 }
 
 }  // namespace
-}  // namespace hemibake::bench
+}  // namespace hemibake::baselines

@@ -52,6 +52,7 @@ struct WriteOptions {
   int encode_speed = 5;     ///< Draco speed options, 0 (best compression) to 10 (fastest)
   int decode_speed = 5;
   double exposure = 0.0;    ///< radiosity-to-[0, 1] scale for COLOR_0; 0 chooses one
+  std::string method;       ///< recorded in asset.extras; empty: the solver's (aa or classical)
 };
 
 struct WriteResult {

@@ -5,7 +5,7 @@
 // against the other; otherwise a link is made, its visibility the fraction of `rays` unoccluded
 // rays between random points of the two elements. Solving alternates gathering over the links
 // (B_gathered = rho * sum F V B_source) with push-pull down and up the quadtrees.
-#include "hemibake/bench/hierarchical.h"
+#include "hemibake/baselines/hierarchical.h"
 
 #include <embree3/rtcore.h>
 #include <glm/common.hpp>
@@ -20,7 +20,7 @@
 #include <random>
 #include <vector>
 
-namespace hemibake::bench {
+namespace hemibake::baselines {
 namespace {
 
 using Corners = std::array<glm::dvec3, 4>;
@@ -336,4 +336,4 @@ solver::Mesh solve_hierarchical(const solver::Scene& scene, const HierarchicalPa
   return m;
 }
 
-}  // namespace hemibake::bench
+}  // namespace hemibake::baselines

@@ -10,7 +10,7 @@
 #include <memory>
 #include <vector>
 
-namespace hemibake::bench {
+namespace hemibake::baselines {
 
 struct ReferencePoint {
   glm::dvec3 radiosity{0.0};  ///< estimate
@@ -30,4 +30,4 @@ class Reference {
   std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace hemibake::bench
+}  // namespace hemibake::baselines

@@ -7,7 +7,7 @@
 
 #include <cstdint>
 
-namespace hemibake::bench {
+namespace hemibake::baselines {
 
 struct HierarchicalParams {
   double feps = 1e-3;        ///< refine a link while its estimated form factor exceeds this
@@ -30,4 +30,4 @@ struct HierarchicalStats {
 /// vertices in the loops). Precondition: validate(scene) is empty.
 solver::Mesh solve_hierarchical(const solver::Scene& scene, const HierarchicalParams& params, HierarchicalStats& stats);
 
-}  // namespace hemibake::bench
+}  // namespace hemibake::baselines

@@ -3,7 +3,7 @@
 // emitted power, and a shadow ray: next-event estimation); the path goes on in a cosine-weighted
 // direction, counting only reflected light where it lands (emission there was already sampled), and
 // ends by Russian roulette on the reflectance.
-#include "hemibake/bench/reference.h"
+#include "hemibake/baselines/reference.h"
 
 #include <embree3/rtcore.h>
 #include <glm/geometric.hpp>
@@ -14,7 +14,7 @@
 #include <numbers>
 #include <random>
 
-namespace hemibake::bench {
+namespace hemibake::baselines {
 
 struct Reference::Impl {
   RTCDevice device = nullptr;
@@ -177,4 +177,4 @@ ReferencePoint Reference::radiosity_at(uint32_t patch, const glm::dvec3& x0, uin
   return out;
 }
 
-}  // namespace hemibake::bench
+}  // namespace hemibake::baselines
