@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <functional>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -131,10 +132,13 @@ class Solver {
   }
 
   solver::Mesh mesh() const {
+    // Leaves, with vertices shared by position; each element's loop also holds the corners of finer
+    // neighbours on its edges (their midpoints are computed with the same arithmetic), so the
+    // output has no T-junctions.
     solver::Mesh m;
     std::map<std::array<double, 3>, uint32_t> vid;
-    std::vector<double> weight;
-    std::vector<uint32_t> stack;
+    auto key = [](const glm::dvec3& p) { return std::array<double, 3>{p.x, p.y, p.z}; };
+    std::vector<uint32_t> leaves, stack;
     for (uint32_t p = 0; p < scene_.patches.size(); ++p) {
       stack.push_back(p);
       while (!stack.empty()) {
@@ -145,30 +149,45 @@ class Solver {
           for (uint32_t k = 0; k < 4; ++k) stack.push_back(node.first_child + k);
           continue;
         }
-        solver::Mesh::Element el;
-        el.patch = node.patch;
-        el.corner_count = node.n;
-        el.radiosity = node.b;
-        el.area = node.area;
-        el.boundary_begin = static_cast<uint32_t>(m.boundary.size());
+        leaves.push_back(i);
         for (uint32_t k = 0; k < node.n; ++k) {
-          const std::array<double, 3> key{node.c[k].x, node.c[k].y, node.c[k].z};
-          auto [it, fresh] = vid.try_emplace(key, static_cast<uint32_t>(m.positions.size()));
-          if (fresh) {
-            m.positions.push_back(node.c[k]);
-            m.radiosity.emplace_back(0.0);
-            weight.push_back(0.0);
-          }
-          el.corners[k] = it->second;
-          m.boundary.push_back(it->second);
-          m.radiosity[it->second] += node.b * node.area;
-          weight[it->second] += node.area;
+          auto [it, fresh] = vid.try_emplace(key(node.c[k]), static_cast<uint32_t>(m.positions.size()));
+          if (fresh) m.positions.push_back(node.c[k]);
         }
-        el.boundary_end = static_cast<uint32_t>(m.boundary.size());
-        m.elements.push_back(el);
       }
     }
-    for (size_t v = 0; v < m.radiosity.size(); ++v) m.radiosity[v] /= weight[v];
+    std::vector<double> weight(m.positions.size(), 0.0);
+    m.radiosity.assign(m.positions.size(), glm::dvec3(0.0));
+    std::function<void(const glm::dvec3&, const glm::dvec3&)> hanging = [&](const glm::dvec3& a, const glm::dvec3& b) {
+      const glm::dvec3 mid = 0.5 * (a + b);
+      const auto it = vid.find(key(mid));
+      if (it == vid.end()) return;
+      hanging(a, mid);
+      m.boundary.push_back(it->second);
+      hanging(mid, b);
+    };
+    for (uint32_t i : leaves) {
+      const Node& node = nodes_[i];
+      solver::Mesh::Element el;
+      el.patch = node.patch;
+      el.corner_count = node.n;
+      el.radiosity = node.b;
+      el.area = node.area;
+      el.boundary_begin = static_cast<uint32_t>(m.boundary.size());
+      for (uint32_t k = 0; k < node.n; ++k) {
+        el.corners[k] = vid.at(key(node.c[k]));
+        m.boundary.push_back(el.corners[k]);
+        hanging(node.c[k], node.c[(k + 1) % node.n]);
+      }
+      el.boundary_end = static_cast<uint32_t>(m.boundary.size());
+      for (uint32_t j = el.boundary_begin; j < el.boundary_end; ++j) {
+        m.radiosity[m.boundary[j]] += node.b * node.area;
+        weight[m.boundary[j]] += node.area;
+      }
+      m.elements.push_back(el);
+    }
+    for (size_t v = 0; v < m.radiosity.size(); ++v)
+      if (weight[v] > 0.0) m.radiosity[v] /= weight[v];
     return m;
   }
 
