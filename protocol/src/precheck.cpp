@@ -112,6 +112,17 @@ bool valid_data_uri(const std::string& uri) {
   return pad <= 2;
 }
 
+// A buffer's or image's uri: a string; a data URI with valid base64; an external file only where
+// allowed.
+std::string check_uri(const json& v, const std::string& what, bool allow_external) {
+  if (!v.is_string()) return what + ".uri must be a string";
+  const std::string uri = v;
+  if (uri.rfind("data:", 0) == 0) return valid_data_uri(uri) ? std::string() : what + "'s data URI is not valid base64";
+  if (!allow_external)
+    return what + " refers to an external file ('" + shorten(uri) + "'); only embedded data (GLB or data URIs) is accepted";
+  return {};
+}
+
 }  // namespace
 
 std::string precheck_gltf(std::span<const uint8_t> bytes, bool allow_external, PrecheckResult& out) {
@@ -159,11 +170,7 @@ std::string precheck_gltf(std::span<const uint8_t> bytes, bool allow_external, P
     if (!c.non_negative(b, "byteLength", what)) return shorten(c.error);
     buffer_length[i] = b.value("byteLength", uint64_t{0});
     if (b.contains("uri")) {
-      if (!b["uri"].is_string()) return what + ".uri must be a string";
-      const std::string uri = b["uri"];
-      if (uri.rfind("data:", 0) == 0 && !valid_data_uri(uri)) return what + "'s data URI is not valid base64";
-      if (uri.rfind("data:", 0) != 0 && !allow_external)
-        return what + " refers to an external file ('" + shorten(uri) + "'); only embedded data (GLB or data URIs) is accepted";
+      if (std::string e = check_uri(b["uri"], what, allow_external); !e.empty()) return e;
     } else if (!(glb && i == 0)) {
       return what + " has no uri and is not the GLB's BIN chunk";
     } else if (buffer_length[i] > bin.size()) {
@@ -174,13 +181,8 @@ std::string precheck_gltf(std::span<const uint8_t> bytes, bool allow_external, P
     const json& im = j["images"][i];
     const std::string what = "image " + std::to_string(i);
     if (!c.index(im, "bufferView", views, what, "bufferView")) return shorten(c.error);
-    if (im.contains("uri")) {
-      if (!im["uri"].is_string()) return what + ".uri must be a string";
-      const std::string uri = im["uri"];
-      if (uri.rfind("data:", 0) == 0 && !valid_data_uri(uri)) return what + "'s data URI is not valid base64";
-      if (uri.rfind("data:", 0) != 0 && !allow_external)
-        return what + " refers to an external file ('" + shorten(uri) + "'); only embedded data (GLB or data URIs) is accepted";
-    }
+    if (im.contains("uri"))
+      if (std::string e = check_uri(im["uri"], what, allow_external); !e.empty()) return e;
   }
   for (size_t i = 0; i < views; ++i) {
     const json& v = j["bufferViews"][i];
