@@ -65,6 +65,24 @@ Stats solve(const Scene& scene, const Params& params) {
 
 int main(int argc, char** argv) {
   const bool quick = argc > 1 && std::strcmp(argv[1], "--quick") == 0;
+  if (argc > 1 && std::strcmp(argv[1], "--chamber") == 0) {
+    // The paper's second experiment: a furnished room of about 6300 patches (minutes, so on demand).
+    const Scene room = make_furnished_room();
+    std::printf("## Furnished room (%zu patches; resolution 100, FEPS 0.001, AEPS 0.0001, unshot < 0.001)\n\n",
+                room.patches.size());
+    std::printf("| method | time (s) | shots | hemicubes | elements | peak memory (MB) |\n|---|---|---|---|---|---|\n");
+    for (Method m : {Method::kAntiAliased, Method::kClassical}) {
+      Params p;
+      p.method = m;
+      const Result r = isolated([&] { return solve(room, p); });
+      std::printf("| %s | %.1f | %llu | %llu | %llu | %.1f |\n", m == Method::kAntiAliased ? "aa" : "classical",
+                  r.stats.seconds, static_cast<unsigned long long>(r.stats.shots),
+                  static_cast<unsigned long long>(r.stats.hemicubes), static_cast<unsigned long long>(r.stats.elements),
+                  r.peak_kib / 1024.0);
+      std::fflush(stdout);
+    }
+    return 0;
+  }
   const Scene cornell = make_cornell_box();
 
   std::printf("## Cornell box (resolution 100, FEPS 0.001, AEPS 0.0001, until unshot < 0.001 of emitted)\n\n");

@@ -112,4 +112,87 @@ Scene make_closed_box(double size, uint32_t cells, const glm::dvec3& reflectance
   return s;
 }
 
+Scene make_furnished_room(uint32_t target_patches) {
+  using V = glm::dvec3;
+  struct Box {
+    V lo, hi;
+    glm::dvec3 rho;
+    bool floor_open;  // standing on the floor: no bottom face
+  };
+  const glm::dvec3 wall(0.7), floor(0.45, 0.4, 0.35), wood(0.5, 0.35, 0.2), metal(0.55, 0.55, 0.6), cloth(0.3, 0.35, 0.5);
+  const V room(6.0, 3.0, 5.0);
+  std::vector<Box> boxes;
+  // Table (top and four legs), four chairs (seat, back, legs), a cabinet, a bench, a door frame.
+  auto table = [&](V c) {
+    boxes.push_back({c + V(-0.8, 0.72, -0.45), c + V(0.8, 0.76, 0.45), wood, false});
+    for (double sx : {-0.72, 0.68})
+      for (double sz : {-0.37, 0.33}) boxes.push_back({c + V(sx, 0.0, sz), c + V(sx + 0.04, 0.72, sz + 0.04), wood, true});
+  };
+  auto chair = [&](V c, double facing) {
+    boxes.push_back({c + V(-0.22, 0.44, -0.22), c + V(0.22, 0.48, 0.22), cloth, false});
+    const double bz = facing > 0 ? -0.22 : 0.18;
+    boxes.push_back({c + V(-0.22, 0.48, bz), c + V(0.22, 0.95, bz + 0.04), cloth, false});
+    for (double sx : {-0.2, 0.17})
+      for (double sz : {-0.2, 0.17}) boxes.push_back({c + V(sx, 0.0, sz), c + V(sx + 0.03, 0.44, sz + 0.03), metal, true});
+  };
+  table(V(3.0, 0.0, 2.5));
+  chair(V(2.5, 0.0, 1.7), 1.0);
+  chair(V(3.5, 0.0, 1.7), 1.0);
+  chair(V(2.5, 0.0, 3.3), -1.0);
+  chair(V(3.5, 0.0, 3.3), -1.0);
+  boxes.push_back({V(0.1, 0.0, 0.3), V(0.6, 1.9, 1.5), metal, true});    // cabinet
+  boxes.push_back({V(4.6, 0.0, 4.4), V(5.8, 0.45, 4.85), wood, true});    // bench
+  boxes.push_back({V(5.96, 0.0, 1.8), V(6.0, 2.1, 2.8), wood, false});     // door (on the wall)
+
+  // Total area, to size the grid cells so that the patch count comes near the target.
+  auto box_area = [](const Box& b) {
+    const V d = b.hi - b.lo;
+    return 2.0 * (d.x * d.y + d.y * d.z + d.z * d.x) - (b.floor_open ? d.x * d.z : 0.0);
+  };
+  double area = 2.0 * (room.x * room.y + room.y * room.z + room.z * room.x);
+  for (const Box& b : boxes) area += box_area(b);
+  const double cell = std::sqrt(area / target_patches);
+
+  Scene s;
+  // A rectangle from `o` spanned by `u` and `v` (counter-clockwise seen from the front), cut into a
+  // grid of cells about `cell` wide.
+  auto rect = [&](V o, V u, V v, const glm::dvec3& rho, const glm::dvec3& e, uint32_t material) {
+    const int nu = std::max(1, static_cast<int>(std::lround(glm::length(u) / cell)));
+    const int nv = std::max(1, static_cast<int>(std::lround(glm::length(v) / cell)));
+    for (int i = 0; i < nu; ++i)
+      for (int j = 0; j < nv; ++j) {
+        const V a = o + u * (double(i) / nu) + v * (double(j) / nv);
+        const V du = u / double(nu), dv = v / double(nv);
+        add_quad(s, a, a + du, a + du + dv, a + dv, rho, e, material);
+      }
+  };
+  const glm::dvec3 none(0.0);
+  // Room, seen from inside: floor, ceiling (with light panels), four walls.
+  rect(V(0, 0, 0), V(0, 0, room.z), V(room.x, 0, 0), floor, none, 1);
+  rect(V(0, room.y, 0), V(room.x, 0, 0), V(0, 0, room.z), wall, none, 0);
+  rect(V(0, 0, 0), V(room.x, 0, 0), V(0, room.y, 0), wall, none, 0);
+  rect(V(0, 0, room.z), V(0, room.y, 0), V(room.x, 0, 0), wall, none, 0);
+  rect(V(0, 0, 0), V(0, room.y, 0), V(0, 0, room.z), wall, none, 0);
+  rect(V(room.x, 0, 0), V(0, 0, room.z), V(0, room.y, 0), wall, none, 0);
+  // Light panels just below the ceiling, facing down.
+  for (double lx : {1.5, 4.5})
+    for (double lz : {1.5, 3.5})
+      add_quad(s, V(lx - 0.5, room.y - 0.01, lz - 0.3), V(lx + 0.5, room.y - 0.01, lz - 0.3),
+               V(lx + 0.5, room.y - 0.01, lz + 0.3), V(lx - 0.5, room.y - 0.01, lz + 0.3), glm::dvec3(0.8),
+               glm::dvec3(12.0, 11.0, 9.0), 2);
+  // Boxes, faces outward.
+  uint32_t material = 3;
+  for (const Box& b : boxes) {
+    const V lo = b.lo, d = b.hi - b.lo;
+    rect(V(lo.x, b.hi.y, lo.z), V(0, 0, d.z), V(d.x, 0, 0), b.rho, none, material);            // top
+    if (!b.floor_open) rect(lo, V(d.x, 0, 0), V(0, 0, d.z), b.rho, none, material);            // bottom
+    rect(lo, V(0, d.y, 0), V(d.x, 0, 0), b.rho, none, material);                              // -z
+    rect(V(lo.x, lo.y, b.hi.z), V(d.x, 0, 0), V(0, d.y, 0), b.rho, none, material);           // +z
+    rect(lo, V(0, 0, d.z), V(0, d.y, 0), b.rho, none, material);                              // -x
+    rect(V(b.hi.x, lo.y, lo.z), V(0, d.y, 0), V(0, 0, d.z), b.rho, none, material);           // +x
+    ++material;
+  }
+  return s;
+}
+
 }  // namespace hemibake::solver

@@ -22,6 +22,11 @@ Scene make_cornell_box();
 Scene make_closed_box(double size, uint32_t cells, const glm::dvec3& reflectance,
                       const glm::dvec3& emission, bool block);
 
+/// A furnished room like the paper's interrogation chamber (its Figure 10): a 6 x 3 x 5 m room
+/// with a table, chairs, a cabinet, a bench and a door, lit by ceiling panels; every face is a grid
+/// of small patches, about `target_patches` in all (the paper's had 6276). Deterministic.
+Scene make_furnished_room(uint32_t target_patches = 6300);
+
 /// Appends a quad (counter-clockwise seen from the front) as one patch, or as two triangles when
 /// its corners are not coplanar.
 void add_quad(Scene& scene, const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c,
