@@ -15,6 +15,7 @@
 #include <cstdlib>
 #include <cmath>
 #include <cstring>
+#include <algorithm>
 #include <string>
 #include <vector>
 
@@ -65,6 +66,67 @@ Stats solve(const Scene& scene, const Params& params) {
 
 int main(int argc, char** argv) {
   const bool quick = argc > 1 && std::strcmp(argv[1], "--quick") == 0;
+  const Scene cornell = make_cornell_box();
+  if (argc > 1 && std::strcmp(argv[1], "--sweep") == 0) {
+    // Equal quality: each method at several tolerances, its error against the reference and its
+    // time (one thread for both, so that the comparison is of the methods).
+    const hemibake::baselines::Reference reference(cornell);
+    auto error = [&](const Mesh& mesh) {
+      double err2 = 0.0, se2 = 0.0, sum_ref = 0.0;
+      uint64_t seed = 1, n = 0;
+      for (const auto& el : mesh.elements) {
+        if (cornell.patches[el.patch].emission.x > 0.0) continue;
+        glm::dvec3 c(0.0);
+        for (uint32_t k = 0; k < el.corner_count; ++k) c += mesh.positions[el.corners[k]];
+        c /= static_cast<double>(el.corner_count);
+        const auto r = reference.radiosity_at(el.patch, c, 512, seed++);
+        const double rl = (r.radiosity.x + r.radiosity.y + r.radiosity.z) / 3.0;
+        const double bl = (el.radiosity.x + el.radiosity.y + el.radiosity.z) / 3.0;
+        const double se = (r.std_error.x + r.std_error.y + r.std_error.z) / 3.0;
+        err2 += (bl - rl) * (bl - rl);
+        se2 += se * se;
+        sum_ref += rl;
+        ++n;
+      }
+      return std::sqrt(std::max(0.0, err2 - se2) / n) / (sum_ref / n);
+    };
+    struct Run {
+      std::string method;
+      double tolerance, seconds, err;
+      uint64_t elements;
+    };
+    std::vector<Run> runs;
+    std::printf("## Equal quality (Cornell box, one thread; error = RMS against the reference, its noise removed)\n\n");
+    std::printf("| method | tolerance | time (s) | elements | error |\n|---|---|---|---|---|\n");
+    for (double beps : {0.1, 0.03, 0.01}) {
+      Params p;
+      p.threads = 1;
+      p.beps = beps;
+      Solver solver(cornell, p);
+      const Stats& st = solver.run();
+      const Mesh mesh = solver.mesh();
+      runs.push_back({"aa", beps, st.seconds, error(mesh), mesh.elements.size()});
+    }
+    for (double feps : {0.01, 0.003, 0.001}) {
+      hemibake::baselines::HierarchicalParams hp;
+      hp.feps = feps;
+      hemibake::baselines::HierarchicalStats hs;
+      const Mesh mesh = hemibake::baselines::solve_hierarchical(cornell, hp, hs);
+      runs.push_back({"hr", feps, hs.seconds, error(mesh), mesh.elements.size()});
+    }
+    for (const Run& r : runs)
+      std::printf("| %s | %s %g | %.3f | %llu | %.4f |\n", r.method.c_str(), r.method == "aa" ? "beps" : "feps",
+                  r.tolerance, r.seconds, static_cast<unsigned long long>(r.elements), r.err);
+    // The smallest error both reach, and the fastest run of each that reaches it.
+    double best_aa = 1e300, best_hr = 1e300;
+    for (const Run& r : runs) (r.method == "aa" ? best_aa : best_hr) = std::min(r.method == "aa" ? best_aa : best_hr, r.err);
+    const double target = std::max(best_aa, best_hr);
+    double t_aa = 1e300, t_hr = 1e300;
+    for (const Run& r : runs)
+      if (r.err <= target * 1.0000001) (r.method == "aa" ? t_aa : t_hr) = std::min(r.method == "aa" ? t_aa : t_hr, r.seconds);
+    std::printf("\nTo reach an error of %.4f: aa %.3f s, hr %.3f s; hr / aa = %.2f\n", target, t_aa, t_hr, t_hr / t_aa);
+    return 0;
+  }
   if (argc > 1 && std::strcmp(argv[1], "--chamber") == 0) {
     // The paper's second experiment: a furnished room of about 6300 patches (minutes, so on demand).
     const Scene room = make_furnished_room();
@@ -83,7 +145,6 @@ int main(int argc, char** argv) {
     }
     return 0;
   }
-  const Scene cornell = make_cornell_box();
 
   std::printf("## Cornell box (resolution 100, FEPS 0.001, AEPS 0.0001, until unshot < 0.001 of emitted)\n\n");
   std::printf("| method | visibility of children | threads | time (s) | shots | hemicubes | elements | "
