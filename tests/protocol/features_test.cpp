@@ -41,7 +41,7 @@ using V = glm::dvec3;
 using UV = glm::dvec2;
 
 constexpr int kTriangles = 4, kTriangleStrip = 5, kTriangleFan = 6;
-constexpr int kFloat = 5126, kUnsignedShort = 5123, kUnsignedInt = 5125;
+constexpr int kFloat = 5126, kUnsignedShort = 5123;
 
 // The sRGB electro-optical transfer function (IEC 61966-2-1), as glTF specifies for colour textures.
 double srgb_to_linear(double c) { return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4); }
