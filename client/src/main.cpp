@@ -311,6 +311,7 @@ int bake(const Options& o) {
     hp.feps = o.params.feps;
     hp.aeps = o.params.aeps;
     hp.rays = o.rays;
+    hp.threads = o.params.threads;
     hemibake::baselines::HierarchicalStats hs;
     mesh = hemibake::baselines::solve_hierarchical(scene, hp, hs);
     st.elements = hs.elements;

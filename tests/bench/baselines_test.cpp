@@ -61,5 +61,49 @@ TEST(Hierarchical, ClosedBoxConvergesToEOverOneMinusRho) {
   EXPECT_NEAR(ba / a / (expected.x + expected.y + expected.z), 1.0, 0.02);
 }
 
+// The links are refined on several threads; the solution must not depend on how many.
+TEST(Hierarchical, SameResultOnOneAndThreeThreads) {
+  const solver::Scene scene = solver::make_cornell_box();
+  HierarchicalParams params;
+  params.feps = 0.01;
+  HierarchicalStats one_stats, three_stats;
+  params.threads = 1;
+  const solver::Mesh one = solve_hierarchical(scene, params, one_stats);
+  params.threads = 3;
+  const solver::Mesh three = solve_hierarchical(scene, params, three_stats);
+  EXPECT_EQ(one_stats.links, three_stats.links);
+  ASSERT_EQ(one.elements.size(), three.elements.size());
+  ASSERT_GT(one.elements.size(), scene.patches.size());  // it did subdivide
+  for (size_t i = 0; i < one.elements.size(); ++i) {
+    EXPECT_EQ(one.elements[i].patch, three.elements[i].patch);
+    EXPECT_EQ(one.elements[i].radiosity, three.elements[i].radiosity) << "element " << i;
+  }
+  EXPECT_EQ(one.radiosity, three.radiosity);
+}
+
+// A cancelled solve stops and says so; progress is reported while linking.
+TEST(Hierarchical, CancelStopsLinking) {
+  const solver::Scene scene = solver::make_cornell_box();
+  solver::CancelToken cancel;
+  uint32_t reports = 0;
+  HierarchicalParams params;
+  params.feps = 1e-5;  // far more linking work than the time the test waits
+  params.aeps = 1e-6;
+  HierarchicalStats stats;
+  const solver::Mesh mesh = solve_hierarchical(
+      scene, params, stats,
+      [&](const HierarchicalProgress& p) {
+        ++reports;
+        EXPECT_TRUE(p.linking);
+        EXPECT_GE(p.fraction, 0.0);
+        EXPECT_LE(p.fraction, 1.0);
+        cancel.cancel();
+      },
+      &cancel);
+  EXPECT_TRUE(stats.cancelled);
+  EXPECT_TRUE(mesh.elements.empty());
+  EXPECT_GE(reports, 1u);
+}
+
 }  // namespace
 }  // namespace hemibake::baselines
