@@ -9,10 +9,13 @@
 #include <glm/geometric.hpp>
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <numbers>
 #include <random>
+#include <thread>
 
 namespace hemibake::baselines {
 
@@ -175,6 +178,54 @@ ReferencePoint Reference::radiosity_at(uint32_t patch, const glm::dvec3& x0, uin
   const glm::dvec3 var = glm::max(sum2 / ns - mean * mean, glm::dvec3(0.0));
   out.std_error = glm::sqrt(var / ns);
   return out;
+}
+
+ReferenceBakeStats apply_reference(const solver::Scene& scene, solver::Mesh& mesh, uint32_t samples, uint32_t threads,
+                                   const std::function<void(double)>& progress, const solver::CancelToken* cancel) {
+  const auto t0 = std::chrono::steady_clock::now();
+  ReferenceBakeStats stats;
+  const Reference reference(scene);
+  std::vector<uint32_t> patch_of(mesh.positions.size(), UINT32_MAX);
+  for (const auto& el : mesh.elements)
+    for (uint32_t i = el.boundary_begin; i < el.boundary_end; ++i) patch_of[mesh.boundary[i]] = el.patch;
+  std::vector<double> std_error(mesh.positions.size(), 0.0);
+  const size_t count = mesh.positions.size();
+  constexpr size_t kChunk = 16;
+  std::atomic<size_t> next{0}, done{0};
+  std::atomic<bool> stop{false};
+  auto work = [&] {
+    for (size_t begin; !stop.load(std::memory_order_relaxed) && (begin = next.fetch_add(kChunk)) < count;) {
+      const size_t end = std::min(count, begin + kChunk);
+      for (size_t v = begin; v < end; ++v) {
+        if (patch_of[v] == UINT32_MAX) continue;
+        const ReferencePoint r = reference.radiosity_at(patch_of[v], mesh.positions[v], samples, v + 1);
+        mesh.radiosity[v] = r.radiosity;
+        std_error[v] = (r.std_error.x + r.std_error.y + r.std_error.z) / 3.0;
+      }
+      done.fetch_add(end - begin);
+    }
+  };
+  const uint32_t n = threads != 0 ? threads : std::max(1u, std::thread::hardware_concurrency());
+  std::vector<std::thread> pool;
+  for (uint32_t t = 0; t < n; ++t) pool.emplace_back(work);
+  auto last = std::chrono::steady_clock::now();
+  while (done.load() < count && !stop.load()) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    if (cancel != nullptr && cancel->cancelled()) stop.store(true);
+    if (progress && std::chrono::steady_clock::now() - last > std::chrono::milliseconds(100)) {
+      last = std::chrono::steady_clock::now();
+      progress(static_cast<double>(done.load()) / static_cast<double>(count));
+    }
+  }
+  for (auto& th : pool) th.join();
+  stats.cancelled = stop.load();
+  for (auto& el : mesh.elements) {
+    el.radiosity = glm::dvec3(0.0);
+    for (uint32_t k = 0; k < el.corner_count; ++k) el.radiosity += mesh.radiosity[el.corners[k]] / static_cast<double>(el.corner_count);
+  }
+  for (double se : std_error) stats.largest_std_error = std::max(stats.largest_std_error, se);
+  stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return stats;
 }
 
 }  // namespace hemibake::baselines

@@ -31,8 +31,8 @@ using hemibake::solver::Params;
 constexpr const char* kSolverOptions =
     "solver options (the paper's names):\n"
     "  --method aa|classical   form factors: anti-aliased (default) or classical hemicube\n"
-    "           hr             (bake only) hierarchical radiosity with ray-cast visibility (baseline)\n"
-    "           reference      (bake only) the aa mesh with path-traced radiosity at its vertices\n"
+    "           hr             (bake, submit) hierarchical radiosity with ray-cast visibility (baseline)\n"
+    "           reference      (bake, submit) the aa mesh with path-traced radiosity at its vertices\n"
     "  --rays N                hr: visibility rays per link (default 4)\n"
     "  --samples N             reference: paths per vertex (default 256)\n"
     "  --resolution N          hemicube resolution (default 100)\n"
@@ -330,25 +330,11 @@ int bake(const Options& o) {
     print_stats(st);
     mesh = solver.mesh();
     if (o.baseline == "reference") {
-      // The same mesh, its vertex radiosity replaced by path-traced estimates (each vertex on the
-      // patch of an element it bounds); elements take the mean of their corners.
-      const hemibake::baselines::Reference reference(scene);
-      std::vector<uint32_t> patch_of(mesh.positions.size(), UINT32_MAX);
-      for (const auto& el : mesh.elements)
-        for (uint32_t i = el.boundary_begin; i < el.boundary_end; ++i) patch_of[mesh.boundary[i]] = el.patch;
-      double worst_se = 0.0;
-      for (size_t v = 0; v < mesh.positions.size(); ++v) {
-        if (patch_of[v] == UINT32_MAX) continue;
-        const auto r = reference.radiosity_at(patch_of[v], mesh.positions[v], o.samples, v + 1);
-        mesh.radiosity[v] = r.radiosity;
-        worst_se = std::max(worst_se, (r.std_error.x + r.std_error.y + r.std_error.z) / 3.0);
-      }
-      for (auto& el : mesh.elements) {
-        el.radiosity = glm::dvec3(0.0);
-        for (uint32_t k = 0; k < el.corner_count; ++k) el.radiosity += mesh.radiosity[el.corners[k]] / static_cast<double>(el.corner_count);
-      }
+      // The same mesh, its vertex radiosity replaced by path-traced estimates.
+      const auto rs = hemibake::baselines::apply_reference(scene, mesh, o.samples, o.params.threads);
       write.method = "reference";
-      std::printf("  reference: %u paths per vertex, largest standard error %.4g\n", o.samples, worst_se);
+      std::printf("  reference: %u paths per vertex in %.3f s, largest standard error %.4g\n", o.samples, rs.seconds,
+                  rs.largest_std_error);
     }
   }
   const auto written = hemibake::protocol::write_baked_glb(*loaded.document, mesh, o.params, st, write);
@@ -386,8 +372,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "hemibake: %s\n", err.c_str());
     return 2;
   }
-  if (!o.baseline.empty() && !(command == "bake" && o.server.empty() && !std::getenv("HEMIBAKE_SERVER"))) {
-    std::fprintf(stderr, "hemibake: --method %s is for local bakes only\n", o.baseline.c_str());
+  if (!o.baseline.empty() && command != "bake" && command != "submit") {
+    std::fprintf(stderr, "hemibake: --method %s is for bake and submit only\n", o.baseline.c_str());
     return 2;
   }
   if (command == "cornell") return cornell(o);
@@ -409,6 +395,9 @@ int main(int argc, char** argv) {
   hemibake::protocol::JobSpec spec;
   spec.params = o.params;
   spec.write = o.write;
+  spec.write.method = o.baseline;
+  spec.rays = o.rays;
+  spec.samples = o.samples;
   if (command != "list" && o.input.empty()) {
     std::fprintf(stderr, "hemibake: %s needs %s\n", command.c_str(), command == "submit" || command == "bake" ? "an input file" : "a job id");
     return 2;

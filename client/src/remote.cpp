@@ -87,10 +87,16 @@ std::string query_of(const protocol::JobSpec& spec) {
 
 void progress_line(const json& p, bool tty) {
   if (!tty) return;
+  const std::string phase = p.value("phase", "shooting");
   const double u = p.value("unshot_fraction", 1.0);
-  const double done = u > 0.0 ? std::clamp(std::log10(1.0 / u) / 3.0, 0.0, 1.0) : 1.0;
+  const double done = std::clamp(p.value("fraction", u > 0.0 ? std::log10(1.0 / u) / 3.0 : 1.0), 0.0, 1.0);
   const int width = 24, filled = static_cast<int>(done * width);
   const double eta = p.value("eta_seconds", -1.0);
+  if (phase != "shooting" && phase != "done") {
+    std::fprintf(stderr, "\r  [%.*s%*s] %-9s %5.1f %%  %6.1f s%40s", filled, "########################", width - filled, "",
+                 phase.c_str(), 100.0 * done, p.value("elapsed_seconds", 0.0), "");
+    return;
+  }
   std::fprintf(stderr, "\r  [%.*s%*s] shots %6llu  unshot %8.5f  elements %7llu  %6.1f s%s", filled,
                "########################", width - filled, "", static_cast<unsigned long long>(p.value("shots", 0)),
                u, static_cast<unsigned long long>(p.value("elements", 0)), p.value("elapsed_seconds", 0.0),

@@ -38,9 +38,16 @@ std::string apply_params(const std::map<std::string, std::string>& values, JobSp
     bool b = false;
     bool ok = true;
     if (key == "method") {
-      if (value == "aa") p.method = solver::Method::kAntiAliased;
-      else if (value == "classical") p.method = solver::Method::kClassical;
-      else return "method must be aa or classical (got '" + value + "')";
+      // hr and reference keep params.method: reference bakes the aa (or classical) mesh first.
+      if (value == "aa" || value == "classical") {
+        p.method = value == "aa" ? solver::Method::kAntiAliased : solver::Method::kClassical;
+        w.method.clear();
+      } else if (value == "hr" || value == "reference") {
+        p.method = solver::Method::kAntiAliased;
+        w.method = value;
+      } else {
+        return "method must be aa, classical, hr or reference (got '" + value + "')";
+      }
     } else if (key == "resolution") {
       ok = whole(value, 4096, n);
       p.resolution = static_cast<uint32_t>(n);
@@ -64,6 +71,12 @@ std::string apply_params(const std::map<std::string, std::string>& values, JobSp
     } else if (key == "reuse") {
       ok = flag(value, b);
       p.reuse_visibility = b;
+    } else if (key == "rays") {
+      ok = whole(value, 1024, n) && n >= 1;
+      spec.rays = static_cast<uint32_t>(n);
+    } else if (key == "samples") {
+      ok = whole(value, 1u << 20, n) && n >= 1;
+      spec.samples = static_cast<uint32_t>(n);
     } else if (key == "draco") {
       ok = flag(value, b);
       w.draco = b;
@@ -91,7 +104,7 @@ std::string params_json(const JobSpec& spec) {
   const solver::Params& p = spec.params;
   const WriteOptions& w = spec.write;
   nlohmann::ordered_json j;
-  j["method"] = p.method == solver::Method::kAntiAliased ? "aa" : "classical";
+  j["method"] = !w.method.empty() ? w.method : p.method == solver::Method::kAntiAliased ? "aa" : "classical";
   j["resolution"] = p.resolution;
   j["feps"] = p.feps;
   j["aeps"] = p.aeps;
@@ -101,6 +114,8 @@ std::string params_json(const JobSpec& spec) {
   j["max_elements"] = p.max_elements;
   j["threads"] = p.threads;
   j["reuse"] = p.reuse_visibility;
+  j["rays"] = spec.rays;
+  j["samples"] = spec.samples;
   j["draco"] = w.draco;
   j["position_bits"] = w.position_bits;
   j["texcoord_bits"] = w.texcoord_bits;

@@ -1,5 +1,7 @@
 #include "hemibake/server/service.h"
 
+#include "hemibake/baselines/hierarchical.h"
+#include "hemibake/baselines/reference.h"
 #include "hemibake/protocol/gltf.h"
 #include "hemibake/protocol/job.h"
 #include "hemibake/solver/solver.h"
@@ -209,52 +211,108 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
     store_->add_event(id, "state", json{{"state", "failed"}, {"error", loaded.error}}.dump());
     return;
   }
-  solver::Solver solver(protocol::scene_of(*loaded.document), spec.params);
+  const solver::Scene& input = protocol::scene_of(*loaded.document);
   bool over_budget = false;
   double last_report = -1.0;
-  solver.run(
-      [&](const solver::Progress& p) {
-        if (p.elapsed_seconds > options_.job_seconds) {
-          over_budget = true;
-          token.cancel();
-        }
-        // A preview asked for: the current state, with the ambient term so it is displayable.
-        {
-          std::unique_lock lock(mutex_);
-          auto it = active_.find(id);
-          if (it != active_.end() && it->second.preview_wanted) {
-            it->second.preview_wanted = false;
-            lock.unlock();
-            const auto written = protocol::write_baked_glb(*loaded.document, solver.mesh(true), spec.params,
-                                                           solver.stats(), spec.write);
-            lock.lock();
-            it = active_.find(id);
-            if (it != active_.end()) {
-              it->second.preview.assign(written.glb.begin(), written.glb.end());
-              ++it->second.preview_serial;
+  // Stores a progress record (at most every 0.5 s unless `force`) and checks the time budget.
+  auto report = [&](json progress, bool force) {
+    const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (elapsed > options_.job_seconds) {
+      over_budget = true;
+      token.cancel();
+    }
+    if (!force && elapsed - last_report < 0.5) return;
+    last_report = elapsed;
+    progress["elapsed_seconds"] = elapsed;
+    store_->set_progress(id, progress.dump());
+    store_->add_event(id, "progress", progress.dump());
+  };
+  auto set_previews = [&](bool on) {
+    std::lock_guard lock(mutex_);
+    if (auto it = active_.find(id); it != active_.end()) it->second.previews = on;
+    preview_ready_.notify_all();
+  };
+  solver::Mesh mesh;
+  solver::Stats st;
+  if (spec.write.method == "hr") {
+    set_previews(false);
+    baselines::HierarchicalParams hp;
+    hp.feps = spec.params.feps;
+    hp.aeps = spec.params.aeps;
+    hp.rays = spec.rays;
+    hp.threads = spec.params.threads;
+    baselines::HierarchicalStats hs;
+    mesh = baselines::solve_hierarchical(
+        input, hp, hs,
+        [&](const baselines::HierarchicalProgress& p) {
+          report({{"phase", p.linking ? "linking" : "gathering"}, {"fraction", p.fraction}, {"links", p.links},
+                  {"iterations", p.iterations}, {"shots", 0}, {"unshot_fraction", p.linking ? 1.0 : 0.0},
+                  {"elements", 0}, {"eta_seconds", -1.0}},
+                 false);
+        },
+        &token);
+    st.cancelled = hs.cancelled;
+    st.converged = !hs.cancelled;
+    st.unshot_fraction = 0.0;
+    st.elements = hs.elements;
+    st.patches = input.patches.size();
+    st.seconds = hs.seconds;
+  } else {
+    solver::Solver solver(input, spec.params);
+    solver.run(
+        [&](const solver::Progress& p) {
+          // A preview asked for: the current state, with the ambient term so it is displayable.
+          {
+            std::unique_lock lock(mutex_);
+            auto it = active_.find(id);
+            if (it != active_.end() && it->second.preview_wanted) {
+              it->second.preview_wanted = false;
+              lock.unlock();
+              const auto written = protocol::write_baked_glb(*loaded.document, solver.mesh(true), spec.params,
+                                                             solver.stats(), spec.write);
+              lock.lock();
+              it = active_.find(id);
+              if (it != active_.end()) {
+                it->second.preview.assign(written.glb.begin(), written.glb.end());
+                ++it->second.preview_serial;
+              }
+              preview_ready_.notify_all();
             }
-            preview_ready_.notify_all();
           }
-        }
-        if (p.elapsed_seconds - last_report < 0.5) return;
-        last_report = p.elapsed_seconds;
-        // Time left, from how fast the unshot power has fallen so far (it falls roughly
-        // geometrically): elapsed * log(u / target) / log(1 / u).
-        const double target = spec.params.convergence;
-        double eta = -1.0;
-        if (p.unshot_fraction > target && p.unshot_fraction < 1.0)
-          eta = p.elapsed_seconds * std::log(p.unshot_fraction / target) / std::log(1.0 / p.unshot_fraction);
-        const json progress = {{"shots", p.shots}, {"unshot_fraction", p.unshot_fraction}, {"elements", p.elements},
-                               {"elapsed_seconds", p.elapsed_seconds}, {"eta_seconds", eta}};
-        store_->set_progress(id, progress.dump());
-        store_->add_event(id, "progress", progress.dump());
-      },
-      &token);
-  const solver::Stats& st = solver.stats();
+          // Time left, from how fast the unshot power has fallen so far (it falls roughly
+          // geometrically): elapsed * log(u / target) / log(1 / u).
+          const double target = spec.params.convergence;
+          double eta = -1.0;
+          if (p.unshot_fraction > target && p.unshot_fraction < 1.0)
+            eta = p.elapsed_seconds * std::log(p.unshot_fraction / target) / std::log(1.0 / p.unshot_fraction);
+          const double fraction = p.unshot_fraction >= 1.0 ? 0.0
+                                  : p.unshot_fraction <= target
+                                      ? 1.0
+                                      : std::log(p.unshot_fraction) / std::log(target);
+          report({{"phase", "shooting"}, {"fraction", fraction}, {"shots", p.shots},
+                  {"unshot_fraction", p.unshot_fraction}, {"elements", p.elements}, {"eta_seconds", eta}},
+                 false);
+        },
+        &token);
+    st = solver.stats();
+    mesh = solver.mesh();
+    if (spec.write.method == "reference" && !st.cancelled) {
+      set_previews(false);
+      const auto rs = baselines::apply_reference(
+          input, mesh, spec.samples, spec.params.threads,
+          [&](double fraction) {
+            report({{"phase", "tracing"}, {"fraction", fraction}, {"shots", st.shots}, {"unshot_fraction", 0.0},
+                    {"elements", st.elements}, {"eta_seconds", -1.0}},
+                   false);
+          },
+          &token);
+      st.cancelled = rs.cancelled;
+    }
+  }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  const json final_progress = {{"shots", st.shots}, {"unshot_fraction", st.unshot_fraction}, {"elements", st.elements},
-                               {"elapsed_seconds", st.seconds}, {"eta_seconds", 0.0}};
-  store_->set_progress(id, final_progress.dump());
+  report({{"phase", "done"}, {"fraction", 1.0}, {"shots", st.shots}, {"unshot_fraction", st.unshot_fraction},
+          {"elements", st.elements}, {"eta_seconds", 0.0}},
+         true);
   if (st.cancelled) {
     if (over_budget) {
       const std::string e = "the bake exceeded its time budget of " + std::to_string(options_.job_seconds) + " s";
@@ -267,7 +325,7 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
     }
     return;
   }
-  const auto written = protocol::write_baked_glb(*loaded.document, solver.mesh(), spec.params, st, spec.write);
+  const auto written = protocol::write_baked_glb(*loaded.document, mesh, spec.params, st, spec.write);
   if (!written.error.empty()) {
     store_->fail(id, written.error);
     store_->add_event(id, "state", json{{"state", "failed"}, {"error", written.error}}.dump());
@@ -282,8 +340,10 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
   size_t b = 0;
   while (b < bake_seconds_buckets_.size() && seconds > bake_seconds_buckets_[b]) ++b;
   ++bake_seconds_counts_[b];
-  shots_ += st.shots;
-  shot_seconds_ += st.seconds;
+  if (spec.write.method != "hr") {  // a reference job's shots are its aa solve's
+    shots_ += st.shots;
+    shot_seconds_ += st.seconds;
+  }
 }
 
 std::optional<Response> Service::check_auth(const Request& request) const {
@@ -441,6 +501,13 @@ Response Service::preview(const std::string& id) {
   const auto state = store_->get(id);
   std::unique_lock lock(mutex_);
   auto it = active_.find(id);
+  if (it != active_.end() && !it->second.previews) {
+    lock.unlock();
+    Response r = error(409, "no preview in this phase: hr has no solution until it has linked and gathered, and a reference job "
+                            "has none while it traces paths; follow its events and fetch the result");
+    r.headers.emplace_back("Retry-After", "5");
+    return r;
+  }
   if (it == active_.end() || !state || state->state != JobState::kRunning) {
     lock.unlock();
     const auto& rec = state;
@@ -453,7 +520,7 @@ Response Service::preview(const std::string& id) {
   it->second.preview_wanted = true;
   const bool made = preview_ready_.wait_for(lock, std::chrono::seconds(30), [&] {
     auto a = active_.find(id);
-    return a == active_.end() || a->second.preview_serial != serial;
+    return a == active_.end() || a->second.preview_serial != serial || !a->second.previews;
   });
   auto a = active_.find(id);
   if (!made || a == active_.end() || a->second.preview.empty()) {

@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <sstream>
 #include <string>
 #include <sys/wait.h>
@@ -329,6 +330,54 @@ TEST(Server, PreviewOfARunningJob) {
   request(server.port(), http::verb::delete_, "/v1/jobs/" + id);
   EXPECT_EQ(wait_finished(server.port(), id)["state"], "cancelled");
   EXPECT_EQ(request(server.port(), http::verb::get, "/v1/jobs/" + id + "/preview").status, 409);
+}
+
+// The GLB's JSON chunk.
+json glb_json(const std::string& glb) {
+  if (glb.size() < 20 || glb.substr(0, 4) != "glTF") return json();
+  uint32_t length = 0;
+  std::memcpy(&length, glb.data() + 12, 4);
+  return json::parse(glb.substr(20, length), nullptr, false);
+}
+
+// The baselines run as jobs too, with their own phases in the progress events.
+TEST(Server, HierarchicalAndReferenceJobs) {
+  ServerProcess server(temp_dir("baselines"), {"--workers", "1"});
+  for (const std::string method : {"hr", "reference"}) {
+    const std::string query = method == "hr" ? "?method=hr&feps=0.01&rays=2" : "?method=reference&samples=8&convergence=0.05";
+    const Reply posted = request(server.port(), http::verb::post, "/v1/jobs" + query, cornell(), kGltf);
+    ASSERT_EQ(posted.status, 202) << posted.body;
+    const std::string id = posted.js()["id"];
+    const auto evs = events(server.port(), id);
+    ASSERT_FALSE(evs.empty());
+    EXPECT_EQ(json::parse(std::get<2>(evs.back()))["state"], "succeeded") << method;
+    std::set<std::string> phases;
+    for (const auto& e : evs)
+      if (std::get<1>(e) == "progress") phases.insert(json::parse(std::get<2>(e)).value("phase", ""));
+    EXPECT_TRUE(phases.count("done")) << method;
+    const json job = request(server.port(), http::verb::get, "/v1/jobs/" + id).js();
+    EXPECT_EQ(job["params"]["method"], method);
+    const Reply result = request(server.port(), http::verb::get, "/v1/jobs/" + id + "/result");
+    ASSERT_EQ(result.status, 200);
+    const json doc = glb_json(result.body);
+    ASSERT_TRUE(doc.is_object()) << method;
+    EXPECT_EQ(doc["asset"]["extras"]["hemibake"]["parameters"]["method"], method);
+    // Both subdivide the 26 input patches.
+    EXPECT_GT(doc["asset"]["extras"]["hemibake"]["statistics"]["elements"].get<double>(), 100.0) << method;
+  }
+  // A long hr job: no preview while it links, and cancelling stops it.
+  const Reply posted = request(server.port(), http::verb::post, "/v1/jobs?method=hr&feps=0.00001&aeps=0.000001", cornell(), kGltf);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = posted.js()["id"];
+  for (int i = 0; i < 200 && request(server.port(), http::verb::get, "/v1/jobs/" + id).js()["state"] != "running"; ++i)
+    std::this_thread::sleep_for(20ms);
+  std::this_thread::sleep_for(300ms);
+  const Reply preview = request(server.port(), http::verb::get, "/v1/jobs/" + id + "/preview");
+  EXPECT_EQ(preview.status, 409) << preview.body;
+  const auto t0 = std::chrono::steady_clock::now();
+  request(server.port(), http::verb::delete_, "/v1/jobs/" + id);
+  EXPECT_EQ(wait_finished(server.port(), id)["state"], "cancelled");
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 10s);
 }
 
 // SIGTERM: the running job goes back to the queue and completes after the restart.

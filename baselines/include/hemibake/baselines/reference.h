@@ -7,6 +7,7 @@
 #include <glm/vec3.hpp>
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -29,5 +30,21 @@ class Reference {
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+struct ReferenceBakeStats {
+  double largest_std_error = 0.0;  ///< over vertices, mean of the channels
+  double seconds = 0.0;
+  bool cancelled = false;
+};
+
+/// Replaces the vertex radiosity of `mesh` (a solution of `scene`) by path-traced estimates from
+/// `samples` paths each (a vertex is traced from the patch of an element it bounds), and each
+/// element's radiosity by the mean of its corners. Runs on `threads` threads (0 = all cores);
+/// the result does not depend on their number. `progress(fraction of vertices done)` is called
+/// from the calling thread about every 0.1 s; a cancelled run leaves `mesh` partly updated and
+/// sets `cancelled`.
+ReferenceBakeStats apply_reference(const solver::Scene& scene, solver::Mesh& mesh, uint32_t samples, uint32_t threads,
+                                   const std::function<void(double)>& progress = {},
+                                   const solver::CancelToken* cancel = nullptr);
 
 }  // namespace hemibake::baselines

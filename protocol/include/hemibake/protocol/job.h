@@ -9,15 +9,19 @@
 
 namespace hemibake::protocol {
 
-/// What a bake is asked to do.
+/// What a bake is asked to do. `write.method` names the method: empty for the solver's own (aa
+/// or classical, in params.method), "hr" for hierarchical radiosity, "reference" for the aa mesh
+/// with path-traced vertex radiosity.
 struct JobSpec {
   solver::Params params;
   WriteOptions write;
+  uint32_t rays = 4;       ///< hr: visibility rays per link
+  uint32_t samples = 256;  ///< reference: paths per vertex
 };
 
-/// Applies named parameters (the command line's names without dashes: method, resolution, feps,
-/// aeps, beps, convergence, max_shots, max_elements, threads, reuse, draco, position_bits,
-/// texcoord_bits, draco_speed, exposure) to `spec`. Returns an empty string, or a message naming
+/// Applies named parameters (the command line's names without dashes: method (aa, classical, hr,
+/// reference), resolution, feps, aeps, beps, convergence, max_shots, max_elements, threads, reuse,
+/// rays, samples, draco, position_bits, texcoord_bits, draco_speed, exposure) to `spec`. Returns an empty string, or a message naming
 /// the first unknown or bad parameter.
 std::string apply_params(const std::map<std::string, std::string>& values, JobSpec& spec);
 

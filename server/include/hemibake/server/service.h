@@ -88,6 +88,7 @@ class Service {
   // A running job: its cancellation token, and previews asked for and made between its shots.
   struct Active {
     solver::CancelToken* token = nullptr;
+    bool previews = true;  // false while no displayable solution exists (hr, reference tracing)
     bool preview_wanted = false;
     uint64_t preview_serial = 0;
     std::string preview;  // GLB
