@@ -16,7 +16,9 @@
 #include <cmath>
 #include <cstring>
 #include <algorithm>
+#include <atomic>
 #include <string>
+#include <thread>
 #include <vector>
 
 namespace {
@@ -28,33 +30,171 @@ struct Result {
   long peak_kib = 0;
 };
 
-// Runs fn() in a forked child and returns its stats and peak resident memory.
-template <typename Fn>
-Result isolated(Fn fn) {
+// Runs fn() (returning a trivially copyable T) in a forked child and returns its result; the
+// child's peak resident memory goes to *peak_kib.
+template <typename T, typename Fn>
+T isolated_value(Fn fn, long* peak_kib) {
   int fds[2];
   if (pipe(fds) != 0) std::abort();
   const pid_t pid = fork();
   if (pid == 0) {
     close(fds[0]);
-    Result r;
-    r.stats = fn();
+    struct {
+      T value;
+      long peak;
+    } out{fn(), 0};
     rusage ru{};
     getrusage(RUSAGE_SELF, &ru);
-    r.peak_kib = ru.ru_maxrss;
-    if (write(fds[1], &r, sizeof r) != static_cast<ssize_t>(sizeof r)) _exit(1);
+    out.peak = ru.ru_maxrss;
+    if (write(fds[1], &out, sizeof out) != static_cast<ssize_t>(sizeof out)) _exit(1);
     _exit(0);
   }
   close(fds[1]);
-  Result r;
-  const ssize_t got = read(fds[0], &r, sizeof r);
+  struct {
+    T value;
+    long peak;
+  } in{};
+  size_t got = 0;
+  while (got < sizeof in) {
+    const ssize_t n = read(fds[0], reinterpret_cast<char*>(&in) + got, sizeof in - got);
+    if (n <= 0) break;
+    got += static_cast<size_t>(n);
+  }
   close(fds[0]);
   int status = 0;
   waitpid(pid, &status, 0);
-  if (got != static_cast<ssize_t>(sizeof r)) {
+  if (got != sizeof in) {
     std::fprintf(stderr, "benchmark child failed\n");
     std::exit(1);
   }
+  if (peak_kib != nullptr) *peak_kib = in.peak;
+  return in.value;
+}
+
+template <typename Fn>
+Result isolated(Fn fn) {
+  Result r;
+  r.stats = isolated_value<Stats>(fn, &r.peak_kib);
   return r;
+}
+
+// A mesh's error against the path-traced reference at its element centres (emitters left out:
+// they are exact), as fractions of the reference's mean radiosity (luminance = mean of RGB).
+struct Error {
+  double rms = 0.0;        // RMS error
+  double rms_clean = 0.0;  // with the reference's own variance subtracted
+  double max = 0.0;        // largest absolute error
+  double ref_se = 0.0;     // the reference's RMS standard error
+  double energy = 0.0;     // sum B A / the reference's
+};
+
+Error error_of(const Scene& scene, const Mesh& mesh, uint32_t samples) {
+  const hemibake::baselines::Reference reference(scene);
+  std::vector<uint32_t> todo;
+  for (uint32_t i = 0; i < mesh.elements.size(); ++i)
+    if (scene.patches[mesh.elements[i].patch].emission == glm::dvec3(0.0)) todo.push_back(i);
+  std::vector<double> ref(todo.size()), se(todo.size());
+  std::atomic<size_t> next{0};
+  auto work = [&] {
+    for (size_t k; (k = next.fetch_add(1)) < todo.size();) {
+      const auto& el = mesh.elements[todo[k]];
+      glm::dvec3 c(0.0);
+      for (uint32_t j = 0; j < el.corner_count; ++j) c += mesh.positions[el.corners[j]];
+      c /= static_cast<double>(el.corner_count);
+      const auto r = reference.radiosity_at(el.patch, c, samples, todo[k] + 1);
+      ref[k] = (r.radiosity.x + r.radiosity.y + r.radiosity.z) / 3.0;
+      se[k] = std::sqrt((r.std_error.x * r.std_error.x + r.std_error.y * r.std_error.y + r.std_error.z * r.std_error.z) / 3.0);
+    }
+  };
+  std::vector<std::thread> pool;
+  for (unsigned t = 0; t < std::max(1u, std::thread::hardware_concurrency()); ++t) pool.emplace_back(work);
+  for (auto& t : pool) t.join();
+  double err2 = 0.0, se2 = 0.0, worst = 0.0, sum_ref = 0.0, sum_refa = 0.0, sum_ba = 0.0;
+  for (size_t k = 0; k < todo.size(); ++k) {
+    const auto& el = mesh.elements[todo[k]];
+    const double b = (el.radiosity.x + el.radiosity.y + el.radiosity.z) / 3.0;
+    err2 += (b - ref[k]) * (b - ref[k]);
+    se2 += se[k] * se[k];
+    worst = std::max(worst, std::abs(b - ref[k]));
+    sum_ref += ref[k];
+    sum_refa += ref[k] * el.area;
+    sum_ba += b * el.area;
+  }
+  const double n = static_cast<double>(std::max<size_t>(1, todo.size())), mean = sum_ref / n;
+  return {std::sqrt(err2 / n) / mean, std::sqrt(std::max(0.0, err2 - se2) / n) / mean, worst / mean,
+          std::sqrt(se2 / n) / mean, sum_ba / sum_refa};
+}
+
+// One method on one scene: time, counters, error and memory.
+struct Run {
+  char method[24] = {};
+  uint32_t threads = 0;
+  double seconds = 0.0;
+  uint64_t shots = 0;       // aa / classical: shots; hr: gathering iterations
+  uint64_t hemicubes = 0;
+  uint64_t elements = 0;
+  uint64_t links = 0;
+  Error error;
+  long peak_kib = 0;
+};
+
+// Runs `method` ("aa", "classical" or "hr") with `threads` on `scene` in a child process; the
+// error against the reference (`samples` paths per element) is measured after the clock stops.
+// With `repeats` > 1 the solve runs that many times and the fastest counts (this machine is shared).
+Run run_method(const Scene& scene, const std::string& method, uint32_t threads, uint32_t samples,
+               const Params& base = {}, const hemibake::baselines::HierarchicalParams& hr_base = {},
+               uint32_t repeats = 1) {
+  long peak = 0;
+  Run r = isolated_value<Run>(
+      [&] {
+        Run out;
+        std::snprintf(out.method, sizeof out.method, "%s", method.c_str());
+        out.threads = threads;
+        Mesh mesh;
+        out.seconds = 1e300;
+        for (uint32_t rep = 0; rep < std::max(1u, repeats); ++rep) {
+          if (method == "hr") {
+            auto hp = hr_base;
+            hp.threads = threads;
+            hemibake::baselines::HierarchicalStats hs;
+            mesh = hemibake::baselines::solve_hierarchical(scene, hp, hs);
+            out.seconds = std::min(out.seconds, hs.seconds);
+            out.shots = hs.iterations;
+            out.links = hs.links;
+          } else {
+            Params p = base;
+            p.method = method == "aa" ? Method::kAntiAliased : Method::kClassical;
+            p.threads = threads;
+            Solver solver(scene, p);
+            const Stats& st = solver.run();
+            out.seconds = std::min(out.seconds, st.seconds);
+            out.shots = st.shots;
+            out.hemicubes = st.hemicubes;
+            mesh = solver.mesh();
+          }
+        }
+        out.elements = mesh.elements.size();
+        if (samples > 0) out.error = error_of(scene, mesh, samples);
+        return out;
+      },
+      &peak);
+  r.peak_kib = peak;
+  return r;
+}
+
+void print_runs_header() {
+  std::printf("| method | threads | time (s) | shots (hr: iterations) | hemicubes | elements | links | "
+              "RMS error | RMS error, reference noise removed | max error | energy / reference's | peak memory (MB) |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+}
+
+void print_run(const Run& r) {
+  std::printf("| %s | %s | %.3f | %llu | %llu | %llu | %llu | %.4f | %.4f | %.4f | %.4f | %.1f |\n", r.method,
+              r.threads == 0 ? "all" : std::to_string(r.threads).c_str(),
+              r.seconds, static_cast<unsigned long long>(r.shots), static_cast<unsigned long long>(r.hemicubes),
+              static_cast<unsigned long long>(r.elements), static_cast<unsigned long long>(r.links), r.error.rms,
+              r.error.rms_clean, r.error.max, r.error.energy, r.peak_kib / 1024.0);
+  std::fflush(stdout);
 }
 
 Stats solve(const Scene& scene, const Params& params) {
@@ -62,87 +202,89 @@ Stats solve(const Scene& scene, const Params& params) {
   return solver.run();
 }
 
+// Equal quality: each method at several tolerances, error against the reference, time; prints the
+// time each needs to reach the best error both reach, and their ratio.
+void sweep(const Scene& scene, const char* title, uint32_t samples, const std::vector<Params>& aa,
+           const std::vector<hemibake::baselines::HierarchicalParams>& hr, const std::vector<std::string>& labels,
+           uint32_t repeats) {
+  std::printf("## Equal quality (%s; all threads; error = RMS against the reference, its noise removed)\n\n", title);
+  std::printf("| method | setting | time (s) | elements | links | error |\n|---|---|---|---|---|---|\n");
+  std::vector<Run> runs;
+  size_t label = 0;
+  for (const Params& p : aa) {
+    runs.push_back(run_method(scene, "aa", 0, samples, p, {}, repeats));
+    std::printf("| aa | %s | %.3f | %llu | | %.4f |\n", labels[label++].c_str(), runs.back().seconds,
+                static_cast<unsigned long long>(runs.back().elements), runs.back().error.rms_clean);
+    std::fflush(stdout);
+  }
+  for (const auto& hp : hr) {
+    runs.push_back(run_method(scene, "hr", 0, samples, {}, hp, repeats));
+    std::printf("| hr | %s | %.3f | %llu | %llu | %.4f |\n", labels[label++].c_str(), runs.back().seconds,
+                static_cast<unsigned long long>(runs.back().elements), static_cast<unsigned long long>(runs.back().links),
+                runs.back().error.rms_clean);
+    std::fflush(stdout);
+  }
+  auto is_aa = [](const Run& r) { return std::strcmp(r.method, "aa") == 0; };
+  double best_aa = 1e300, best_hr = 1e300;
+  for (const Run& r : runs) (is_aa(r) ? best_aa : best_hr) = std::min(is_aa(r) ? best_aa : best_hr, r.error.rms_clean);
+  const double target = std::max(best_aa, best_hr);
+  double t_aa = 1e300, t_hr = 1e300;
+  for (const Run& r : runs)
+    if (r.error.rms_clean <= target * 1.0000001) (is_aa(r) ? t_aa : t_hr) = std::min(is_aa(r) ? t_aa : t_hr, r.seconds);
+  std::printf("\nTo reach an error of %.4f: aa %.3f s, hr %.3f s; hr / aa = %.2f\n\n", target, t_aa, t_hr, t_hr / t_aa);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  const bool quick = argc > 1 && std::strcmp(argv[1], "--quick") == 0;
+  const std::string mode = argc > 1 ? argv[1] : "";
+  const bool quick = mode == "--quick";
+  if (!mode.empty() && !quick && mode != "--sweep" && mode != "--chamber" && mode != "--scaling") {
+    std::fprintf(stderr, "usage: hemibake-bench [--quick | --sweep | --chamber | --scaling]\n");
+    return 2;
+  }
   const Scene cornell = make_cornell_box();
-  if (argc > 1 && std::strcmp(argv[1], "--sweep") == 0) {
-    // Equal quality: each method at several tolerances, its error against the reference and its
-    // time (one thread for both, so that the comparison is of the methods).
-    const hemibake::baselines::Reference reference(cornell);
-    auto error = [&](const Mesh& mesh) {
-      double err2 = 0.0, se2 = 0.0, sum_ref = 0.0;
-      uint64_t seed = 1, n = 0;
-      for (const auto& el : mesh.elements) {
-        if (cornell.patches[el.patch].emission.x > 0.0) continue;
-        glm::dvec3 c(0.0);
-        for (uint32_t k = 0; k < el.corner_count; ++k) c += mesh.positions[el.corners[k]];
-        c /= static_cast<double>(el.corner_count);
-        const auto r = reference.radiosity_at(el.patch, c, 512, seed++);
-        const double rl = (r.radiosity.x + r.radiosity.y + r.radiosity.z) / 3.0;
-        const double bl = (el.radiosity.x + el.radiosity.y + el.radiosity.z) / 3.0;
-        const double se = (r.std_error.x + r.std_error.y + r.std_error.z) / 3.0;
-        err2 += (bl - rl) * (bl - rl);
-        se2 += se * se;
-        sum_ref += rl;
-        ++n;
-      }
-      return std::sqrt(std::max(0.0, err2 - se2) / n) / (sum_ref / n);
-    };
-    struct Run {
-      std::string method;
-      double tolerance, seconds, err;
-      uint64_t elements;
-    };
-    std::vector<Run> runs;
-    std::printf("## Equal quality (Cornell box, one thread; error = RMS against the reference, its noise removed)\n\n");
-    std::printf("| method | tolerance | time (s) | elements | error |\n|---|---|---|---|---|\n");
-    for (double beps : {0.1, 0.03, 0.01}) {
-      Params p;
-      p.threads = 1;
-      p.beps = beps;
-      Solver solver(cornell, p);
-      const Stats& st = solver.run();
-      const Mesh mesh = solver.mesh();
-      runs.push_back({"aa", beps, st.seconds, error(mesh), mesh.elements.size()});
-    }
-    for (double feps : {0.01, 0.003, 0.001}) {
-      hemibake::baselines::HierarchicalParams hp;
-      hp.feps = feps;
-      hemibake::baselines::HierarchicalStats hs;
-      const Mesh mesh = hemibake::baselines::solve_hierarchical(cornell, hp, hs);
-      runs.push_back({"hr", feps, hs.seconds, error(mesh), mesh.elements.size()});
-    }
-    for (const Run& r : runs)
-      std::printf("| %s | %s %g | %.3f | %llu | %.4f |\n", r.method.c_str(), r.method == "aa" ? "beps" : "feps",
-                  r.tolerance, r.seconds, static_cast<unsigned long long>(r.elements), r.err);
-    // The smallest error both reach, and the fastest run of each that reaches it.
-    double best_aa = 1e300, best_hr = 1e300;
-    for (const Run& r : runs) (r.method == "aa" ? best_aa : best_hr) = std::min(r.method == "aa" ? best_aa : best_hr, r.err);
-    const double target = std::max(best_aa, best_hr);
-    double t_aa = 1e300, t_hr = 1e300;
-    for (const Run& r : runs)
-      if (r.err <= target * 1.0000001) (r.method == "aa" ? t_aa : t_hr) = std::min(r.method == "aa" ? t_aa : t_hr, r.seconds);
-    std::printf("\nTo reach an error of %.4f: aa %.3f s, hr %.3f s; hr / aa = %.2f\n", target, t_aa, t_hr, t_hr / t_aa);
+  if (mode == "--sweep") {
+    std::vector<Params> aa(3);
+    aa[0].beps = 0.1;
+    aa[1].beps = 0.03;
+    aa[2].beps = 0.01;
+    std::vector<hemibake::baselines::HierarchicalParams> hr(3);
+    hr[0].feps = 0.01;
+    hr[1].feps = 0.003;
+    hr[2].feps = 0.001;
+    sweep(cornell, "Cornell box", 512, aa, hr, {"beps 0.1", "beps 0.03", "beps 0.01", "FEPS 0.01", "FEPS 0.003", "FEPS 0.001"}, 3);
     return 0;
   }
-  if (argc > 1 && std::strcmp(argv[1], "--chamber") == 0) {
+  if (mode == "--chamber") {
     // The paper's second experiment: a furnished room of about 6300 patches (minutes, so on demand).
     const Scene room = make_furnished_room();
-    std::printf("## Furnished room (%zu patches; resolution 100, FEPS 0.001, AEPS 0.0001, unshot < 0.001)\n\n",
+    std::printf("## Furnished room (%zu patches; resolution 100, FEPS 0.001, AEPS 0.0001, unshot < 0.001; "
+                "reference 256 paths per element centre)\n\n",
                 room.patches.size());
-    std::printf("| method | time (s) | shots | hemicubes | elements | peak memory (MB) |\n|---|---|---|---|---|---|\n");
-    for (Method m : {Method::kAntiAliased, Method::kClassical}) {
-      Params p;
-      p.method = m;
-      const Result r = isolated([&] { return solve(room, p); });
-      std::printf("| %s | %.1f | %llu | %llu | %llu | %.1f |\n", m == Method::kAntiAliased ? "aa" : "classical",
-                  r.stats.seconds, static_cast<unsigned long long>(r.stats.shots),
-                  static_cast<unsigned long long>(r.stats.hemicubes), static_cast<unsigned long long>(r.stats.elements),
-                  r.peak_kib / 1024.0);
+    print_runs_header();
+    for (const char* m : {"aa", "classical", "hr"}) print_run(run_method(room, m, 0, 256));
+    std::printf("\n");
+    return 0;
+  }
+  if (mode == "--scaling") {
+    // How cost grows with the number of input patches: the furnished room cut finer and finer.
+    std::printf("## Scaling: the furnished room at several patch counts (paper's settings, all threads)\n\n");
+    std::printf("| input patches | aa time (s) | aa shots | aa elements | aa time per shot (ms) | aa time per shot per 1000 elements (ms) | aa peak memory (MB) | hr time (s) | hr links | hr elements | hr links per patch | hr peak memory (MB) |\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    for (uint32_t target : {400u, 800u, 1600u, 3200u, 6300u, 12600u}) {
+      const Scene room = make_furnished_room(target);
+      const Run aa = run_method(room, "aa", 0, 0);
+      const Run hr = run_method(room, "hr", 0, 0);
+      const double per_shot = aa.seconds / static_cast<double>(std::max<uint64_t>(1, aa.shots)) * 1e3;
+      std::printf("| %zu | %.2f | %llu | %llu | %.3f | %.4f | %.1f | %.2f | %llu | %llu | %.0f | %.1f |\n", room.patches.size(),
+                  aa.seconds, static_cast<unsigned long long>(aa.shots), static_cast<unsigned long long>(aa.elements),
+                  per_shot, per_shot / (static_cast<double>(aa.elements) / 1000.0), aa.peak_kib / 1024.0, hr.seconds,
+                  static_cast<unsigned long long>(hr.links), static_cast<unsigned long long>(hr.elements),
+                  static_cast<double>(hr.links) / static_cast<double>(room.patches.size()), hr.peak_kib / 1024.0);
       std::fflush(stdout);
     }
+    std::printf("\n");
     return 0;
   }
 
@@ -176,54 +318,18 @@ int main(int argc, char** argv) {
     std::fflush(stdout);
   }
 
-  // Accuracy against the path-traced reference, at element centres (luminance = mean of RGB).
-  {
-    const uint32_t samples = quick ? 256 : 1024;
-    std::printf("\n## Error against a path-traced reference (Cornell box, %u paths per element centre)\n\n", samples);
-    std::printf("| method | elements | RMS error / mean radiosity | RMS error, reference noise removed | max abs error / mean | reference standard error (RMS) / mean | energy (sum B A) / reference's |\n");
-    std::printf("|---|---|---|---|---|---|---|\n");
-    const hemibake::baselines::Reference reference(cornell);
-    auto compare = [&](const char* name, const Mesh& mesh) {
-      double se2 = 0.0, err2 = 0.0, worst = 0.0, sum_ref = 0.0, sum_refa = 0.0, sum_ba = 0.0;
-      uint64_t seed = 1, n = 0;
-      for (const auto& el : mesh.elements) {
-        if (cornell.patches[el.patch].emission.x > 0.0) continue;  // the light itself is exact
-        glm::dvec3 c(0.0);
-        for (uint32_t k = 0; k < el.corner_count; ++k) c += mesh.positions[el.corners[k]];
-        c /= static_cast<double>(el.corner_count);
-        const auto r = reference.radiosity_at(el.patch, c, samples, seed++);
-        const double rl = (r.radiosity.x + r.radiosity.y + r.radiosity.z) / 3.0;
-        const double bl = (el.radiosity.x + el.radiosity.y + el.radiosity.z) / 3.0;
-        const double sel = std::sqrt((r.std_error.x * r.std_error.x + r.std_error.y * r.std_error.y + r.std_error.z * r.std_error.z) / 3.0);
-        err2 += (bl - rl) * (bl - rl);
-        se2 += sel * sel;
-        worst = std::max(worst, std::abs(bl - rl));
-        sum_ref += rl;
-        sum_refa += rl * el.area;
-        sum_ba += bl * el.area;
-        ++n;
-      }
-      const double mean_ref = sum_ref / static_cast<double>(n);
-      std::printf("| %s | %zu | %.4f | %.4f | %.4f | %.4f | %.4f |\n", name, mesh.elements.size(),
-                  std::sqrt(err2 / n) / mean_ref, std::sqrt(std::max(0.0, err2 - se2) / n) / mean_ref, worst / mean_ref,
-                  std::sqrt(se2 / n) / mean_ref, sum_ba / sum_refa);
-      std::fflush(stdout);
-    };
-    for (Method m : {Method::kAntiAliased, Method::kClassical}) {
-      Params p;
-      p.method = m;
-      Solver solver(cornell, p);
-      solver.run();
-      compare(m == Method::kAntiAliased ? "aa" : "classical", solver.mesh());
-    }
-    hemibake::baselines::HierarchicalStats hs;
-    const Mesh hr = hemibake::baselines::solve_hierarchical(cornell, {}, hs);
-    compare("hr", hr);
-    std::printf("\nHierarchical radiosity (FEPS 0.001, AEPS 0.0001, 4 rays per link, 1 thread): %.3f s "
-                "(%.3f s linking), %llu links, %llu elements, %u iterations\n",
-                hs.seconds, hs.seconds_linking, static_cast<unsigned long long>(hs.links),
-                static_cast<unsigned long long>(hs.elements), hs.iterations);
-  }
+  // Every method against the path-traced reference, at element centres.
+  const uint32_t samples = quick ? 256 : 1024;
+  std::printf("\n## Methods side by side (Cornell box, paper's settings; error against a path-traced reference, "
+              "%u paths per element centre, as fractions of its mean radiosity)\n\n",
+              samples);
+  print_runs_header();
+  const uint32_t repeats = quick ? 1 : 3;
+  print_run(run_method(cornell, "aa", 0, samples, {}, {}, repeats));
+  print_run(run_method(cornell, "aa", 1, samples, {}, {}, repeats));
+  print_run(run_method(cornell, "classical", 0, samples, {}, {}, repeats));
+  print_run(run_method(cornell, "hr", 0, samples, {}, {}, repeats));
+  print_run(run_method(cornell, "hr", 1, samples, {}, {}, repeats));
 
   std::printf("\n## Cost of one hemicube against elements (closed box, no subdivision, aa, all threads)\n\n");
   std::printf("| elements | hemicubes | time per hemicube (ms) | time per hemicube per 1000 elements (ms) |\n");
