@@ -264,6 +264,11 @@ int main(int argc, char** argv) {
                 room.patches.size());
     print_runs_header();
     for (const char* m : {"aa", "classical", "hr"}) print_run(run_method(room, m, 0, 256));
+    Params alone;
+    alone.cluster_size = 0.0;
+    Run r = run_method(room, "aa", 0, 256, alone);
+    std::snprintf(r.method, sizeof r.method, "aa, no clusters");
+    print_run(r);
     std::printf("\n");
     return 0;
   }

@@ -39,6 +39,8 @@ constexpr const char* kSolverOptions =
     "  --feps X                form-factor tolerance (default 0.001)\n"
     "  --aeps X                minimum element area / scene area (default 0.0001)\n"
     "  --beps X                radiosity tolerance (default 0.03)\n"
+    "  --cluster-size X        small patches of a surface shoot together in clusters up to X times the\n"
+    "                          scene's diagonal wide (default 0.15; 0: every patch shoots alone)\n"
     "  --convergence X         stop at unshot/emitted power below X (default 0.001)\n"
     "  --max-shots N           shot limit\n"
     "  --max-elements N        element limit (default 2000000)\n"
@@ -161,6 +163,7 @@ std::string parse(int argc, char** argv, int first, bool bake, Options& o) {
     else if (opt == "--feps") o.params.feps = x;
     else if (opt == "--aeps") o.params.aeps = x;
     else if (opt == "--beps") o.params.beps = x;
+    else if (opt == "--cluster-size") o.params.cluster_size = x;
     else if (opt == "--convergence") o.params.convergence = x;
     else if (opt == "--max-shots" && whole) o.params.max_shots = static_cast<uint64_t>(x);
     else if (opt == "--max-elements" && whole) o.params.max_elements = static_cast<uint64_t>(x);

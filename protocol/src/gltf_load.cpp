@@ -573,22 +573,22 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
         idx.resize(pos.count);
         for (size_t i = 0; i < pos.count; ++i) idx[i] = static_cast<uint32_t>(i);
       }
-      // Positions of the vertices the triangles use, in world space (a vertex no triangle uses is
-      // neither checked nor transformed: instances of a large mesh cost only what they use).
-      std::vector<glm::dvec3> points(pos.count);
-      {
-        std::vector<uint8_t> used(pos.count, 0);
-        for (uint32_t i : idx) used[i] = 1;
-        for (size_t i = 0; i < pos.count; ++i) {
-          if (!used[i]) continue;
-          const glm::dvec3 p(read_component(pos, i, 0), read_component(pos, i, 1), read_component(pos, i, 2));
-          if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) {
-            result.error = "accessor " + std::to_string(pos_it->second) + " (POSITION of " + where +
-                           ") has a non-finite value at element " + std::to_string(i);
-            return result;
-          }
-          points[i] = glm::dvec3(world * glm::dvec4(p, 1.0));
+      // The vertices the triangles use, renumbered compactly (an instance of a large mesh costs
+      // what its triangles use, not the accessor's length), in world space.
+      std::vector<uint32_t> used(idx);
+      std::sort(used.begin(), used.end());
+      used.erase(std::unique(used.begin(), used.end()), used.end());
+      for (uint32_t& i : idx) i = static_cast<uint32_t>(std::lower_bound(used.begin(), used.end(), i) - used.begin());
+      std::vector<glm::dvec3> points(used.size());
+      for (size_t k = 0; k < used.size(); ++k) {
+        const size_t i = used[k];
+        const glm::dvec3 p(read_component(pos, i, 0), read_component(pos, i, 1), read_component(pos, i, 2));
+        if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) {
+          result.error = "accessor " + std::to_string(pos_it->second) + " (POSITION of " + where +
+                         ") has a non-finite value at element " + std::to_string(i);
+          return result;
         }
+        points[k] = glm::dvec3(world * glm::dvec4(p, 1.0));
       }
       // Material and texture coordinates.
       MaterialInfo mat;
@@ -606,8 +606,8 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
         if (uv.components != 2 || uv.count != pos.count)
           return "accessor " + std::to_string(it->second) + " (TEXCOORD_" + std::to_string(set) + " of " + where +
                  ") must be VEC2 with one element per vertex";
-        uvs.resize(uv.count);
-        for (size_t i = 0; i < uv.count; ++i) uvs[i] = glm::dvec2(read_component(uv, i, 0), read_component(uv, i, 1));
+        uvs.resize(used.size());
+        for (size_t k = 0; k < used.size(); ++k) uvs[k] = glm::dvec2(read_component(uv, used[k], 0), read_component(uv, used[k], 1));
         return {};
       };
       std::vector<glm::dvec2> uv0, uv_base, uv_emit;

@@ -71,6 +71,8 @@ std::string apply_params(const std::map<std::string, std::string>& values, JobSp
     } else if (key == "reuse") {
       ok = flag(value, b);
       p.reuse_visibility = b;
+    } else if (key == "cluster_size") {
+      ok = number(value, p.cluster_size);
     } else if (key == "rays") {
       ok = whole(value, 1024, n) && n >= 1;
       spec.rays = static_cast<uint32_t>(n);
@@ -114,6 +116,7 @@ std::string params_json(const JobSpec& spec) {
   j["max_elements"] = p.max_elements;
   j["threads"] = p.threads;
   j["reuse"] = p.reuse_visibility;
+  j["cluster_size"] = p.cluster_size;
   j["rays"] = spec.rays;
   j["samples"] = spec.samples;
   j["draco"] = w.draco;

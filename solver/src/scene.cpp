@@ -146,6 +146,8 @@ std::string validate(const Params& p) {
     err << "threads must be at most 1024 (got " << p.threads << ")";
   else if (!(p.shooter_size > 0.0) || !std::isfinite(p.shooter_size))
     err << "shooter_size must be a positive number (got " << p.shooter_size << ")";
+  else if (!(p.cluster_size >= 0.0) || !std::isfinite(p.cluster_size))
+    err << "cluster_size must be 0 or a positive number (got " << p.cluster_size << ")";
   return err.str();
 }
 

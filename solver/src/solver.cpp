@@ -22,6 +22,8 @@
 //      F(element -> shooter) = F(shooter -> element) * A_shooter / A_element (capped at 1).
 #include "hemibake/solver/solver.h"
 
+#include "hemibake/solver/hemicube.h"
+
 #include "hemicube_engine.h"
 #include "scene_prep.h"
 #include "thread_pool.h"
@@ -34,6 +36,7 @@
 #include <functional>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <thread>
 #include <unordered_map>
 #include <unordered_set>
@@ -113,6 +116,11 @@ struct Solver::Impl {
   void corners_of(uint32_t e, Corners& out) const {
     for (uint32_t i = 0; i < corner_count(e); ++i) out[i] = vpos[e_corner[e][i]];
   }
+  Corners corners_of_copy(uint32_t e) const {
+    Corners c{};
+    corners_of(e, c);
+    return c;
+  }
   uint32_t midpoint(uint32_t a, uint32_t b);
   uint32_t add_element(uint32_t patch, uint32_t parent, const std::array<uint32_t, 4>& corners,
                        const glm::dvec3& b, const glm::dvec3& unshot);
@@ -128,8 +136,30 @@ struct Solver::Impl {
     glm::dvec3 unshot;
     int depth;
   };
+  // What one hemicube shoots from: a piece of a patch, or a cluster of coplanar patches.
+  struct Piece {
+    uint32_t patch;                   // a patch of the piece: its plane and occlusion group
+    glm::dvec3 centre, up;            // the hemicube's centre and rotation hint
+    double area, diameter;
+    glm::dvec3 dB;                    // unshot radiosity shot (uniform over the piece)
+    std::vector<glm::dvec3> points;   // points whose hull holds the piece (facing tests)
+    int depth;                        // hemicube level (each halves the resolution)
+    bool may_refine;                  // near receivers are left to sub-pieces
+  };
+  // A node of a cluster's binary tree over its patches (by median cuts of their centres).
+  struct ClusterNode {
+    uint32_t begin = 0, end = 0;  // its patches: cluster_patch[begin, end)
+    uint32_t child = kNone;       // children at child and child + 1
+    glm::dvec3 centre{0.0};       // area centroid
+    double area = 0.0, diameter = 0.0;
+    std::array<glm::dvec3, 8> box{};  // corners of the bounding box of its patches' corners
+  };
   void shoot_patch(uint32_t p);
   void shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers, bool whole_scene);
+  void shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bool whole_scene, int depth);
+  std::vector<uint32_t> shoot_piece(const Piece& piece, std::vector<uint32_t> receivers, bool whole_scene);
+  void build_cluster(uint32_t id, uint32_t begin, uint32_t end);
+  void build_clusters();
   void replace_split(std::vector<uint32_t>& list) const;
   void grow_scratch();
   int coarser_levels(double power) const;
@@ -160,6 +190,12 @@ struct Solver::Impl {
   std::vector<uint32_t> leaves;
   std::vector<uint32_t> p_root;
   std::vector<double> p_unshot;  // unshot power per patch (channel sum times area)
+  // Shooters: a unit is a patch that shoots alone or a cluster of small coplanar patches that
+  // shoot together (cluster trees in c_nodes; unit_node kNone for a single patch).
+  std::vector<ClusterNode> c_nodes;
+  std::vector<uint32_t> cluster_patch;
+  std::vector<uint32_t> unit_patch, unit_node, p_unit;
+  std::vector<double> u_unshot;  // unshot power per unit
   std::vector<uint8_t> p_front;  // per patch: faces the current hemicube
 
   // Per-hemicube scratch.
@@ -178,6 +214,7 @@ struct Solver::Impl {
   std::vector<std::vector<Fragment>> chunk_frags;
   std::vector<uint32_t> order, pixel_start;
   std::vector<double> shot_b, vmin, vmax;
+  std::vector<double> f_recv, f_open;  // per accepted receiver: F(element -> piece), visible and open
 
   Stats stats;
   bool done = false;
@@ -211,6 +248,7 @@ Solver::Impl::Impl(const Scene& scene, const Params& p)
     p_unshot[i] = channel_sum(patches[i].emission) * prep.area[i];
     leaves.push_back(p_root[i]);
   }
+  build_clusters();
   stats.patches = patches.size();
   stats.elements = leaves.size();
   stats.emitted_power = emitted_power;
@@ -404,85 +442,107 @@ int Solver::Impl::coarser_levels(double power) const {
   return (power < 0.05 * emitted_power ? 1 : 0) + (power < 0.005 * emitted_power ? 1 : 0);
 }
 
-void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers,
-                              bool whole_scene) {
-  const uint32_t n = patches[p].corner_count;
-  const double area = polygon_area(node.c, n);
-  glm::dvec3 dB = node.unshot;
-  if (node.element != kNone && e_child[node.element] != kNone) {
-    glm::dvec3 power(0.0);
-    for_leaves(node.element, [&](uint32_t e) { power += e_unshot[e] * e_area[e]; });
-    dB = power / area;
-  } else if (node.element != kNone) {
-    dB = e_unshot[node.element];
-  }
-  if (channel_sum(dB) <= 0.0 || receivers.empty()) return;
+std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<uint32_t> receivers, bool whole_scene) {
+  const uint32_t p = piece.patch;
+  const glm::dvec3& dB = piece.dB;
+  const double area = piece.area;
   const double power = channel_sum(dB) * area;
-  const glm::dvec3 centre = polygon_centre(node.c, n);
-  const double diameter = polygon_diameter(node.c, n);
+  const glm::dvec3& centre = piece.centre;
 
-  // Receivers split by earlier nodes are replaced by their leaves.
+  // Receivers split by earlier pieces are replaced by their leaves.
   std::vector<uint32_t> current;
   current.reserve(receivers.size());
   for (uint32_t e : receivers) for_leaves(e, [&](uint32_t leaf) { current.push_back(leaf); });
 
-  // What the hemicube must see: every receiver, and whatever may stand between a receiver and the
-  // shooting area (within the ball around the area that holds every receiver).
+  // Near-field: a receiver close to the piece (a room corner, or a block standing on a lit floor,
+  // whose faces see only part of the piece) sees it very differently from how the hemicube at its
+  // centre sees the receiver. Such receivers take their share from the piece's sub-pieces instead
+  // (the caller's recursion), each with a hemicube of its own.
+  std::vector<uint32_t> accepted, near;
+  const double eps = 1e-6 * prep.diagonal;
+  const glm::dvec3& normal = prep.normal[p];
+  auto is_close = [&](uint32_t e) {
+    const uint32_t q = e_patch[e];
+    if (glm::distance(centre, e_centre[e]) - e_radius[e] >= kNearFactor * piece.diameter ||
+        prep.occlusion_group[q] == prep.occlusion_group[p])
+      return false;
+    // Only a receiver that some of the piece can see, and that can see some of the piece, counts.
+    double hi = 0.0;
+    for (const glm::dvec3& x : piece.points) hi = std::max(hi, glm::dot(prep.normal[q], x - patches[q].corners[0]));
+    bool in_front = false;
+    for (uint32_t i = 0; i < corner_count(e) && !in_front; ++i)
+      in_front = glm::dot(normal, vpos[e_corner[e][i]] - centre) > eps;
+    return hi > eps && in_front;
+  };
+  for (uint32_t e : current) (piece.may_refine && is_close(e) ? near : accepted).push_back(e);
+  if (accepted.empty()) return near;
+
+  // What the hemicube must see: every accepted receiver, and whatever may stand between one and
+  // the piece (within the ball around the piece that holds them all).
   std::vector<uint32_t> seen;
   if (whole_scene) {
     seen = leaves;
   } else {
     double radius = 0.0;
-    for (uint32_t e : current) radius = std::max(radius, glm::distance(centre, e_centre[e]) + e_radius[e]);
-    radius += 0.5 * diameter;
+    for (uint32_t e : accepted) radius = std::max(radius, glm::distance(centre, e_centre[e]) + e_radius[e]);
+    radius += 0.5 * piece.diameter;
     for (uint32_t e : leaves)
       if (glm::distance(centre, e_centre[e]) - e_radius[e] <= radius) seen.push_back(e);
   }
 
   ++stats.hemicubes;
   ++stamp;
-  cube = &cubes[static_cast<size_t>(node.depth) + coarser_levels(power)];
-  cube->place(centre, prep.normal[p], node.c[1] - node.c[0]);
+  cube = &cubes[std::min<size_t>(static_cast<size_t>(piece.depth) + coarser_levels(power), cubes.size() - 1)];
+  cube->place(centre, normal, piece.up);
   project(p, seen);
 
-  // Near-field: a receiver close to the shooting area (a room corner, or a block standing on a lit
-  // floor, whose faces see only part of the area) sees it very differently from how the hemicube at
-  // its centre sees the receiver. Such receivers take their share from the area's four quarters instead, each with a
-  // hemicube of its own, down to kMaxShooterDepth levels; weak shots stay whole.
-  std::vector<uint32_t> accepted, near;
-  const bool may_refine = node.depth < kMaxShooterDepth && power >= params.feps * emitted_power;
-  const double eps = 1e-6 * prep.diagonal;
-  const glm::dvec3& normal = prep.normal[p];
-  for (uint32_t e : current) {
-    bool is_near = false;
-    const uint32_t q = e_patch[e];
-    if (may_refine && glm::distance(centre, e_centre[e]) - e_radius[e] < kNearFactor * diameter &&
-        prep.occlusion_group[q] != prep.occlusion_group[p]) {
-      // Only a receiver that some of the area can see, and that can see some of the area, counts.
-      double lo = 0.0, hi = 0.0;
-      for (uint32_t i = 0; i < n; ++i) {
-        const double d = glm::dot(prep.normal[q], node.c[i] - patches[q].corners[0]);
-        lo = std::min(lo, d);
-        hi = std::max(hi, d);
-      }
-      bool in_front = false;
-      for (uint32_t i = 0; i < corner_count(e) && !in_front; ++i)
-        in_front = glm::dot(normal, vpos[e_corner[e][i]] - centre) > eps;
-      is_near = hi > eps && in_front;
-    }
-    (is_near ? near : accepted).push_back(e);
-  }
-
-  // This area's share of the emitted power: how much the interaction matters (criterion a).
+  // This piece's share of the emitted power: how much the interaction matters (criterion a).
   const double weight = power / emitted_power;
   auto received = [&](uint32_t e, double ff) {
     return std::min(1.0, ff * area / e_area[e]);  // F(element -> shooter) by reciprocity
   };
 
-  for (int round = 0; round < 64 && !accepted.empty(); ++round) {
+  // Receivers within a diameter of a piece that is not refined further (a weak shot, or the
+  // deepest level) and smaller than it take the exact form factor from their centre to the piece
+  // (Lambert's formula, the piece cut to the receiver's front side) times the fraction of them the
+  // hemicube found visible: reciprocity from the piece's centre errs by the piece's size against
+  // the distance, the receiver's centre by the receiver's, so the smaller of the two is the point.
+  const bool exact_close = !piece.may_refine && piece.points.size() <= 4;
+  auto exact = [&](uint32_t e) {
+    const glm::dvec3& n = prep.normal[e_patch[e]];
+    const glm::dvec3 x = polygon_centre(corners_of_copy(e), corner_count(e));
+    uint32_t m = 0;
+    std::array<glm::dvec3, 8> clipped{};
+    const size_t k = piece.points.size();
+    for (size_t i = 0; i < k; ++i) {
+      const glm::dvec3& a = piece.points[i];
+      const glm::dvec3& b = piece.points[(i + 1) % k];
+      const double da = glm::dot(n, a - x), db = glm::dot(n, b - x);
+      if (da > 0.0) clipped[m++] = a;
+      if ((da > 0.0) != (db > 0.0)) clipped[m++] = a + (b - a) * (da / (da - db));
+    }
+    return m < 3 ? 0.0 : point_polygon_form_factor(x, n, std::span(clipped.data(), m));
+  };
+  auto form_factors = [&] {
+    for (uint32_t e : accepted) {
+      f_recv[e] = f_open[e] = 0.0;
+      if (e_stamp[e] != stamp || e_ff_open[e] <= 0.0) continue;
+      f_recv[e] = received(e, e_ff[e]);
+      f_open[e] = received(e, e_ff_open[e]);
+      if (exact_close && 2.0 * e_radius[e] < piece.diameter &&
+          glm::distance(centre, e_centre[e]) - e_radius[e] < piece.diameter && is_close(e)) {
+        const double f = std::min(1.0, exact(e));
+        f_recv[e] = f * (e_ff[e] / e_ff_open[e]);
+        f_open[e] = f;
+      }
+    }
+  };
+
+  for (int round = 0; round < 64; ++round) {
+    form_factors();
     // This shot's radiosity at every accepted receiver, and its spread around every vertex.
     for (uint32_t e : accepted) {
-      const double v = e_stamp[e] == stamp ? mean(patches[e_patch[e]].reflectance * dB) * received(e, e_ff[e]) : 0.0;
+      const double v = mean(patches[e_patch[e]].reflectance * dB) * f_recv[e];
       shot_b[e] = v;
       for (uint32_t k = 0; k < corner_count(e); ++k) {
         const uint32_t vert = e_corner[e][k];
@@ -501,7 +561,7 @@ void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<u
         stats.splits_form_factor += split_it;
         // (b) partly hidden, and the hidden part matters.
         if (!split_it && e_ff[e] > 0.0 && e_ff[e] < e_ff_open[e]) {
-          const double open = mean(patches[e_patch[e]].reflectance * dB) * received(e, e_ff_open[e]);
+          const double open = mean(patches[e_patch[e]].reflectance * dB) * f_open[e];
           split_it = open - shot_b[e] > b_tolerance;
           stats.splits_visibility += split_it;
         }
@@ -541,16 +601,43 @@ void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<u
     }
   }
 
-  // Southwell step: distribute this area's unshot radiosity to the receivers that took it here.
+  // Southwell step: distribute this piece's unshot radiosity to the receivers that took it here.
+  form_factors();
   for (uint32_t e : accepted) {
-    if (e_stamp[e] != stamp || e_ff[e] <= 0.0) continue;
+    if (f_recv[e] <= 0.0) continue;
     const uint32_t q = e_patch[e];
-    const glm::dvec3 gain = patches[q].reflectance * dB * received(e, e_ff[e]);
+    const glm::dvec3 gain = patches[q].reflectance * dB * f_recv[e];
     e_b[e] += gain;
     e_unshot[e] += gain;
     p_unshot[q] += channel_sum(gain) * e_area[e];
+    u_unshot[p_unit[q]] += channel_sum(gain) * e_area[e];
   }
+  return near;
+}
 
+void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers,
+                              bool whole_scene) {
+  const uint32_t n = patches[p].corner_count;
+  Piece piece;
+  piece.patch = p;
+  piece.area = polygon_area(node.c, n);
+  piece.dB = node.unshot;
+  if (node.element != kNone && e_child[node.element] != kNone) {
+    glm::dvec3 power(0.0);
+    for_leaves(node.element, [&](uint32_t e) { power += e_unshot[e] * e_area[e]; });
+    piece.dB = power / piece.area;
+  } else if (node.element != kNone) {
+    piece.dB = e_unshot[node.element];
+  }
+  if (channel_sum(piece.dB) <= 0.0 || receivers.empty()) return;
+  piece.centre = polygon_centre(node.c, n);
+  piece.up = node.c[1] - node.c[0];
+  piece.diameter = polygon_diameter(node.c, n);
+  piece.points.assign(node.c.begin(), node.c.begin() + n);
+  piece.depth = node.depth;
+  // Weak shots stay whole.
+  piece.may_refine = node.depth < kMaxShooterDepth && channel_sum(piece.dB) * piece.area >= params.feps * emitted_power;
+  const std::vector<uint32_t> near = shoot_piece(piece, std::move(receivers), whole_scene);
   if (near.empty()) return;
   const bool is_leaf = node.element == kNone || e_child[node.element] == kNone;
   for (uint32_t k = 0; k < 4; ++k) {
@@ -558,8 +645,145 @@ void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<u
     child_corners(node.c, n, k, kid.c);
     kid.depth = node.depth + 1;
     kid.element = is_leaf ? kNone : e_child[node.element] + k;
-    kid.unshot = dB;  // a geometric piece of a leaf shares the leaf's unshot radiosity
+    kid.unshot = piece.dB;  // a geometric piece of a leaf shares the leaf's unshot radiosity
     shoot_node(p, kid, near, false);
+  }
+}
+
+void Solver::Impl::shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bool whole_scene, int depth) {
+  if (receivers.empty()) return;
+  const ClusterNode& node = c_nodes[c];
+  if (node.end - node.begin == 1) {
+    // One patch: it shoots for these receivers as it would alone.
+    const uint32_t p = cluster_patch[node.begin];
+    Corners root{};
+    corners_of(p_root[p], root);
+    shoot_node(p, {root, p_root[p], glm::dvec3(0.0), std::min(depth / 2, kMaxShooterDepth)}, std::move(receivers),
+               whole_scene);
+    return;
+  }
+  Piece piece;
+  piece.patch = cluster_patch[node.begin];
+  glm::dvec3 power(0.0);
+  for (uint32_t i = node.begin; i < node.end; ++i)
+    for_leaves(p_root[cluster_patch[i]], [&](uint32_t e) { power += e_unshot[e] * e_area[e]; });
+  if (channel_sum(power) <= 0.0) return;
+  piece.area = node.area;
+  piece.dB = power / node.area;
+  piece.centre = node.centre;
+  piece.up = node.box[1] - node.box[0];
+  if (glm::length(glm::cross(piece.up, prep.normal[piece.patch])) < 1e-9 * prep.diagonal) piece.up = node.box[2] - node.box[0];
+  piece.diameter = node.diameter;
+  piece.points.assign(node.box.begin(), node.box.end());
+  piece.depth = depth / 2;  // each level halves the area, every second one the width
+  // A cluster stands for its patches: receivers near it always go on to its halves, down to single
+  // patches, so that clustering never makes a receiver see a coarser shooter than the patches.
+  piece.may_refine = true;
+  const std::vector<uint32_t> near = shoot_piece(piece, std::move(receivers), whole_scene);
+  if (near.empty()) return;
+  // Near receivers go on to the quarters (the halves' halves: half as wide), as for a patch.
+  for (uint32_t h = node.child; h < node.child + 2; ++h) {
+    if (c_nodes[h].child == kNone) {
+      shoot_cluster(h, near, false, depth + 2);
+      continue;
+    }
+    shoot_cluster(c_nodes[h].child, near, false, depth + 2);
+    shoot_cluster(c_nodes[h].child + 1, near, false, depth + 2);
+  }
+}
+
+void Solver::Impl::build_cluster(uint32_t id, uint32_t begin, uint32_t end) {
+  ClusterNode node;
+  node.begin = begin;
+  node.end = end;
+  glm::dvec3 lo(std::numeric_limits<double>::max()), hi(std::numeric_limits<double>::lowest());
+  glm::dvec3 clo = lo, chi = hi;  // of the patch centres
+  for (uint32_t i = begin; i < end; ++i) {
+    const uint32_t q = cluster_patch[i];
+    const Patch& patch = patches[q];
+    for (uint32_t k = 0; k < patch.corner_count; ++k) {
+      lo = glm::min(lo, patch.corners[k]);
+      hi = glm::max(hi, patch.corners[k]);
+    }
+    const glm::dvec3 pc = polygon_centre(patch.corners, patch.corner_count);
+    node.centre += pc * prep.area[q];
+    node.area += prep.area[q];
+    clo = glm::min(clo, pc);
+    chi = glm::max(chi, pc);
+  }
+  node.centre /= node.area;
+  for (int k = 0; k < 8; ++k) node.box[k] = glm::dvec3(k & 1 ? hi.x : lo.x, k & 2 ? hi.y : lo.y, k & 4 ? hi.z : lo.z);
+  for (uint32_t i = begin; i < end; ++i) {
+    const Patch& patch = patches[cluster_patch[i]];
+    for (uint32_t k = 0; k < patch.corner_count; ++k)
+      node.diameter = std::max(node.diameter, 2.0 * glm::distance(node.centre, patch.corners[k]));
+  }
+  if (end - begin > 1) {
+    // Median cut of the patch centres across their widest extent.
+    const glm::dvec3 ext = chi - clo;
+    const int axis = ext.x >= ext.y && ext.x >= ext.z ? 0 : ext.y >= ext.z ? 1 : 2;
+    const uint32_t mid = begin + (end - begin) / 2;
+    auto key = [&](uint32_t q) { return polygon_centre(patches[q].corners, patches[q].corner_count)[axis]; };
+    std::nth_element(cluster_patch.begin() + begin, cluster_patch.begin() + mid, cluster_patch.begin() + end,
+                     [&](uint32_t a, uint32_t b) { return key(a) != key(b) ? key(a) < key(b) : a < b; });
+    node.child = static_cast<uint32_t>(c_nodes.size());
+    c_nodes.resize(c_nodes.size() + 2);
+    build_cluster(node.child, begin, mid);
+    build_cluster(node.child + 1, mid, end);
+  }
+  c_nodes[id] = node;
+}
+
+void Solver::Impl::build_clusters() {
+  // Small patches of one surface (an occlusion group: coplanar and edge-connected) with the same
+  // emission shoot together: each surface's tree is cut into clusters no wider than cluster_size
+  // of the scene's diagonal. Larger patches shoot alone.
+  const double limit = params.cluster_size * prep.diagonal;
+  std::map<std::pair<uint32_t, std::array<double, 3>>, std::vector<uint32_t>> groups;
+  p_unit.assign(patches.size(), kNone);
+  for (uint32_t p = 0; p < patches.size(); ++p) {
+    Corners c{};
+    corners_of(p_root[p], c);
+    if (limit <= 0.0 || polygon_diameter(c, patches[p].corner_count) > 0.5 * limit) continue;
+    const glm::dvec3& e = patches[p].emission;
+    groups[{prep.occlusion_group[p], {e.x, e.y, e.z}}].push_back(p);
+  }
+  std::vector<std::vector<uint32_t>> by_group;
+  for (auto& [key, members] : groups) by_group.push_back(std::move(members));
+  for (auto& members : by_group) {
+    if (members.size() < 2) continue;
+    const uint32_t begin = static_cast<uint32_t>(cluster_patch.size());
+    cluster_patch.insert(cluster_patch.end(), members.begin(), members.end());
+    // Cut from the top until the pieces are narrow enough.
+    const uint32_t root = static_cast<uint32_t>(c_nodes.size());
+    c_nodes.emplace_back();
+    build_cluster(root, begin, static_cast<uint32_t>(cluster_patch.size()));
+    std::vector<uint32_t> stack{root};
+    while (!stack.empty()) {
+      const uint32_t c = stack.back();
+      stack.pop_back();
+      if (c_nodes[c].diameter > limit && c_nodes[c].child != kNone) {
+        stack.push_back(c_nodes[c].child);
+        stack.push_back(c_nodes[c].child + 1);
+        continue;
+      }
+      if (c_nodes[c].end - c_nodes[c].begin < 2) continue;  // one patch: it shoots alone
+      const uint32_t u = static_cast<uint32_t>(unit_patch.size());
+      unit_patch.push_back(kNone);
+      unit_node.push_back(c);
+      u_unshot.push_back(0.0);
+      for (uint32_t i = c_nodes[c].begin; i < c_nodes[c].end; ++i) {
+        p_unit[cluster_patch[i]] = u;
+        u_unshot[u] += p_unshot[cluster_patch[i]];
+      }
+    }
+  }
+  for (uint32_t p = 0; p < patches.size(); ++p) {
+    if (p_unit[p] != kNone) continue;
+    p_unit[p] = static_cast<uint32_t>(unit_patch.size());
+    unit_patch.push_back(p);
+    unit_node.push_back(kNone);
+    u_unshot.push_back(p_unshot[p]);
   }
 }
 
@@ -576,6 +800,8 @@ void Solver::Impl::replace_split(std::vector<uint32_t>& list) const {
 
 void Solver::Impl::grow_scratch() {
   shot_b.resize(e_patch.size());
+  f_recv.resize(e_patch.size());
+  f_open.resize(e_patch.size());
   vmin.resize(vpos.size(), std::numeric_limits<double>::max());
   vmax.resize(vpos.size(), std::numeric_limits<double>::lowest());
 }
@@ -612,6 +838,7 @@ void Solver::Impl::shoot_patch(uint32_t p) {
   for (const ShooterNode& top : tops) shoot_node(p, top, leaves, true);
   for_leaves(p_root[p], [&](uint32_t e) { e_unshot[e] = glm::dvec3(0.0); });
   p_unshot[p] = 0.0;
+  u_unshot[p_unit[p]] = 0.0;
 }
 
 bool Solver::Impl::step() {
@@ -628,9 +855,21 @@ bool Solver::Impl::step() {
   }
   const auto t0 = Clock::now();
   uint32_t best = 0;
-  for (uint32_t p = 1; p < patches.size(); ++p)
-    if (p_unshot[p] > p_unshot[best]) best = p;
-  shoot_patch(best);
+  for (uint32_t u = 1; u < u_unshot.size(); ++u)
+    if (u_unshot[u] > u_unshot[best]) best = u;
+  if (unit_node[best] == kNone) {
+    shoot_patch(unit_patch[best]);
+  } else {
+    grow_scratch();
+    shoot_cluster(unit_node[best], leaves, true, 0);
+    const ClusterNode& c = c_nodes[unit_node[best]];
+    for (uint32_t i = c.begin; i < c.end; ++i) {
+      const uint32_t q = cluster_patch[i];
+      for_leaves(p_root[q], [&](uint32_t e) { e_unshot[e] = glm::dvec3(0.0); });
+      p_unshot[q] = 0.0;
+    }
+    u_unshot[best] = 0.0;
+  }
   ++stats.shots;
   update_unshot_total();
   stats.seconds += seconds_since(t0);

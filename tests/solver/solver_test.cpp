@@ -78,6 +78,46 @@ INSTANTIATE_TEST_SUITE_P(Solver, ClosedBox,
                                   (test.param.method == Method::kAntiAliased ? "Aa" : "Classical");
                          });
 
+// Many small patches per wall: they shoot in clusters (a wall's patches together, quarters of the
+// cluster for receivers near it, single patches at the closest), and the closed form still holds.
+// Shooting every patch alone is no better: near corners its weak shots see each small patch from
+// its centre (RMS 2.8 %, worst element 9 % on this box).
+TEST(Solver, ClustersOfSmallPatchesKeepTheClosedForm) {
+  const glm::dvec3 rho(0.5, 0.3, 0.7), e(1.0, 2.0, 0.5);
+  const glm::dvec3 expected = e / (glm::dvec3(1.0) - rho);
+  for (bool block : {false, true}) {
+    const Scene scene = make_closed_box(2.0, 10, rho, e, block);  // 600 patches 0.2 wide
+    Params params;
+    params.cluster_size = 0.25;  // clusters up to 0.87 wide, of patches up to 0.43
+    Solver clustered(scene, params);
+    const Stats& st = clustered.run();
+    ASSERT_TRUE(st.converged);
+    if (!block) {
+      params.cluster_size = 0.0;
+      Solver alone(scene, params);
+      const Stats& st_alone = alone.run();
+      // Clusters are the unit of shooting: far fewer shots than patches shooting alone.
+      EXPECT_LT(st.shots * 3, st_alone.shots) << st.shots << " against " << st_alone.shots;
+    }
+    const Mesh mesh = clustered.mesh();
+    double worst = 0.0, sum2 = 0.0, total_ba = 0.0, total_a = 0.0;
+    for (const auto& el : mesh.elements) {
+      double w = 0.0;
+      for (int c = 0; c < 3; ++c) w = std::max(w, std::abs(el.radiosity[c] / expected[c] - 1.0));
+      worst = std::max(worst, w);
+      sum2 += w * w;
+      total_ba += mean3(el.radiosity) * el.area;
+      total_a += el.area;
+    }
+    // Energy: sum A B = sum A E / (1 - rho). The exact form factors of receivers close to a
+    // small shooting piece are not reciprocal to the hemicube's, so energy holds to the per-element
+    // accuracy (here +0.5 %) rather than to rounding.
+    EXPECT_NEAR(total_ba / total_a / mean3(expected), 1.0, 0.01) << (block ? "with block" : "empty");
+    EXPECT_LT(std::sqrt(sum2 / mesh.elements.size()), 0.025) << (block ? "with block" : "empty");
+    EXPECT_LT(worst, 0.08) << (block ? "with block" : "empty");
+  }
+}
+
 // Whether segment p->q hits a convex planar polygon (independent of the solver's hemicube).
 bool segment_hits(const glm::dvec3& p, const glm::dvec3& q, const Patch& patch) {
   const glm::dvec3 n = glm::cross(patch.corners[1] - patch.corners[0], patch.corners[2] - patch.corners[0]);

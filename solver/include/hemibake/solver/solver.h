@@ -58,6 +58,9 @@ struct Params {
   uint32_t threads = 0;         ///< worker threads within a shot; 0 = hardware concurrency
   double shooter_size = 0.5;    ///< a patch shoots from sub-areas no wider than this fraction of the
                                 ///< scene's diagonal (large shooters near receivers are not points)
+  double cluster_size = 0.15;   ///< non-emitting patches narrower than half this (times the scene's
+                                ///< diagonal) shoot together with their surface's neighbours, in
+                                ///< clusters up to this wide; 0 = every patch shoots alone
   bool reuse_visibility = true; ///< children take visibility from their parent's pixels; false
                                 ///< re-projects the whole scene after every split (for comparison)
 };
