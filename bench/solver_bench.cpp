@@ -277,7 +277,7 @@ int main(int argc, char** argv) {
     std::printf("## Scaling: the furnished room at several patch counts (paper's settings, all threads)\n\n");
     std::printf("| input patches | aa time (s) | aa shots | aa elements | aa time per shot (ms) | aa time per shot per 1000 elements (ms) | aa peak memory (MB) | hr time (s) | hr links | hr elements | hr links per patch | hr peak memory (MB) |\n");
     std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
-    for (uint32_t target : {400u, 800u, 1600u, 3200u, 6300u, 12600u}) {
+    for (uint32_t target : {400u, 800u, 1600u, 3200u, 6300u, 12600u, 25200u}) {
       const Scene room = make_furnished_room(target);
       const Run aa = run_method(room, "aa", 0, 0);
       const Run hr = run_method(room, "hr", 0, 0);
@@ -344,6 +344,7 @@ int main(int argc, char** argv) {
     const Scene box = make_closed_box(1.0, cells, glm::dvec3(0.5), glm::dvec3(1.0), false);
     Params p;
     p.aeps = 0.5;  // nothing splits: the element count stays fixed
+    p.cluster_size = 0.0;  // every patch shoots alone: one whole-scene hemicube per shot
     p.max_shots = 40;
     p.shooter_size = 10.0;
     const Result r = isolated([&] { return solve(box, p); });

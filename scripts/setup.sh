@@ -8,7 +8,7 @@ packages=(
   build-essential cmake pkg-config
   libglm-dev
   libtinygltf-dev libdraco-dev libstb-dev nlohmann-json3-dev
-  libboost1.81-dev libsqlite3-dev libssl-dev libembree-dev
+  libboost1.81-dev libsqlite3-dev libssl-dev libembree-dev zlib1g-dev
   libgtest-dev libgmock-dev libbenchmark-dev
 )
 if [[ "${1:-}" == "--test" ]]; then

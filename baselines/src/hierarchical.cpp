@@ -222,26 +222,32 @@ class Solver {
   bool cancelled() const { return cancelled_; }
 
   solver::Mesh mesh() const {
-    // Leaves, with vertices shared by position; each element's loop also holds the corners of finer
-    // neighbours on its edges (their midpoints are computed with the same arithmetic), so the
-    // output has no T-junctions.
+    // Leaves, with vertices shared by position within a surface (same material, same plane
+    // direction: radiosity is not averaged across creases or materials, as in the solver's output);
+    // each element's loop also holds the corners of finer neighbours on its edges (their midpoints
+    // are computed with the same arithmetic), so the output has no T-junctions.
     solver::Mesh m;
-    std::map<std::array<double, 3>, uint32_t> vid;
-    auto key = [](const glm::dvec3& p) { return std::array<double, 3>{p.x, p.y, p.z}; };
+    using Key = std::array<double, 7>;
+    std::map<Key, uint32_t> vid;
+    auto key = [&](const glm::dvec3& p, uint32_t patch) {
+      const glm::dvec3 n = glm::round(normal_[patch] * 1e6);
+      return Key{p.x, p.y, p.z, static_cast<double>(scene_.patches[patch].material), n.x, n.y, n.z};
+    };
     std::vector<const Node*> leaves;
     for (const Node* node : all_) {
       if (node->children() != nullptr) continue;
       leaves.push_back(node);
       for (uint32_t k = 0; k < node->n; ++k) {
-        auto [it, fresh] = vid.try_emplace(key(node->c[k]), static_cast<uint32_t>(m.positions.size()));
+        auto [it, fresh] = vid.try_emplace(key(node->c[k], node->patch), static_cast<uint32_t>(m.positions.size()));
         if (fresh) m.positions.push_back(node->c[k]);
       }
     }
     std::vector<double> weight(m.positions.size(), 0.0);
     m.radiosity.assign(m.positions.size(), glm::dvec3(0.0));
+    uint32_t surface_patch = 0;
     std::function<void(const glm::dvec3&, const glm::dvec3&)> hanging = [&](const glm::dvec3& a, const glm::dvec3& b) {
       const glm::dvec3 mid = 0.5 * (a + b);
-      const auto it = vid.find(key(mid));
+      const auto it = vid.find(key(mid, surface_patch));
       if (it == vid.end()) return;
       hanging(a, mid);
       m.boundary.push_back(it->second);
@@ -254,8 +260,9 @@ class Solver {
       el.radiosity = node->b;
       el.area = node->area;
       el.boundary_begin = static_cast<uint32_t>(m.boundary.size());
+      surface_patch = node->patch;
       for (uint32_t k = 0; k < node->n; ++k) {
-        el.corners[k] = vid.at(key(node->c[k]));
+        el.corners[k] = vid.at(key(node->c[k], node->patch));
         m.boundary.push_back(el.corners[k]);
         hanging(node->c[k], node->c[(k + 1) % node->n]);
       }
@@ -270,6 +277,7 @@ class Solver {
       if (weight[v] > 0.0) m.radiosity[v] /= weight[v];
     return m;
   }
+
 
  private:
   void number(Node& node) {

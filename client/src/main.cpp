@@ -52,6 +52,7 @@ void usage(FILE* out) {
                "usage:\n"
                "  hemibake bake IN.glb|IN.gltf -o OUT.glb [options]   bake a glTF scene\n"
                "  hemibake cornell [options]                          bake the built-in Cornell box\n"
+               "  hemibake room [--patches N] [options]               bake the benchmarks' furnished room\n"
                "  hemibake bake --server URL IN -o OUT.glb [options]  bake on a hemibake-server\n"
                "  hemibake submit IN [options]                        submit to the server; prints the job id\n"
                "  hemibake status ID | watch ID | cancel ID           a job's state, live progress, cancel it\n"
@@ -87,7 +88,7 @@ struct Options {
   std::string input, output, render_path, wire_path, server, state;
   bool flat = false, wire_flag = false;
   std::string baseline;  // "hr" or "reference", else empty
-  uint32_t rays = 4, samples = 256;
+  uint32_t rays = 4, samples = 256, patches = 6300;
   std::optional<hemibake::client::Camera> camera;
 };
 
@@ -175,9 +176,10 @@ std::string parse(int argc, char** argv, int first, bool bake, Options& o) {
     else if (opt == "--max-triangles" && whole) o.limits.max_triangles = static_cast<uint64_t>(x);
     else if (opt == "--rays" && whole && x >= 1 && x <= 1024) o.rays = static_cast<uint32_t>(x);
     else if (opt == "--samples" && whole && x >= 1 && x <= 1000000) o.samples = static_cast<uint32_t>(x);
+    else if (opt == "--patches" && whole && x >= 100 && x <= 1000000) o.patches = static_cast<uint32_t>(x);
     else if (opt == "--resolution" || opt == "--max-shots" || opt == "--max-elements" || opt == "--threads" ||
              opt == "--position-bits" || opt == "--texcoord-bits" || opt == "--draco-speed" ||
-             opt == "--exposure" || opt == "--max-triangles" || opt == "--rays" || opt == "--samples")
+             opt == "--exposure" || opt == "--max-triangles" || opt == "--rays" || opt == "--samples" || opt == "--patches")
       return opt + " is out of range (got '" + val + "')";
     else return "unknown option '" + opt + "'";
   }
@@ -241,21 +243,41 @@ hemibake::client::Camera frame(const hemibake::solver::Mesh& mesh) {
   return cam;
 }
 
-int cornell(const Options& o) {
-  const auto scene = hemibake::solver::make_cornell_box();
+// Solves `scene` with the chosen method (aa, classical or hr), printing the statistics.
+hemibake::solver::Mesh solve_builtin(const hemibake::solver::Scene& scene, const Options& o) {
+  if (o.baseline == "hr") {
+    hemibake::baselines::HierarchicalParams hp;
+    hp.feps = o.params.feps;
+    hp.aeps = o.params.aeps;
+    hp.rays = o.rays;
+    hp.threads = o.params.threads;
+    hemibake::baselines::HierarchicalStats hs;
+    auto mesh = hemibake::baselines::solve_hierarchical(scene, hp, hs);
+    std::printf("  hierarchical radiosity: %.3f s (%.3f s linking), %llu links, %llu elements, %u iterations\n", hs.seconds,
+                hs.seconds_linking, static_cast<unsigned long long>(hs.links), static_cast<unsigned long long>(hs.elements),
+                hs.iterations);
+    return mesh;
+  }
   hemibake::solver::Solver solver(scene, o.params);
   solve(solver);
-  const auto& st = solver.stats();
-  const auto mesh = solver.mesh();
+  print_stats(solver.stats());
+  return solver.mesh();
+}
+
+const char* method_name(const Options& o) {
+  return o.baseline == "hr" ? "hierarchical radiosity" : o.params.method == Method::kAntiAliased ? "anti-aliased hemicube" : "classical hemicube";
+}
+
+int cornell(const Options& o) {
+  const auto scene = hemibake::solver::make_cornell_box();
+  std::printf("Cornell box, %s, resolution %u\n", method_name(o), o.params.resolution);
+  const auto mesh = solve_builtin(scene, o);
   std::map<uint32_t, std::pair<double, double>> by_material;  // material -> (sum B*A, A)
   for (const auto& el : mesh.elements) {
     auto& [ba, a] = by_material[scene.patches[el.patch].material];
     ba += (el.radiosity.x + el.radiosity.y + el.radiosity.z) / 3.0 * el.area;
     a += el.area;
   }
-  std::printf("Cornell box, %s hemicube, resolution %u\n",
-              o.params.method == Method::kAntiAliased ? "anti-aliased" : "classical", o.params.resolution);
-  print_stats(st);
   const char* names[] = {"white", "red", "green", "light"};
   for (const auto& [mat, v] : by_material)
     std::printf("  mean radiosity %-6s %.4f\n", mat < 4 ? names[mat] : "?", v.first / v.second);
@@ -263,6 +285,18 @@ int cornell(const Options& o) {
   cam.position = {278, 273, -800};
   cam.target = {278, 273, 0};
   cam.fov_y_degrees = 39.3;
+  return render_pngs(mesh, o, o.camera.value_or(cam)) ? 0 : 1;
+}
+
+// The furnished room of the benchmarks (the paper's second scene), about `patches` patches.
+int room(const Options& o) {
+  const auto scene = hemibake::solver::make_furnished_room(o.patches);
+  std::printf("furnished room, %zu patches, %s, resolution %u\n", scene.patches.size(), method_name(o), o.params.resolution);
+  const auto mesh = solve_builtin(scene, o);
+  hemibake::client::Camera cam;  // inside, from a top corner, looking at the table
+  cam.position = {5.7, 2.7, 4.7};
+  cam.target = {2.6, 0.5, 1.9};
+  cam.fov_y_degrees = 60.0;
   return render_pngs(mesh, o, o.camera.value_or(cam)) ? 0 : 1;
 }
 
@@ -366,20 +400,22 @@ int main(int argc, char** argv) {
   const std::string command = argv[1];
   const bool remote_command = command == "submit" || command == "status" || command == "watch" ||
                               command == "fetch" || command == "cancel" || command == "list";
-  if (command != "cornell" && command != "bake" && command != "render" && !remote_command) {
+  if (command != "cornell" && command != "room" && command != "bake" && command != "render" && !remote_command) {
     std::fprintf(stderr, "hemibake: unknown command '%s' (try --help)\n", argv[1]);
     return 2;
   }
   Options o;
-  if (std::string err = parse(argc, argv, 2, command != "cornell" && command != "list", o); !err.empty()) {
+  if (std::string err = parse(argc, argv, 2, command != "cornell" && command != "room" && command != "list", o); !err.empty()) {
     std::fprintf(stderr, "hemibake: %s\n", err.c_str());
     return 2;
   }
-  if (!o.baseline.empty() && command != "bake" && command != "submit") {
-    std::fprintf(stderr, "hemibake: --method %s is for bake and submit only\n", o.baseline.c_str());
+  if (!o.baseline.empty() && command != "bake" && command != "submit" &&
+      !(o.baseline == "hr" && (command == "cornell" || command == "room"))) {
+    std::fprintf(stderr, "hemibake: --method %s is for bake and submit (hr also cornell and room) only\n", o.baseline.c_str());
     return 2;
   }
   if (command == "cornell") return cornell(o);
+  if (command == "room") return room(o);
   if (command == "render") return render_file(o);
   if (command == "bake" && o.server.empty() && !std::getenv("HEMIBAKE_SERVER")) return bake(o);
   if (command == "bake" && o.server.empty()) o.server = std::getenv("HEMIBAKE_SERVER");

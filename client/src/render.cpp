@@ -1,6 +1,7 @@
 #include "render.h"
 
 #include <glm/geometric.hpp>
+#include <zlib.h>
 
 #include <algorithm>
 #include <array>
@@ -15,14 +16,6 @@ struct ScreenVertex {
   double x, y, inv_z;
   glm::dvec3 colour;
 };
-
-uint32_t crc32(const uint8_t* data, size_t n, uint32_t crc = 0xffffffffu) {
-  for (size_t i = 0; i < n; ++i) {
-    crc ^= data[i];
-    for (int k = 0; k < 8; ++k) crc = (crc >> 1) ^ (0xedb88320u & (0u - (crc & 1u)));
-  }
-  return crc;
-}
 
 void put_u32(std::vector<uint8_t>& out, uint32_t v) {
   for (int s = 24; s >= 0; s -= 8) out.push_back(static_cast<uint8_t>(v >> s));
@@ -133,30 +126,18 @@ std::vector<uint8_t> render(const solver::Mesh& mesh, const Camera& cam, const R
 }
 
 bool write_png(const std::string& path, const std::vector<uint8_t>& rgb, uint32_t w, uint32_t h) {
-  // Raw scanlines (filter byte 0) wrapped in stored (uncompressed) deflate blocks.
+  // Scanlines with the Sub filter (each byte minus the one a pixel to its left), deflated by zlib.
   std::vector<uint8_t> raw;
   raw.reserve((static_cast<size_t>(w) * 3 + 1) * h);
   for (uint32_t y = 0; y < h; ++y) {
-    raw.push_back(0);
-    raw.insert(raw.end(), rgb.begin() + static_cast<size_t>(y) * w * 3, rgb.begin() + static_cast<size_t>(y + 1) * w * 3);
+    raw.push_back(1);
+    const uint8_t* row = rgb.data() + static_cast<size_t>(y) * w * 3;
+    for (uint32_t x = 0; x < w * 3; ++x) raw.push_back(static_cast<uint8_t>(row[x] - (x >= 3 ? row[x - 3] : 0)));
   }
-  std::vector<uint8_t> z{0x78, 0x01};
-  uint32_t a = 1, b = 0;
-  for (uint8_t v : raw) {
-    a = (a + v) % 65521;
-    b = (b + a) % 65521;
-  }
-  for (size_t off = 0; off < raw.size() || off == 0; off += 65535) {
-    const size_t len = std::min<size_t>(65535, raw.size() - off);
-    z.push_back(off + len >= raw.size() ? 1 : 0);
-    z.push_back(static_cast<uint8_t>(len));
-    z.push_back(static_cast<uint8_t>(len >> 8));
-    z.push_back(static_cast<uint8_t>(~len));
-    z.push_back(static_cast<uint8_t>(~len >> 8));
-    z.insert(z.end(), raw.begin() + off, raw.begin() + off + len);
-    if (raw.empty()) break;
-  }
-  put_u32(z, (b << 16) | a);
+  uLongf zlen = compressBound(static_cast<uLong>(raw.size()));
+  std::vector<uint8_t> z(zlen);
+  if (compress2(z.data(), &zlen, raw.data(), static_cast<uLong>(raw.size()), 9) != Z_OK) return false;
+  z.resize(zlen);
 
   std::vector<uint8_t> png{0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
   auto chunk = [&](const char* type, const std::vector<uint8_t>& data) {
@@ -164,7 +145,7 @@ bool write_png(const std::string& path, const std::vector<uint8_t>& rgb, uint32_
     const size_t start = png.size();
     png.insert(png.end(), type, type + 4);
     png.insert(png.end(), data.begin(), data.end());
-    put_u32(png, crc32(png.data() + start, png.size() - start) ^ 0xffffffffu);
+    put_u32(png, static_cast<uint32_t>(::crc32(0L, png.data() + start, static_cast<uInt>(png.size() - start))));
   };
   std::vector<uint8_t> ihdr;
   put_u32(ihdr, w);

@@ -9,6 +9,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <sys/wait.h>
 #include <unistd.h>
 
 namespace {
@@ -43,5 +44,23 @@ TEST_P(BaselineBake, WritesALitGlbRecordingTheMethod) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Cli, BaselineBake, ::testing::Values("hr", "reference"));
+
+// The benchmarks' furnished room from the command line, with each method, renders a PNG; a bad
+// patch count is refused with a message.
+TEST(Cli, RoomRendersWithEveryMethod) {
+  for (const std::string method : {"aa", "classical", "hr"}) {
+    const std::string png = (std::filesystem::temp_directory_path() /
+                             ("hemibake-room-" + method + "-" + std::to_string(getpid()) + ".png")).string();
+    const std::string command = std::string(HEMIBAKE_CLIENT) + " room --patches 300 --convergence 0.05 --method " + method +
+                                " --render " + png + " > /dev/null";
+    ASSERT_EQ(std::system(command.c_str()), 0) << command;
+    const std::string bytes = read_all(png);
+    std::filesystem::remove(png);
+    ASSERT_GT(bytes.size(), 1000u) << method;
+    EXPECT_EQ(bytes.substr(1, 3), "PNG") << method;
+  }
+  const std::string bad = std::string(HEMIBAKE_CLIENT) + " room --patches 5 2> /dev/null";
+  EXPECT_EQ(WEXITSTATUS(std::system(bad.c_str())), 2);
+}
 
 }  // namespace
