@@ -467,18 +467,28 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   std::vector<uint32_t> accepted, near;
   const double eps = 1e-6 * prep.diagonal;
   const glm::dvec3& normal = prep.normal[p];
+  // Near: within kNearFactor diameters of the piece, or on a plane that cuts through the piece (its
+  // centre may lie behind the receiver while part of it is in front: a face of a block that sees
+  // part of the light would get nothing from the light's centre).
   auto is_close = [&](uint32_t e) {
     const uint32_t q = e_patch[e];
-    if (glm::distance(centre, e_centre[e]) - e_radius[e] >= kNearFactor * piece.diameter ||
-        prep.occlusion_group[q] == prep.occlusion_group[p])
-      return false;
+    if (prep.occlusion_group[q] == prep.occlusion_group[p]) return false;
+    const glm::dvec3& nq = prep.normal[q];
+    const glm::dvec3& oq = patches[q].corners[0];
+    const bool within = glm::distance(centre, e_centre[e]) - e_radius[e] < kNearFactor * piece.diameter;
+    if (!within && std::abs(glm::dot(nq, centre - oq)) > 0.5 * piece.diameter) return false;
     // Only a receiver that some of the piece can see, and that can see some of the piece, counts.
-    double hi = 0.0;
-    for (const glm::dvec3& x : piece.points) hi = std::max(hi, glm::dot(prep.normal[q], x - patches[q].corners[0]));
+    double lo = 0.0, hi = 0.0;
+    for (const glm::dvec3& x : piece.points) {
+      const double d = glm::dot(nq, x - oq);
+      lo = std::min(lo, d);
+      hi = std::max(hi, d);
+    }
+    if (hi <= eps || (!within && lo >= -eps)) return false;
     bool in_front = false;
     for (uint32_t i = 0; i < corner_count(e) && !in_front; ++i)
       in_front = glm::dot(normal, vpos[e_corner[e][i]] - centre) > eps;
-    return hi > eps && in_front;
+    return in_front;
   };
   for (uint32_t e : current) (piece.may_refine && is_close(e) ? near : accepted).push_back(e);
   if (accepted.empty()) return near;
@@ -560,14 +570,18 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   auto form_factors = [&] {
     for (uint32_t e : accepted) {
       f_recv[e] = f_open[e] = 0.0;
-      if (e_stamp[e] != stamp || e_ff_open[e] <= 0.0) continue;
-      f_recv[e] = received(e, e_ff[e]);
-      f_open[e] = received(e, e_ff_open[e]);
+      const bool projected = e_stamp[e] == stamp && e_ff_open[e] > 0.0;
+      if (projected) {
+        f_recv[e] = received(e, e_ff[e]);
+        f_open[e] = received(e, e_ff_open[e]);
+      }
       const double size = 2.0 * e_radius[e];
       if (exact_close && size < 2.0 * piece.diameter &&
           glm::distance(centre, e_centre[e]) - e_radius[e] < piece.diameter && is_close(e)) {
+        // A receiver the hemicube did not see (the piece's centre lies behind it, though part of
+        // the piece is in front) is taken as unoccluded: the piece is the smallest there is.
         const double f = std::min(1.0, exact(e, size < 0.5 * piece.diameter ? 1 : size < piece.diameter ? 2 : 3));
-        f_recv[e] = f * (e_ff[e] / e_ff_open[e]);
+        f_recv[e] = projected ? f * (e_ff[e] / e_ff_open[e]) : f;
         f_open[e] = f;
       }
     }
