@@ -66,6 +66,9 @@ constexpr int kMaxShooterDepth = 3;
 constexpr uint32_t kMinResolution = 20;
 // Coarser hemicubes may shoot at most this share of all the power shot (see coarser_levels).
 constexpr double kCoarseShare = 0.25;
+// Pieces carrying at least this share of the emitted power refine for receivers whose plane cuts
+// through them, however far (shoot_piece).
+constexpr double kStraddlePower = 0.05;
 
 // Child k of a quad (4 corners) or triangle (3), in the order Solver::Impl::split creates them.
 // Quads split at edge midpoints and the corners' mean (the bilinear centre); triangles at edge
@@ -467,16 +470,23 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   std::vector<uint32_t> accepted, near;
   const double eps = 1e-6 * prep.diagonal;
   const glm::dvec3& normal = prep.normal[p];
-  // Near: within kNearFactor diameters of the piece, or on a plane that cuts through the piece (its
-  // centre may lie behind the receiver while part of it is in front: a face of a block that sees
-  // part of the light would get nothing from the light's centre).
+  // Near: within kNearFactor diameters of the piece, or (a piece of a patch carrying at least
+  // kStraddlePower of the emitted power) on a plane that cuts through the piece: its centre may lie behind the receiver while part of it is in front (a face
+  // of a block that sees part of the light got nothing from the light's centre). Clusters are
+  // left to their quarters' own tests: planes cut through them everywhere in a furnished room.
+  const bool polygon = piece.points.size() <= 4 && power >= kStraddlePower * emitted_power;
   auto is_close = [&](uint32_t e) {
     const uint32_t q = e_patch[e];
     if (prep.occlusion_group[q] == prep.occlusion_group[p]) return false;
     const glm::dvec3& nq = prep.normal[q];
     const glm::dvec3& oq = patches[q].corners[0];
     const bool within = glm::distance(centre, e_centre[e]) - e_radius[e] < kNearFactor * piece.diameter;
-    if (!within && std::abs(glm::dot(nq, centre - oq)) > 0.5 * piece.diameter) return false;
+    if (!within) {
+      // The piece's centre behind the receiver's plane, or just in front of it: the centre's
+      // hemicube gives the receiver nothing, or a grazing, poor view.
+      const double dc = glm::dot(nq, centre - oq);
+      if (!polygon || dc > 0.1 * piece.diameter || dc < -0.5 * piece.diameter) return false;
+    }
     // Only a receiver that some of the piece can see, and that can see some of the piece, counts.
     double lo = 0.0, hi = 0.0;
     for (const glm::dvec3& x : piece.points) {

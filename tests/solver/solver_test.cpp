@@ -1,5 +1,6 @@
 // The progressive solver against closed-form radiosity, conservation laws and geometry computed
 // here independently of the solver.
+#include "hemibake/solver/hemicube.h"
 #include "hemibake/solver/scenes.h"
 #include "hemibake/solver/solver.h"
 
@@ -116,6 +117,36 @@ TEST(Solver, ClustersOfSmallPatchesKeepTheClosedForm) {
     EXPECT_LT(std::sqrt(sum2 / mesh.elements.size()), 0.025) << (block ? "with block" : "empty");
     EXPECT_LT(worst, 0.08) << (block ? "with block" : "empty");
   }
+}
+
+// A receiver far below a square light, on a plane through the light's centre: it sees half the
+// light, though the light's centre is on its horizon (the hemicube there gives it nothing). Its
+// radiosity must be rho E F(receiver -> the half in front), F by Lambert's formula over its area.
+TEST(Solver, ReceiverWhosePlaneCutsTheLightSeesItsHalf) {
+  Scene scene;
+  const glm::dvec3 e(10.0), rho(0.5);
+  // Light: y = 2, facing down, x and z in [-0.5, 0.5]. Receiver: the plane x = 0, facing +x.
+  add_quad(scene, {-0.5, 2, -0.5}, {0.5, 2, -0.5}, {0.5, 2, 0.5}, {-0.5, 2, 0.5}, glm::dvec3(0.0), e, 1);
+  add_quad(scene, {0, -4, -0.5}, {0, -4, 0.5}, {0, -3, 0.5}, {0, -3, -0.5}, rho, glm::dvec3(0.0), 0);
+  ASSERT_EQ(validate(scene), "");
+  Solver solver(scene, {});
+  solver.run();
+  const Mesh mesh = solver.mesh();
+  double ba = 0.0, a = 0.0;
+  for (const auto& el : mesh.elements)
+    if (el.patch == 1) {
+      ba += el.radiosity.x * el.area;
+      a += el.area;
+    }
+  const std::vector<glm::dvec3> half{{0, 2, -0.5}, {0.5, 2, -0.5}, {0.5, 2, 0.5}, {0, 2, 0.5}};
+  double f = 0.0;
+  constexpr int kGrid = 32;
+  for (int i = 0; i < kGrid; ++i)
+    for (int j = 0; j < kGrid; ++j)
+      f += point_polygon_form_factor({0, -4 + (i + 0.5) / kGrid, -0.5 + (j + 0.5) / kGrid}, {1, 0, 0}, half);
+  f /= kGrid * kGrid;
+  ASSERT_GT(f, 0.0);
+  EXPECT_NEAR(ba / a, rho.x * e.x * f, 0.05 * rho.x * e.x * f);
 }
 
 // Whether segment p->q hits a convex planar polygon (independent of the solver's hemicube).
