@@ -471,10 +471,11 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   const double eps = 1e-6 * prep.diagonal;
   const glm::dvec3& normal = prep.normal[p];
   // Near: within kNearFactor diameters of the piece, or (a piece of a patch carrying at least
-  // kStraddlePower of the emitted power) on a plane that cuts through the piece: its centre may lie behind the receiver while part of it is in front (a face
-  // of a block that sees part of the light got nothing from the light's centre). Clusters are
-  // left to their quarters' own tests: planes cut through them everywhere in a furnished room.
-  const bool polygon = piece.points.size() <= 4 && power >= kStraddlePower * emitted_power;
+  // kStraddlePower of the emitted power) on a plane that cuts through the piece: its centre may lie
+  // behind the receiver while part of it is in front (a face of a block that sees part of the light
+  // got nothing from the light's centre). Clusters are left to their quarters' own tests: planes
+  // cut through them everywhere in a furnished room.
+  const bool cut_rule = piece.points.size() <= 4 && power >= kStraddlePower * emitted_power;
   auto is_close = [&](uint32_t e) {
     const uint32_t q = e_patch[e];
     if (prep.occlusion_group[q] == prep.occlusion_group[p]) return false;
@@ -485,7 +486,7 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
       // The piece's centre behind the receiver's plane, or just in front of it: the centre's
       // hemicube gives the receiver nothing, or a grazing, poor view.
       const double dc = glm::dot(nq, centre - oq);
-      if (!polygon || dc > 0.1 * piece.diameter || dc < -0.5 * piece.diameter) return false;
+      if (!cut_rule || dc > 0.1 * piece.diameter || dc < -0.5 * piece.diameter) return false;
     }
     // Only a receiver that some of the piece can see, and that can see some of the piece, counts.
     double lo = 0.0, hi = 0.0;
@@ -589,7 +590,8 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
       if (exact_close && size < 2.0 * piece.diameter &&
           glm::distance(centre, e_centre[e]) - e_radius[e] < piece.diameter && is_close(e)) {
         // A receiver the hemicube did not see (the piece's centre lies behind it, though part of
-        // the piece is in front) is taken as unoccluded: the piece is the smallest there is.
+        // the piece is in front: a floor piece under a block's face) is taken as unoccluded from
+        // the part in front, which lies within a diameter of it.
         const double f = std::min(1.0, exact(e, size < 0.5 * piece.diameter ? 1 : size < piece.diameter ? 2 : 3));
         f_recv[e] = projected ? f * (e_ff[e] / e_ff_open[e]) : f;
         f_open[e] = f;
