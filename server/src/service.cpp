@@ -180,6 +180,7 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
     }
     active_[id].token = &token;
   }
+  preview_ready_.notify_all();  // a preview asked for between the claim and this registration
   struct Unregister {
     Service* s;
     const std::string& id;
@@ -191,6 +192,11 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
       s->preview_ready_.notify_all();
     }
   } unregister{this, id};
+  if (const auto rec = store_->get(id); rec && rec->state == JobState::kCancelled) {
+    // Cancelled between the claim and the registration, when no token could be reached.
+    store_->add_event(id, "state", json{{"state", "cancelled"}}.dump());
+    return;
+  }
   store_->add_event(id, "state", json{{"state", "running"}}.dump());
   protocol::JobSpec spec;
   if (std::string e = protocol::parse_params_json(params, spec); !e.empty()) {
@@ -501,6 +507,11 @@ Response Service::preview(const std::string& id) {
   const auto state = store_->get(id);
   std::unique_lock lock(mutex_);
   auto it = active_.find(id);
+  if (it == active_.end() && state && state->state == JobState::kRunning) {
+    // Claimed by a worker that has not registered it yet: wait a moment for it.
+    preview_ready_.wait_for(lock, std::chrono::seconds(5), [&] { return active_.count(id) != 0; });
+    it = active_.find(id);
+  }
   if (it != active_.end() && !it->second.previews) {
     lock.unlock();
     Response r = error(409, "no preview in this phase: hr has no solution until it has linked and gathered, and a reference job "
