@@ -252,21 +252,22 @@ int main(int argc, char** argv) {
     std::vector<Params> aa;
     std::vector<hemibake::baselines::HierarchicalParams> hr;
     std::vector<std::string> labels;
+    auto label = [&](const char* format, double v) {
+      char text[64];
+      std::snprintf(text, sizeof text, format, v);
+      labels.emplace_back(text);
+    };
     for (const double v : room ? std::vector<double>{50, 100, 200} : std::vector<double>{0.1, 0.03, 0.01}) {
       aa.emplace_back();
       if (room) aa.back().resolution = static_cast<uint32_t>(v);
       else aa.back().beps = v;
-      char text[64];
-      std::snprintf(text, sizeof text, room ? "resolution %g" : "beps %g", v);
-      labels.emplace_back(text);
+      label(room ? "resolution %g" : "beps %g", v);
     }
     for (const double v : room ? std::vector<double>{1, 4, 16} : std::vector<double>{0.01, 0.003, 0.001}) {
       hr.emplace_back();
       if (room) hr.back().rays = static_cast<uint32_t>(v);
       else hr.back().feps = v;
-      char text[64];
-      std::snprintf(text, sizeof text, room ? "%g rays per link" : "FEPS %g", v);
-      labels.emplace_back(text);
+      label(room ? "%g rays per link" : "FEPS %g", v);
     }
     if (room) sweep(make_furnished_room(), "furnished room, 6758 patches", 256, aa, hr, labels, 1);
     else sweep(cornell, "Cornell box", 512, aa, hr, labels, 3);

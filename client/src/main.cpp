@@ -243,20 +243,27 @@ hemibake::client::Camera frame(const hemibake::solver::Mesh& mesh) {
   return cam;
 }
 
+// Solves `scene` with hierarchical radiosity (the options' FEPS, AEPS, rays and threads) and prints
+// its statistics.
+hemibake::solver::Mesh solve_hr(const hemibake::solver::Scene& scene, const Options& o,
+                                hemibake::baselines::HierarchicalStats& hs) {
+  hemibake::baselines::HierarchicalParams hp;
+  hp.feps = o.params.feps;
+  hp.aeps = o.params.aeps;
+  hp.rays = o.rays;
+  hp.threads = o.params.threads;
+  auto mesh = hemibake::baselines::solve_hierarchical(scene, hp, hs);
+  std::printf("  hierarchical radiosity: %.3f s (%.3f s linking), %llu links, %llu elements, %u iterations\n", hs.seconds,
+              hs.seconds_linking, static_cast<unsigned long long>(hs.links), static_cast<unsigned long long>(hs.elements),
+              hs.iterations);
+  return mesh;
+}
+
 // Solves `scene` with the chosen method (aa, classical or hr), printing the statistics.
 hemibake::solver::Mesh solve_builtin(const hemibake::solver::Scene& scene, const Options& o) {
   if (o.baseline == "hr") {
-    hemibake::baselines::HierarchicalParams hp;
-    hp.feps = o.params.feps;
-    hp.aeps = o.params.aeps;
-    hp.rays = o.rays;
-    hp.threads = o.params.threads;
     hemibake::baselines::HierarchicalStats hs;
-    auto mesh = hemibake::baselines::solve_hierarchical(scene, hp, hs);
-    std::printf("  hierarchical radiosity: %.3f s (%.3f s linking), %llu links, %llu elements, %u iterations\n", hs.seconds,
-                hs.seconds_linking, static_cast<unsigned long long>(hs.links), static_cast<unsigned long long>(hs.elements),
-                hs.iterations);
-    return mesh;
+    return solve_hr(scene, o, hs);
   }
   hemibake::solver::Solver solver(scene, o.params);
   solve(solver);
@@ -344,22 +351,14 @@ int bake(const Options& o) {
   hemibake::solver::Stats st;
   auto write = o.write;
   if (o.baseline == "hr") {
-    hemibake::baselines::HierarchicalParams hp;
-    hp.feps = o.params.feps;
-    hp.aeps = o.params.aeps;
-    hp.rays = o.rays;
-    hp.threads = o.params.threads;
     hemibake::baselines::HierarchicalStats hs;
-    mesh = hemibake::baselines::solve_hierarchical(scene, hp, hs);
+    mesh = solve_hr(scene, o, hs);
     st.elements = hs.elements;
     st.patches = scene.patches.size();
     st.seconds = hs.seconds;
     st.converged = true;
     st.unshot_fraction = 0.0;
     write.method = "hr";
-    std::printf("  hierarchical radiosity: %.3f s (%.3f s linking), %llu links, %llu elements, %u iterations\n", hs.seconds,
-                hs.seconds_linking, static_cast<unsigned long long>(hs.links), static_cast<unsigned long long>(hs.elements),
-                hs.iterations);
   } else {
     hemibake::solver::Solver solver(scene, o.params);
     solve(solver);
