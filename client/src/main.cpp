@@ -206,10 +206,11 @@ void print_stats(const hemibake::solver::Stats& st) {
               st.converged ? "converged" : st.cancelled ? "cancelled" : "stopped at a limit", st.seconds,
               static_cast<unsigned long long>(st.shots), static_cast<unsigned long long>(st.hemicubes),
               static_cast<unsigned long long>(st.elements), st.unshot_fraction);
-  std::printf("  splits: %llu (form factor %llu, visibility %llu, gradient %llu), projections %llu, reused children %llu\n",
+  std::printf("  splits: %llu (form factor %llu, visibility %llu, gradient %llu), projections %llu of %llu elements in all, reused children %llu\n",
               static_cast<unsigned long long>(st.splits), static_cast<unsigned long long>(st.splits_form_factor),
               static_cast<unsigned long long>(st.splits_visibility), static_cast<unsigned long long>(st.splits_gradient),
-              static_cast<unsigned long long>(st.projections), static_cast<unsigned long long>(st.reused_children));
+              static_cast<unsigned long long>(st.projections), static_cast<unsigned long long>(st.elements_projected),
+              static_cast<unsigned long long>(st.reused_children));
 }
 
 bool render_pngs(const hemibake::solver::Mesh& mesh, const Options& o, const hemibake::client::Camera& cam) {

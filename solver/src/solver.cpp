@@ -63,6 +63,9 @@ using Corners = std::array<glm::dvec3, 4>;
 // from the area's quarters, down to kMaxShooterDepth levels.
 constexpr double kNearFactor = 2.0;
 constexpr int kMaxShooterDepth = 3;
+// A near-field hemicube projects only what may hide its receivers: elements overlapping the joint
+// bounding box of the piece and the receivers of one surface, at most this many boxes.
+constexpr size_t kMaxShaftBoxes = 32;
 constexpr uint32_t kMinResolution = 20;
 // Coarser hemicubes may shoot at most this share of all the power shot (see coarser_levels).
 constexpr double kCoarseShare = 0.25;
@@ -359,6 +362,7 @@ void Solver::Impl::sum_form_factors(std::span<const uint32_t> elements) {
 void Solver::Impl::project(uint32_t shooter_patch, std::span<const uint32_t> elements) {
   const auto t0 = Clock::now();
   ++stats.projections;
+  stats.elements_projected += elements.size();
   const glm::dvec3 eye = cube->eye();
   const double eps = 1e-9 * prep.diagonal;
   for (uint32_t p = 0; p < patches.size(); ++p) {
@@ -510,11 +514,44 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   if (whole_scene) {
     seen = leaves;
   } else {
-    double radius = 0.0;
-    for (uint32_t e : accepted) radius = std::max(radius, glm::distance(centre, e_centre[e]) + e_radius[e]);
-    radius += 0.5 * piece.diameter;
+    // An occluder of a receiver lies between the piece's centre and the receiver, so within the
+    // convex hull of the piece and the receiver, and so within their joint bounding box. The
+    // receivers are boxed by surface (occlusion group), each box joined with the piece's: an
+    // element overlapping none of them hides nothing from any receiver. Too many surfaces are
+    // merged into fewer boxes (still conservative).
+    struct Box {
+      glm::dvec3 lo{std::numeric_limits<double>::max()}, hi{std::numeric_limits<double>::lowest()};
+      void add(const glm::dvec3& x) { lo = glm::min(lo, x); hi = glm::max(hi, x); }
+      void add(const Box& b) { lo = glm::min(lo, b.lo); hi = glm::max(hi, b.hi); }
+    };
+    Box piece_box;
+    for (const glm::dvec3& x : piece.points) piece_box.add(x);
+    std::vector<std::pair<uint32_t, uint32_t>> by_group;  // (surface, receiver)
+    by_group.reserve(accepted.size());
+    for (uint32_t e : accepted) by_group.emplace_back(prep.occlusion_group[e_patch[e]], e);
+    std::sort(by_group.begin(), by_group.end());
+    std::vector<Box> boxes;
+    for (size_t i = 0; i < by_group.size(); ++i) {
+      if (i == 0 || by_group[i].first != by_group[i - 1].first) boxes.push_back(piece_box);
+      const uint32_t e = by_group[i].second;
+      for (uint32_t k = 0; k < corner_count(e); ++k) boxes.back().add(vpos[e_corner[e][k]]);
+    }
+    while (boxes.size() > kMaxShaftBoxes) {
+      for (size_t i = 0; i + 1 < boxes.size(); i += 2) boxes[i / 2] = [&] { Box b = boxes[i]; b.add(boxes[i + 1]); return b; }();
+      if (boxes.size() % 2) boxes[boxes.size() / 2] = boxes.back();
+      boxes.resize((boxes.size() + 1) / 2);
+    }
+    auto overlaps = [&](uint32_t e) {
+      const glm::dvec3& c = e_centre[e];
+      const double r2 = e_radius[e] * e_radius[e];
+      for (const Box& b : boxes) {
+        const glm::dvec3 d = glm::max(b.lo - c, glm::max(c - b.hi, glm::dvec3(0.0)));
+        if (glm::dot(d, d) <= r2) return true;
+      }
+      return false;
+    };
     for (uint32_t e : leaves)
-      if (glm::distance(centre, e_centre[e]) - e_radius[e] <= radius) seen.push_back(e);
+      if (overlaps(e)) seen.push_back(e);
   }
 
   ++stats.hemicubes;

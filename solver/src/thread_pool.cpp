@@ -1,12 +1,40 @@
 #include "thread_pool.h"
 
 #include <algorithm>
+#include <chrono>
+
+#if defined(__x86_64__) || defined(__i386__)
+#include <immintrin.h>
+#endif
 
 namespace hemibake::solver::detail {
 
 namespace {
 constexpr size_t kMinParallelItems = 256;
+
+// A solve calls parallel_for thousands of times a second, often for well under a millisecond of
+// work: a worker put to sleep after each loop and woken by the next costs tens of microseconds per
+// call on a virtual machine. Threads spin this long for the next loop (or for the last chunk of
+// this one) before they sleep.
+constexpr auto kSpin = std::chrono::microseconds(200);
+
+inline void cpu_relax() {
+#if defined(__x86_64__) || defined(__i386__)
+  _mm_pause();
+#endif
 }
+
+// Spins until done() or kSpin has passed; returns done().
+template <class Done>
+bool spin_until(Done&& done) {
+  const auto until = std::chrono::steady_clock::now() + kSpin;
+  for (uint32_t i = 1;; ++i) {
+    if (done()) return true;
+    cpu_relax();
+    if (i % 64 == 0 && std::chrono::steady_clock::now() > until) return done();
+  }
+}
+}  // namespace
 
 ThreadPool::ThreadPool(unsigned threads) : threads_(std::max(1u, threads)) {
   for (unsigned i = 1; i < threads_; ++i) workers_.emplace_back([this] { worker_loop(); });
@@ -16,6 +44,7 @@ ThreadPool::~ThreadPool() {
   {
     std::lock_guard lock(mutex_);
     stop_ = true;
+    generation_.fetch_add(1, std::memory_order_release);
   }
   wake_.notify_all();
   for (auto& w : workers_) w.join();
@@ -37,17 +66,18 @@ void ThreadPool::run_chunks(std::unique_lock<std::mutex>& lock) {
     lock.unlock();
     (*job)(n * chunk / chunks, n * (chunk + 1) / chunks, chunk);
     lock.lock();
-    if (++chunks_done_ == job_chunks_) done_.notify_all();
+    if (chunks_done_.fetch_add(1, std::memory_order_release) + 1 == job_chunks_) done_.notify_all();
   }
 }
 
 void ThreadPool::worker_loop() {
-  std::unique_lock lock(mutex_);
   uint64_t seen = 0;
   for (;;) {
-    wake_.wait(lock, [&] { return stop_ || (generation_ != seen && next_chunk_ < job_chunks_); });
+    spin_until([&] { return generation_.load(std::memory_order_acquire) != seen; });
+    std::unique_lock lock(mutex_);
+    wake_.wait(lock, [&] { return stop_ || generation_.load(std::memory_order_relaxed) != seen; });
     if (stop_) return;
-    seen = generation_;
+    seen = generation_.load(std::memory_order_relaxed);
     run_chunks(lock);
   }
 }
@@ -64,11 +94,16 @@ void ThreadPool::parallel_for(size_t n, const std::function<void(size_t, size_t,
   job_n_ = n;
   job_chunks_ = chunks;
   next_chunk_ = 0;
-  chunks_done_ = 0;
-  ++generation_;
+  chunks_done_.store(0, std::memory_order_relaxed);
+  generation_.fetch_add(1, std::memory_order_release);
   wake_.notify_all();
   run_chunks(lock);
-  done_.wait(lock, [&] { return chunks_done_ == job_chunks_; });
+  if (chunks_done_.load(std::memory_order_acquire) != chunks) {
+    lock.unlock();
+    spin_until([&] { return chunks_done_.load(std::memory_order_acquire) == chunks; });
+    lock.lock();
+    done_.wait(lock, [&] { return chunks_done_.load(std::memory_order_relaxed) == chunks; });
+  }
   job_ = nullptr;
 }
 

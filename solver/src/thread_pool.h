@@ -1,6 +1,7 @@
 // A fixed pool of worker threads for data-parallel loops inside one shot.
 #pragma once
 
+#include <atomic>
 #include <condition_variable>
 #include <cstddef>
 #include <cstdint>
@@ -42,8 +43,8 @@ class ThreadPool {
   size_t job_n_ = 0;
   size_t job_chunks_ = 0;
   size_t next_chunk_ = 0;
-  size_t chunks_done_ = 0;
-  uint64_t generation_ = 0;
+  std::atomic<size_t> chunks_done_{0};
+  std::atomic<uint64_t> generation_{0};
   bool stop_ = false;
 };
 

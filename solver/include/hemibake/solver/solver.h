@@ -97,6 +97,7 @@ struct Stats {
   uint64_t shots = 0;            ///< patch shots (Southwell steps)
   uint64_t hemicubes = 0;        ///< hemicubes placed (a patch shoots from one or more sub-areas)
   uint64_t projections = 0;      ///< whole-scene projections onto a hemicube
+  uint64_t elements_projected = 0;  ///< elements given to those projections, summed
   uint64_t rounds = 0;           ///< repeated shots after splits (the paper's cancelled shots)
   uint64_t splits = 0;           ///< elements split
   uint64_t splits_form_factor = 0;  ///< ... of which for their form factor (FEPS)
