@@ -225,6 +225,10 @@ struct Solver::Impl {
   std::vector<uint32_t> order, pixel_start;
   std::vector<double> shot_b, vmin, vmax;
   std::vector<double> f_recv, f_open;  // per accepted receiver: F(element -> piece), visible and open
+  std::vector<uint64_t> e_mark;        // per element: holds a receiver of hemicube `mark`
+  uint64_t mark = 0;
+  std::vector<double> e_exact;         // per element: exact F(element -> piece), for stamp e_exact_stamp
+  std::vector<uint64_t> e_exact_stamp;
 
   Stats stats;
   bool done = false;
@@ -298,6 +302,9 @@ uint32_t Solver::Impl::add_element(uint32_t patch, uint32_t parent,
   e_stamp.push_back(0);
   e_ff.push_back(0.0);
   e_ff_open.push_back(0.0);
+  e_mark.push_back(0);
+  e_exact.push_back(0.0);
+  e_exact_stamp.push_back(0);
   return id;
 }
 
@@ -509,28 +516,24 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   if (accepted.empty()) return near;
 
   // What the hemicube must see: every accepted receiver, and whatever may stand between one and
-  // the piece (within the ball around the piece that holds them all).
-  std::vector<uint32_t> seen;
-  if (whole_scene) {
-    seen = leaves;
-  } else {
-    // An occluder of a receiver lies between the piece's centre and the receiver, so within the
-    // convex hull of the piece and the receiver, and so within their joint bounding box. The
-    // receivers are boxed by surface (occlusion group), each box joined with the piece's: an
-    // element overlapping none of them hides nothing from any receiver. Too many surfaces are
-    // merged into fewer boxes (still conservative).
-    struct Box {
-      glm::dvec3 lo{std::numeric_limits<double>::max()}, hi{std::numeric_limits<double>::lowest()};
-      void add(const glm::dvec3& x) { lo = glm::min(lo, x); hi = glm::max(hi, x); }
-      void add(const Box& b) { lo = glm::min(lo, b.lo); hi = glm::max(hi, b.hi); }
-    };
+  // the piece. What may hide a receiver lies between the piece's centre and the receiver, so within the
+  // convex hull of the piece and the receiver, and so within their joint bounding box. The
+  // receivers are boxed by surface (occlusion group), each box joined with the piece's: an element
+  // overlapping none of them hides nothing from any receiver. Too many surfaces are merged into
+  // fewer boxes (still conservative). A whole-scene hemicube sees everything.
+  struct Box {
+    glm::dvec3 lo{std::numeric_limits<double>::max()}, hi{std::numeric_limits<double>::lowest()};
+    void add(const glm::dvec3& x) { lo = glm::min(lo, x); hi = glm::max(hi, x); }
+    void add(const Box& b) { lo = glm::min(lo, b.lo); hi = glm::max(hi, b.hi); }
+  };
+  std::vector<Box> boxes;
+  if (!whole_scene) {
     Box piece_box;
     for (const glm::dvec3& x : piece.points) piece_box.add(x);
     std::vector<std::pair<uint32_t, uint32_t>> by_group;  // (surface, receiver)
     by_group.reserve(accepted.size());
     for (uint32_t e : accepted) by_group.emplace_back(prep.occlusion_group[e_patch[e]], e);
     std::sort(by_group.begin(), by_group.end());
-    std::vector<Box> boxes;
     for (size_t i = 0; i < by_group.size(); ++i) {
       if (i == 0 || by_group[i].first != by_group[i - 1].first) boxes.push_back(piece_box);
       const uint32_t e = by_group[i].second;
@@ -541,26 +544,51 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
       if (boxes.size() % 2) boxes[boxes.size() / 2] = boxes.back();
       boxes.resize((boxes.size() + 1) / 2);
     }
-    auto overlaps = [&](uint32_t e) {
-      const glm::dvec3& c = e_centre[e];
-      const double r2 = e_radius[e] * e_radius[e];
-      for (const Box& b : boxes) {
-        const glm::dvec3 d = glm::max(b.lo - c, glm::max(c - b.hi, glm::dvec3(0.0)));
-        if (glm::dot(d, d) <= r2) return true;
-      }
-      return false;
-    };
-    for (uint32_t e : leaves)
-      if (overlaps(e)) seen.push_back(e);
   }
+  auto overlaps = [&](uint32_t e) {
+    if (whole_scene) return true;
+    const glm::dvec3& c = e_centre[e];
+    const double r2 = e_radius[e] * e_radius[e];
+    for (const Box& b : boxes) {
+      const glm::dvec3 d = glm::max(b.lo - c, glm::max(c - b.hi, glm::dvec3(0.0)));
+      if (glm::dot(d, d) <= r2) return true;
+    }
+    return false;
+  };
+  // What the hemicube projects: the receivers, and as occluders, of everything overlapping the
+  // boxes, the largest elements that hold no receiver (the leaves of a subdivided patch tile it, so
+  // one polygon hides what they hide, and a pixel gets one fragment where it got many).
+  std::vector<uint32_t> seen;
+  auto gather_seen = [&] {
+    seen.clear();
+    ++mark;
+    for (uint32_t e : accepted)
+      for (uint32_t x = e; x != kNone && e_mark[x] != mark; x = e_parent[x]) e_mark[x] = mark;
+    std::vector<uint32_t> stack;
+    for (uint32_t q = 0; q < patches.size(); ++q) {
+      stack.push_back(p_root[q]);
+      while (!stack.empty()) {
+        const uint32_t x = stack.back();
+        stack.pop_back();
+        if (e_mark[x] != mark) {
+          if (overlaps(x)) seen.push_back(x);
+        } else if (e_child[x] == kNone) {
+          seen.push_back(x);  // a receiver
+        } else {
+          for (uint32_t k = 4; k-- > 0;) stack.push_back(e_child[x] + k);
+        }
+      }
+    }
+  };
+  gather_seen();
 
-  ++stats.hemicubes;
-  ++stamp;
   // Coarser hemicubes for weak pieces, as long as what they shot stays a small part of all shot.
   int coarser = coarser_levels(power);
   if (coarser > 0 && power_coarse + power > kCoarseShare * (power_shot + power)) coarser = 0;
   power_shot += power;
   if (coarser > 0) power_coarse += power;
+  ++stats.hemicubes;
+  ++stamp;
   cube = &cubes[std::min<size_t>(static_cast<size_t>(piece.depth) + coarser, cubes.size() - 1)];
   cube->place(centre, normal, piece.up);
   project(p, seen);
@@ -578,8 +606,10 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   // the receiver the hemicube found visible: reciprocity from the piece's centre errs by the
   // piece's size against the distance, the receiver's points by the receiver's.
   const bool exact_close = !piece.may_refine && piece.points.size() <= 4;
-  // F(point x with normal n -> piece): Lambert over the piece cut to x's front side.
+  // F(point x with normal n -> piece): Lambert over the piece cut to x's front side; nothing for a
+  // point behind the piece.
   auto point_to_piece = [&](const glm::dvec3& x, const glm::dvec3& n) {
+    if (glm::dot(normal, x - piece.points[0]) <= 0.0) return 0.0;
     uint32_t m = 0;
     std::array<glm::dvec3, 8> clipped{};
     const size_t k = piece.points.size();
@@ -594,7 +624,7 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   };
   // F(element -> piece): the mean over `side` x `side` points of the element (quads: cell centres
   // of a bilinear grid; triangles: the centroid, or those of its four halved-edge triangles).
-  auto exact = [&](uint32_t e, int side) {
+  auto exact_uncached = [&](uint32_t e, int side) {
     const glm::dvec3& n = prep.normal[e_patch[e]];
     const Corners c = corners_of_copy(e);
     if (side <= 1) return point_to_piece(polygon_centre(c, corner_count(e)), n);
@@ -615,6 +645,13 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
     }
     return sum / count;
   };
+  auto exact = [&](uint32_t e, int side) {
+    if (e_exact_stamp[e] != stamp) {
+      e_exact[e] = std::min(1.0, exact_uncached(e, side));
+      e_exact_stamp[e] = stamp;
+    }
+    return e_exact[e];
+  };
   auto form_factors = [&] {
     for (uint32_t e : accepted) {
       f_recv[e] = f_open[e] = 0.0;
@@ -629,7 +666,7 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
         // A receiver the hemicube did not see (the piece's centre lies behind it, though part of
         // the piece is in front: a floor piece under a block's face) is taken as unoccluded from
         // the part in front, which lies within a diameter of it.
-        const double f = std::min(1.0, exact(e, size < 0.5 * piece.diameter ? 1 : size < piece.diameter ? 2 : 3));
+        const double f = exact(e, size < 0.5 * piece.diameter ? 1 : size < piece.diameter ? 2 : 3);
         f_recv[e] = projected ? f * (e_ff[e] / e_ff_open[e]) : f;
         f_open[e] = f;
       }
@@ -694,7 +731,7 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
     if (params.reuse_visibility) {
       project_children(to_split);
     } else {
-      replace_split(seen);
+      gather_seen();
       project(p, seen);
     }
   }
