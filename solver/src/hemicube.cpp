@@ -440,6 +440,21 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
         fragments[order[lo]].trans = 1.0f;
         continue;
       }
+      // Pieces of one surface only (inside a subdivided patch): one layer, no ordering needed.
+      {
+        const uint32_t g0 = fragments[order[lo]].group;
+        double sum = 0.0;
+        bool one_group = true;
+        for (uint32_t k = lo; k < hi && one_group; ++k) {
+          one_group = fragments[order[k]].group == g0;
+          sum += fragments[order[k]].area;
+        }
+        if (one_group) {
+          const float t = static_cast<float>(sum > 1.0 ? 1.0 / sum : 1.0);
+          for (uint32_t k = lo; k < hi; ++k) fragments[order[k]].trans = t;
+          continue;
+        }
+      }
       // Sum the coverage of each occlusion group: pieces of one surface never hide each other.
       by_group.clear();
       for (uint32_t k = lo; k < hi; ++k) by_group.emplace_back(fragments[order[k]].group, order[k]);

@@ -168,6 +168,7 @@ struct Solver::Impl {
   std::vector<uint32_t> shoot_piece(const Piece& piece, std::vector<uint32_t> receivers, bool whole_scene);
   void build_cluster(uint32_t id, uint32_t begin, uint32_t end);
   void build_clusters();
+  void build_patch_tree(uint32_t node, uint32_t begin, uint32_t end);
   void replace_split(std::vector<uint32_t>& list) const;
   void grow_scratch();
   int coarser_levels(double power) const;
@@ -207,6 +208,17 @@ struct Solver::Impl {
   std::vector<uint32_t> unit_patch, unit_node, p_unit;
   std::vector<double> u_unshot;  // unshot power per unit
   std::vector<uint8_t> p_front;  // per patch: faces the current hemicube
+
+  // Bounding-box tree over the patches (median cuts), for finding what lies near a hemicube.
+  struct BoxNode {
+    glm::dvec3 lo, hi;
+    uint32_t begin = 0, end = 0;  // its patches: tree_patch[begin, end)
+    uint32_t child = kNone;       // children at child and child + 1
+  };
+  std::vector<BoxNode> tree;
+  std::vector<uint32_t> tree_patch;
+  std::vector<glm::dvec3> p_lo, p_hi;  // per patch: bounding box
+  std::vector<uint64_t> p_mark;        // per patch: listed for hemicube `mark`
 
   // Per-hemicube scratch.
   // Hemicubes of halving resolution (at least kMinResolution): a quarter-size shooting area serves
@@ -263,6 +275,20 @@ Solver::Impl::Impl(const Scene& scene, const Params& p)
     leaves.push_back(p_root[i]);
   }
   build_clusters();
+  p_lo.resize(patches.size());
+  p_hi.resize(patches.size());
+  tree_patch.resize(patches.size());
+  p_mark.assign(patches.size(), 0);
+  for (uint32_t q = 0; q < patches.size(); ++q) {
+    tree_patch[q] = q;
+    p_lo[q] = p_hi[q] = patches[q].corners[0];
+    for (uint32_t k = 1; k < patches[q].corner_count; ++k) {
+      p_lo[q] = glm::min(p_lo[q], patches[q].corners[k]);
+      p_hi[q] = glm::max(p_hi[q], patches[q].corners[k]);
+    }
+  }
+  tree.emplace_back();
+  if (!patches.empty()) build_patch_tree(0, 0, static_cast<uint32_t>(patches.size()));
   stats.patches = patches.size();
   stats.elements = leaves.size();
   stats.emitted_power = emitted_power;
@@ -564,8 +590,48 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
     ++mark;
     for (uint32_t e : accepted)
       for (uint32_t x = e; x != kNone && e_mark[x] != mark; x = e_parent[x]) e_mark[x] = mark;
+    // The patches whose boxes meet the receivers' boxes (all of them for a whole-scene hemicube).
+    std::vector<uint32_t> near_patches;
+    if (whole_scene) {
+      near_patches = tree_patch;
+    } else {
+      const double slack = 1e-9 * prep.diagonal;
+      auto meets = [&](const glm::dvec3& lo, const glm::dvec3& hi) {
+        for (const Box& b : boxes)
+          if (lo.x <= b.hi.x + slack && lo.y <= b.hi.y + slack && lo.z <= b.hi.z + slack && hi.x + slack >= b.lo.x &&
+              hi.y + slack >= b.lo.y && hi.z + slack >= b.lo.z)
+            return true;
+        return false;
+      };
+      std::vector<uint32_t> nodes{0};
+      while (!nodes.empty()) {
+        const BoxNode& node = tree[nodes.back()];
+        nodes.pop_back();
+        if (!meets(node.lo, node.hi)) continue;
+        if (node.child != kNone) {
+          nodes.push_back(node.child + 1);
+          nodes.push_back(node.child);
+          continue;
+        }
+        for (uint32_t i = node.begin; i < node.end; ++i) {
+          const uint32_t q = tree_patch[i];
+          if (meets(p_lo[q], p_hi[q])) {
+            near_patches.push_back(q);
+            p_mark[q] = mark;
+          }
+        }
+      }
+      // The receivers' patches always count (rounding of shared vertices must not lose one).
+      for (uint32_t e : accepted) {
+        const uint32_t q = e_patch[e];
+        if (p_mark[q] != mark) {
+          near_patches.push_back(q);
+          p_mark[q] = mark;
+        }
+      }
+    }
     std::vector<uint32_t> stack;
-    for (uint32_t q = 0; q < patches.size(); ++q) {
+    for (uint32_t q : near_patches) {
       stack.push_back(p_root[q]);
       while (!stack.empty()) {
         const uint32_t x = stack.back();
@@ -920,6 +986,35 @@ void Solver::Impl::build_clusters() {
     unit_node.push_back(kNone);
     u_unshot.push_back(p_unshot[p]);
   }
+}
+
+void Solver::Impl::build_patch_tree(uint32_t id, uint32_t begin, uint32_t end) {
+  BoxNode node;
+  node.begin = begin;
+  node.end = end;
+  node.lo = glm::dvec3(std::numeric_limits<double>::max());
+  node.hi = glm::dvec3(std::numeric_limits<double>::lowest());
+  glm::dvec3 clo = node.lo, chi = node.hi;  // of the boxes' centres (doubled)
+  for (uint32_t i = begin; i < end; ++i) {
+    const uint32_t q = tree_patch[i];
+    node.lo = glm::min(node.lo, p_lo[q]);
+    node.hi = glm::max(node.hi, p_hi[q]);
+    clo = glm::min(clo, p_lo[q] + p_hi[q]);
+    chi = glm::max(chi, p_lo[q] + p_hi[q]);
+  }
+  if (end - begin > 4) {
+    const glm::dvec3 ext = chi - clo;
+    const int axis = ext.x >= ext.y && ext.x >= ext.z ? 0 : ext.y >= ext.z ? 1 : 2;
+    const uint32_t mid = begin + (end - begin) / 2;
+    auto key = [&](uint32_t q) { return p_lo[q][axis] + p_hi[q][axis]; };
+    std::nth_element(tree_patch.begin() + begin, tree_patch.begin() + mid, tree_patch.begin() + end,
+                     [&](uint32_t a, uint32_t b) { return key(a) != key(b) ? key(a) < key(b) : a < b; });
+    node.child = static_cast<uint32_t>(tree.size());
+    tree.resize(tree.size() + 2);
+    build_patch_tree(node.child, begin, mid);
+    build_patch_tree(node.child + 1, mid, end);
+  }
+  tree[id] = node;
 }
 
 void Solver::Impl::replace_split(std::vector<uint32_t>& list) const {
