@@ -19,10 +19,9 @@ struct PixelWindow {
 
 /// Scratch space for scan_convert_area, reusable across calls so that hot loops allocate nothing.
 struct ScanScratch {
-  std::vector<double> carry;      ///< the paper's C array
-  std::vector<double> carry_x, carry_y;  ///< the same for the first moments
-  std::vector<double> crossings;  ///< edge parameters where an edge crosses a pixel border
-  std::vector<double> y_crossings;  ///< the same, for horizontal borders only
+  /// Per pixel: the edge pieces' own sums and the paper's column carry C (areas, then moments);
+  /// all zero between calls.
+  std::vector<double> cells;
 };
 
 /// Writes into `area` (width * height values, row-major from the bottom row) the area of every
