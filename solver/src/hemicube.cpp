@@ -361,12 +361,13 @@ void Hemicube::rasterize(const Face& face, uint32_t element, uint32_t group, Met
 }
 
 void Hemicube::project(std::span<const glm::dvec3> polygon, uint32_t element, uint32_t group,
-                       Method method, ProjectScratch& scratch, std::vector<Fragment>& out) const {
+                       Method method, ProjectScratch& scratch, std::vector<Fragment>& out,
+                       const glm::dvec3* plane_normal) const {
   to_local(polygon, scratch);
   bool any_in_front = false;
   for (int i = 0; i < scratch.local_n; ++i) any_in_front = any_in_front || scratch.local[i].z > 0.0;
   if (!any_in_front) return;  // wholly below the hemicube's base
-  const glm::dvec3 normal = newell_normal(polygon);
+  const glm::dvec3 normal = plane_normal != nullptr ? *plane_normal : newell_normal(polygon);
   const double offset = glm::dot(normal, polygon[0] - eye_);
   // The faces' frusta are convex cones, so a convex polygon whose corners all lie in one face's
   // frustum lies wholly on that face: the other four need not be looked at.

@@ -415,7 +415,7 @@ void Solver::Impl::project(uint32_t shooter_patch, std::span<const uint32_t> ele
       if (!p_front[p]) continue;
       corners_of(el, poly);
       cube->project(std::span(poly.data(), patches[p].corner_count), el, prep.occlusion_group[p],
-                   params.method, scratch[c], out);
+                   params.method, scratch[c], out, &prep.normal[p]);
       f_end[el] = static_cast<uint32_t>(out.size());
     }
   });
@@ -718,25 +718,29 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
     }
     return e_exact[e];
   };
+  // Each receiver's on its own, so the receivers are shared among the threads.
   auto form_factors = [&] {
-    for (uint32_t e : accepted) {
-      f_recv[e] = f_open[e] = 0.0;
-      const bool projected = e_stamp[e] == stamp && e_ff_open[e] > 0.0;
-      if (projected) {
-        f_recv[e] = received(e, e_ff[e]);
-        f_open[e] = received(e, e_ff_open[e]);
+    pool.parallel_for(accepted.size(), [&](size_t begin, size_t end, size_t) {
+      for (size_t i = begin; i < end; ++i) {
+        const uint32_t e = accepted[i];
+        f_recv[e] = f_open[e] = 0.0;
+        const bool projected = e_stamp[e] == stamp && e_ff_open[e] > 0.0;
+        if (projected) {
+          f_recv[e] = received(e, e_ff[e]);
+          f_open[e] = received(e, e_ff_open[e]);
+        }
+        const double size = 2.0 * e_radius[e];
+        if (exact_close && size < 2.0 * piece.diameter &&
+            glm::distance(centre, e_centre[e]) - e_radius[e] < piece.diameter && is_close(e)) {
+          // A receiver the hemicube did not see (the piece's centre lies behind it, though part of
+          // the piece is in front: a floor piece under a block's face) is taken as unoccluded from
+          // the part in front, which lies within a diameter of it.
+          const double f = exact(e, size < 0.5 * piece.diameter ? 1 : size < piece.diameter ? 2 : 3);
+          f_recv[e] = projected ? f * (e_ff[e] / e_ff_open[e]) : f;
+          f_open[e] = f;
+        }
       }
-      const double size = 2.0 * e_radius[e];
-      if (exact_close && size < 2.0 * piece.diameter &&
-          glm::distance(centre, e_centre[e]) - e_radius[e] < piece.diameter && is_close(e)) {
-        // A receiver the hemicube did not see (the piece's centre lies behind it, though part of
-        // the piece is in front: a floor piece under a block's face) is taken as unoccluded from
-        // the part in front, which lies within a diameter of it.
-        const double f = exact(e, size < 0.5 * piece.diameter ? 1 : size < piece.diameter ? 2 : 3);
-        f_recv[e] = projected ? f * (e_ff[e] / e_ff_open[e]) : f;
-        f_open[e] = f;
-      }
-    }
+    });
   };
 
   for (int round = 0; round < 64; ++round) {
