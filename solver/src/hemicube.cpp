@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cassert>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <numbers>
 
@@ -441,18 +442,46 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
         fragments[order[lo]].trans = 1.0f;
         continue;
       }
-      // Pieces of one surface only (inside a subdivided patch): one layer, no ordering needed.
+      // One or two surfaces (most shared pixels: inside a subdivided patch, along an edge where two
+      // meet, one in front of another): the general rule below, without lists or sorting.
       {
-        const uint32_t g0 = fragments[order[lo]].group;
-        double sum = 0.0;
-        bool one_group = true;
-        for (uint32_t k = lo; k < hi && one_group; ++k) {
-          one_group = fragments[order[k]].group == g0;
-          sum += fragments[order[k]].area;
+        uint32_t g[2] = {fragments[order[lo]].group, 0};
+        bool second = false;
+        double sum[2] = {0.0, 0.0};
+        float depth[2] = {std::numeric_limits<float>::lowest(), std::numeric_limits<float>::lowest()};
+        bool few = true;
+        for (uint32_t k = lo; k < hi; ++k) {
+          const Fragment& f = fragments[order[k]];
+          int slot = 0;
+          if (f.group != g[0]) {
+            if (second && f.group != g[1]) {
+              few = false;
+              break;
+            }
+            g[1] = f.group;
+            second = true;
+            slot = 1;
+          }
+          sum[slot] += f.area;
+          depth[slot] = std::max(depth[slot], f.inv_depth);
         }
-        if (one_group) {
-          const float t = static_cast<float>(sum > 1.0 ? 1.0 / sum : 1.0);
-          for (uint32_t k = lo; k < hi; ++k) fragments[order[k]].trans = t;
+        if (few) {
+          float trans[2];
+          if (!second || adjacency.adjacent(g[0], g[1])) {
+            const double total = sum[0] + sum[1];
+            trans[0] = trans[1] = static_cast<float>(total > 1.0 ? 1.0 / total : 1.0);
+          } else {
+            // Nearest first; ties go to the lower group id.
+            const int near = depth[0] != depth[1] ? (depth[0] > depth[1] ? 0 : 1) : (g[0] < g[1] ? 0 : 1);
+            const int far = 1 - near;
+            trans[near] = static_cast<float>(sum[near] > 1.0 ? 1.0 / sum[near] : 1.0);
+            const double t = 1.0 - std::min(sum[near], 1.0);
+            trans[far] = static_cast<float>(sum[far] > 1.0 ? t / sum[far] : t);
+          }
+          for (uint32_t k = lo; k < hi; ++k) {
+            Fragment& f = fragments[order[k]];
+            f.trans = trans[f.group == g[0] ? 0 : 1];
+          }
           continue;
         }
       }
