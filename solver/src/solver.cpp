@@ -7,7 +7,8 @@
 //   1. The patch with the most unshot power shoots. Large patches shoot from sub-areas no wider
 //      than `shooter_size` of the scene's diagonal, each with its own hemicube, so that receivers
 //      near a large shooter (room corners) do not see it as a point.
-//   2. Every leaf element of every patch that faces the hemicube is projected; each pixel's
+//   2. Every receiver (a leaf element of a patch that faces the hemicube) is projected, and every
+//      other surface as the largest elements of its quadtree that hold no receiver; each pixel's
 //      fragments are resolved by depth (E_k = A_k (1 - f_{k-1})); F(shooter -> element) is the sum
 //      over its pixels of its visible share times the pixel's delta form factor.
 //   3. A posteriori subdivision: a leaf is too large for this interaction when (a) its form factor
@@ -37,6 +38,7 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <numbers>
 #include <thread>
 #include <unordered_map>
 #include <unordered_set>
@@ -66,6 +68,9 @@ constexpr int kMaxShooterDepth = 3;
 // A near-field hemicube projects only what may hide its receivers: elements overlapping the joint
 // bounding box of the piece and the receivers of one surface, at most this many boxes.
 constexpr size_t kMaxShaftBoxes = 32;
+// A close receiver is refined for only if the point view's error could exceed this share of the
+// radiosity tolerance (shoot_piece).
+constexpr double kNearError = 0.25;
 constexpr uint32_t kMinResolution = 20;
 // Coarser hemicubes may shoot at most this share of all the power shot (see coarser_levels).
 constexpr double kCoarseShare = 0.25;
@@ -538,7 +543,20 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
       in_front = glm::dot(normal, vpos[e_corner[e][i]] - centre) > eps;
     return in_front;
   };
-  for (uint32_t e : current) (piece.may_refine && is_close(e) ? near : accepted).push_back(e);
+  // A close receiver goes to the sub-pieces only where the centre's hemicube could err by more than
+  // the radiosity tolerance: it gains at most rho * dB * F, with F at most A / (pi g^2) at a gap g
+  // between them (at most 1), and the hemicube's point view of the piece errs by about (D / 2g)^2
+  // of that (D the piece's diameter), all of it where they touch.
+  auto may_matter = [&](uint32_t e) {
+    const double gap = glm::distance(centre, e_centre[e]) - e_radius[e] - 0.5 * piece.diameter;
+    if (gap <= 0.5 * piece.diameter) return true;
+    // A receiver whose plane cuts the piece (the rule above) may get nothing at all from the centre.
+    if (glm::distance(centre, e_centre[e]) - e_radius[e] >= kNearFactor * piece.diameter) return true;
+    const double f = std::min(1.0, area / (std::numbers::pi * gap * gap));
+    const double share = 0.25 * piece.diameter * piece.diameter / (gap * gap);
+    return mean(patches[e_patch[e]].reflectance * dB) * f * share > kNearError * b_tolerance;
+  };
+  for (uint32_t e : current) (piece.may_refine && is_close(e) && may_matter(e) ? near : accepted).push_back(e);
   if (accepted.empty()) return near;
 
   // What the hemicube must see: every accepted receiver, and whatever may stand between one and
