@@ -212,7 +212,6 @@ struct Solver::Impl {
   std::vector<uint32_t> cluster_patch;
   std::vector<uint32_t> unit_patch, unit_node, p_unit;
   std::vector<double> u_unshot;  // unshot power per unit
-  std::vector<uint8_t> p_front;  // per patch: faces the current hemicube
 
   // Bounding-box tree over the patches (median cuts), for finding what lies near a hemicube.
   struct BoxNode {
@@ -273,7 +272,6 @@ Solver::Impl::Impl(const Scene& scene, const Params& p)
   b_tolerance = params.beps * emitted_mean / prep.total_area;
   p_root.resize(patches.size());
   p_unshot.resize(patches.size());
-  p_front.resize(patches.size());
   for (uint32_t i = 0; i < patches.size(); ++i) {
     p_root[i] = add_element(i, kNone, prep.corner_vertex[i], patches[i].emission, patches[i].emission);
     p_unshot[i] = channel_sum(patches[i].emission) * prep.area[i];
@@ -403,10 +401,6 @@ void Solver::Impl::project(uint32_t shooter_patch, std::span<const uint32_t> ele
   stats.elements_projected += elements.size();
   const glm::dvec3 eye = cube->eye();
   const double eps = 1e-9 * prep.diagonal;
-  for (uint32_t p = 0; p < patches.size(); ++p) {
-    // Back-face culling of the parent patch, seen from the hemicube's centre (section 2.2).
-    p_front[p] = p != shooter_patch && glm::dot(prep.normal[p], eye - patches[p].corners[0]) > eps;
-  }
   const size_t n = elements.size();
   const size_t chunks = pool.chunk_count(n);
   pool.parallel_for(n, [&](size_t b, size_t e, size_t c) {
@@ -417,7 +411,8 @@ void Solver::Impl::project(uint32_t shooter_patch, std::span<const uint32_t> ele
       const uint32_t el = elements[i];
       const uint32_t p = e_patch[el];
       f_begin[el] = f_end[el] = static_cast<uint32_t>(out.size());
-      if (!p_front[p]) continue;
+      // Back-face culling of the parent patch, seen from the hemicube's centre (section 2.2).
+      if (p == shooter_patch || glm::dot(prep.normal[p], eye - patches[p].corners[0]) <= eps) continue;
       corners_of(el, poly);
       cube->project(std::span(poly.data(), patches[p].corner_count), el, prep.occlusion_group[p],
                    params.method, scratch[c], out, &prep.normal[p]);
