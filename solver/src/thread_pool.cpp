@@ -10,7 +10,7 @@
 namespace hemibake::solver::detail {
 
 namespace {
-constexpr size_t kMinParallelItems = 256;
+constexpr size_t kMinParallelItems = 64;
 
 // A solve calls parallel_for thousands of times a second, often for well under a millisecond of
 // work: a worker put to sleep after each loop and woken by the next costs tens of microseconds per
