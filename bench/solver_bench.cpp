@@ -203,7 +203,9 @@ Stats solve(const Scene& scene, const Params& params) {
 }
 
 // Equal quality: each method at several tolerances, error against the reference, time; prints the
-// time each needs to reach the best error both reach, and their ratio.
+// time each needs to reach the best error both reach, and their ratio. A setting within 1 % of that
+// error counts as reaching it: errors closer than that are within the reference's own noise (two
+// hr settings on the room differed in the fourth decimal and picked a time twice as long).
 void sweep(const Scene& scene, const char* title, uint32_t samples, const std::vector<Params>& aa,
            const std::vector<hemibake::baselines::HierarchicalParams>& hr, const std::vector<std::string>& labels,
            uint32_t repeats) {
@@ -230,8 +232,9 @@ void sweep(const Scene& scene, const char* title, uint32_t samples, const std::v
   const double target = std::max(best_aa, best_hr);
   double t_aa = 1e300, t_hr = 1e300;
   for (const Run& r : runs)
-    if (r.error.rms_clean <= target * 1.0000001) (is_aa(r) ? t_aa : t_hr) = std::min(is_aa(r) ? t_aa : t_hr, r.seconds);
-  std::printf("\nTo reach an error of %.4f: aa %.3f s, hr %.3f s; hr / aa = %.2f\n\n", target, t_aa, t_hr, t_hr / t_aa);
+    if (r.error.rms_clean <= target * 1.01) (is_aa(r) ? t_aa : t_hr) = std::min(is_aa(r) ? t_aa : t_hr, r.seconds);
+  std::printf("\nTo reach an error of %.4f (within 1 %%): aa %.3f s, hr %.3f s; hr / aa = %.2f\n\n", target, t_aa, t_hr,
+              t_hr / t_aa);
 }
 
 }  // namespace
@@ -257,19 +260,19 @@ int main(int argc, char** argv) {
       std::snprintf(text, sizeof text, format, v);
       labels.emplace_back(text);
     };
-    for (const double v : room ? std::vector<double>{50, 100, 200} : std::vector<double>{0.1, 0.03, 0.01}) {
+    for (const double v : room ? std::vector<double>{50, 100, 140, 200} : std::vector<double>{0.1, 0.03, 0.01}) {
       aa.emplace_back();
       if (room) aa.back().resolution = static_cast<uint32_t>(v);
       else aa.back().beps = v;
       label(room ? "resolution %g" : "beps %g", v);
     }
-    for (const double v : room ? std::vector<double>{1, 4, 16} : std::vector<double>{0.01, 0.003, 0.001}) {
+    for (const double v : room ? std::vector<double>{1, 4, 8, 16} : std::vector<double>{0.01, 0.003, 0.001}) {
       hr.emplace_back();
       if (room) hr.back().rays = static_cast<uint32_t>(v);
       else hr.back().feps = v;
       label(room ? "%g rays per link" : "FEPS %g", v);
     }
-    if (room) sweep(make_furnished_room(), "furnished room, 6758 patches", 256, aa, hr, labels, 1);
+    if (room) sweep(make_furnished_room(), "furnished room, 6758 patches", 256, aa, hr, labels, 2);
     else sweep(cornell, "Cornell box", 512, aa, hr, labels, 3);
     return 0;
   }
