@@ -149,6 +149,36 @@ TEST(Solver, ReceiverWhosePlaneCutsTheLightSeesItsHalf) {
   EXPECT_NEAR(ba / a, rho.x * e.x * f, 0.05 * rho.x * e.x * f);
 }
 
+TEST(Solver, ReceiverCrossingTheLightsPlaneIsLitOnlyInFrontOfIt) {
+  Scene scene;
+  const glm::dvec3 e(10.0), rho(0.5);
+  // Light: y = 2, facing down, x and z in [-0.5, 0.5]. Receiver: the plane x = 0.6, facing the
+  // light (-x), y in [1.8, 2.2]: its upper half lies behind the light, which gives it nothing.
+  add_quad(scene, {-0.5, 2, -0.5}, {0.5, 2, -0.5}, {0.5, 2, 0.5}, {-0.5, 2, 0.5}, glm::dvec3(0.0), e, 1);
+  add_quad(scene, {0.6, 1.8, -0.5}, {0.6, 1.8, 0.5}, {0.6, 2.2, 0.5}, {0.6, 2.2, -0.5}, rho, glm::dvec3(0.0), 0);
+  ASSERT_EQ(validate(scene), "");
+  Solver solver(scene, {});
+  solver.run();
+  const Mesh mesh = solver.mesh();
+  double ba = 0.0, a = 0.0;
+  for (const auto& el : mesh.elements)
+    if (el.patch == 1) {
+      ba += el.radiosity.x * el.area;
+      a += el.area;
+    }
+  const std::vector<glm::dvec3> light{{-0.5, 2, -0.5}, {0.5, 2, -0.5}, {0.5, 2, 0.5}, {-0.5, 2, 0.5}};
+  double f = 0.0;  // mean over the receiver of F(point -> light), nothing above y = 2
+  constexpr int kGrid = 64;
+  for (int i = 0; i < kGrid; ++i)
+    for (int j = 0; j < kGrid; ++j) {
+      const double y = 1.8 + 0.4 * (i + 0.5) / kGrid;
+      if (y < 2.0) f += point_polygon_form_factor({0.6, y, -0.5 + (j + 0.5) / kGrid}, {-1, 0, 0}, light);
+    }
+  f /= kGrid * kGrid;
+  ASSERT_GT(f, 0.0);
+  EXPECT_NEAR(ba / a, rho.x * e.x * f, 0.03 * rho.x * e.x * f);
+}
+
 // Whether segment p->q hits a convex planar polygon (independent of the solver's hemicube).
 bool segment_hits(const glm::dvec3& p, const glm::dvec3& q, const Patch& patch) {
   const glm::dvec3 n = glm::cross(patch.corners[1] - patch.corners[0], patch.corners[2] - patch.corners[0]);
