@@ -539,9 +539,9 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
     return in_front;
   };
   // A close receiver goes to the sub-pieces only where the centre's hemicube could err by more than
-  // the radiosity tolerance: it gains at most rho * dB * F, with F at most A / (pi g^2) at a gap g
-  // between them (at most 1), and the hemicube's point view of the piece errs by about (D / 2g)^2
-  // of that (D the piece's diameter), all of it where they touch.
+  // kNearError of the radiosity tolerance: it gains at most rho * dB * F, with F at most
+  // A / (pi g^2) at a gap g between them (at most 1), and the hemicube's point view of the piece
+  // errs by about (D / 2g)^2 of that (D the piece's diameter); within half a diameter, always.
   auto may_matter = [&](uint32_t e) {
     const double gap = glm::distance(centre, e_centre[e]) - e_radius[e] - 0.5 * piece.diameter;
     if (gap <= 0.5 * piece.diameter) return true;
