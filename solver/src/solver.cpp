@@ -551,7 +551,12 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
     const double share = 0.25 * piece.diameter * piece.diameter / (gap * gap);
     return mean(patches[e_patch[e]].reflectance * dB) * f * share > kNearError * b_tolerance;
   };
-  for (uint32_t e : current) (piece.may_refine && is_close(e) && may_matter(e) ? near : accepted).push_back(e);
+  std::vector<uint8_t> goes_near(current.size(), 0);
+  if (piece.may_refine)
+    pool.parallel_for(current.size(), [&](size_t begin, size_t end, size_t) {
+      for (size_t i = begin; i < end; ++i) goes_near[i] = is_close(current[i]) && may_matter(current[i]);
+    });
+  for (size_t i = 0; i < current.size(); ++i) (goes_near[i] ? near : accepted).push_back(current[i]);
   if (accepted.empty()) return near;
 
   // What the hemicube must see: every accepted receiver, and whatever may stand between one and
