@@ -72,11 +72,11 @@ class Hemicube {
 
   /// Projects a planar convex polygon (world coordinates, front side facing the eye), appending
   /// its fragments in increasing pixel order. Classical: a fragment per pixel whose centre is
-  /// inside; anti-aliased: a fragment per pixel it covers, with the covered area. `normal`, when
-  /// given, is the polygon's plane normal (any length); otherwise it is computed.
+  /// inside; anti-aliased: a fragment per pixel it covers, with the covered area. `plane_normal`,
+  /// when given, is the polygon's plane normal (any length); otherwise it is computed.
   void project(std::span<const glm::dvec3> polygon, uint32_t element, uint32_t group,
                Method method, ProjectScratch& scratch, std::vector<Fragment>& out,
-               const glm::dvec3* normal = nullptr) const;
+               const glm::dvec3* plane_normal = nullptr) const;
 
   /// Projects a polygon that lies inside a parent polygon whose resolved fragments are `parent`
   /// (sorted by pixel), appending its fragments with the parent's transmission per pixel. No other

@@ -30,7 +30,7 @@ double signed_area(std::span<const glm::dvec2> polygon) {
 namespace {
 
 // floor and ceil by truncation (std::floor is a library call or a long sequence on baseline
-// x86-64); exact for |v| < 2^52, which pixel coordinates are.
+// x86-64); for finite |v| < 2^63, which pixel coordinates are.
 inline double fast_floor(double v) {
   const double t = static_cast<double>(static_cast<int64_t>(v));
   return t > v ? t - 1.0 : t;
@@ -59,13 +59,14 @@ void walk(std::span<const glm::dvec2> polygon, const PixelWindow& window, std::s
   if (n < 3 || cells == 1) {
     // Nothing, or a polygon inside a single pixel: its own area and centroid, no walk needed.
     std::fill_n(area.begin(), cells, 0.0);
-    if (Moments) {
+    if constexpr (Moments) {
       std::fill_n(moment_x.begin(), cells, 0.0);
       std::fill_n(moment_y.begin(), cells, 0.0);
     }
     if (n < 3) return;
     area[0] = std::abs(signed_total);
-    if (Moments && signed_total != 0.0) {
+    if constexpr (Moments) {
+      if (signed_total == 0.0) return;
       double cx = 0.0, cy = 0.0;
       for (size_t i = 0; i < n; ++i) {
         const glm::dvec2 a = polygon[i] - glm::dvec2(window.x0, window.y0);

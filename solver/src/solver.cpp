@@ -429,7 +429,6 @@ void Solver::Impl::project(uint32_t shooter_patch, std::span<const uint32_t> ele
     }
   }
   detail::resolve(frags, cube->pixel_count(), params.method, prep.adjacency, pool, order, pixel_start);
-  sum_form_factors(elements);
   stats.peak_fragments = std::max<uint64_t>(stats.peak_fragments, frags.size());
   stats.seconds_projecting += seconds_since(t0);
 }
@@ -610,9 +609,7 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
       for (uint32_t x = e; x != kNone && e_mark[x] != mark; x = e_parent[x]) e_mark[x] = mark;
     // The patches whose boxes meet the receivers' boxes (all of them for a whole-scene hemicube).
     std::vector<uint32_t> near_patches;
-    if (whole_scene) {
-      near_patches = tree_patch;
-    } else {
+    if (!whole_scene) {
       const double slack = 1e-9 * prep.diagonal;
       auto meets = [&](const glm::dvec3& lo, const glm::dvec3& hi) {
         for (const Box& b : boxes)
@@ -649,7 +646,7 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
       }
     }
     std::vector<uint32_t> stack;
-    for (uint32_t q : near_patches) {
+    for (uint32_t q : whole_scene ? tree_patch : near_patches) {
       stack.push_back(p_root[q]);
       while (!stack.empty()) {
         const uint32_t x = stack.back();
@@ -676,6 +673,7 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   cube = &cubes[std::min<size_t>(static_cast<size_t>(piece.depth) + coarser, cubes.size() - 1)];
   cube->place(centre, normal, piece.up);
   project(p, seen);
+  sum_form_factors(accepted);  // the occluders' own form factors are not needed
 
   // This piece's share of the emitted power: how much the interaction matters (criterion a).
   const double weight = power / emitted_power;
@@ -693,7 +691,7 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   // F(point x with normal n -> piece): Lambert over the piece cut to x's front side; nothing for a
   // point behind the piece.
   auto point_to_piece = [&](const glm::dvec3& x, const glm::dvec3& n) {
-    if (glm::dot(normal, x - piece.points[0]) <= 0.0) return 0.0;
+    if (glm::dot(normal, x - centre) <= 0.0) return 0.0;
     uint32_t m = 0;
     std::array<glm::dvec3, 8> clipped{};
     const size_t k = piece.points.size();
@@ -821,6 +819,7 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
     } else {
       gather_seen();
       project(p, seen);
+      sum_form_factors(accepted);
     }
   }
 

@@ -312,6 +312,39 @@ TEST(ScanConvert, PixelAreasAndMomentsEqualThoseOfRandomNonConvexStarPolygonsCli
   }
 }
 
+TEST(ScanConvert, OneScratchReusedAcrossWindowsAndModesGivesTheResultsOfFreshOnes) {
+  // The scratch keeps its per-pixel sums between calls (cleared by each call's last sweep): a
+  // scratch used by calls of both kinds over windows of changing size must change nothing.
+  const uint64_t seed = test_seed();
+  SCOPED_TRACE(seed_note(seed));
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  ScanScratch shared;
+  int tested = 0;
+  for (int trial = 0; trial < 500; ++trial) {
+    const RandomCase c = random_case(rng);
+    Poly pts;
+    for (int i = 0; i < 6; ++i) pts.push_back(c.lo + (c.hi - c.lo) * glm::dvec2(u(rng), u(rng)));
+    const Poly hull = convex_hull(pts);
+    if (hull.size() < 3) continue;
+    ++tested;
+    const size_t cells = static_cast<size_t>(c.win.width) * c.win.height;
+    std::vector<double> area(cells), mx(cells), my(cells);
+    if (trial % 2 == 0) {
+      scan_convert_area(hull, c.win, area, shared);
+      EXPECT_EQ(area, scan(hull, c.win).area);
+    } else {
+      scan_convert_moments(hull, c.win, area, mx, my, shared);
+      const Result fresh = scan_moments(hull, c.win);
+      EXPECT_EQ(area, fresh.area);
+      EXPECT_EQ(mx, fresh.mx);
+      EXPECT_EQ(my, fresh.my);
+    }
+    if (HasFailure()) return;
+  }
+  EXPECT_GT(tested, 400);
+}
+
 TEST(ScanConvert, SignedAreaIsTheShoelaceAreaWithCounterClockwisePositive) {
   const uint64_t seed = test_seed();
   SCOPED_TRACE(seed_note(seed));

@@ -17,7 +17,8 @@ struct PixelWindow {
   int height = 0;  ///< rows
 };
 
-/// Scratch space for scan_convert_area, reusable across calls so that hot loops allocate nothing.
+/// Scratch space for scan_convert_area and scan_convert_moments, reusable across calls so that hot
+/// loops allocate nothing.
 struct ScanScratch {
   /// Per pixel: the edge pieces' own sums and the paper's column carry C (areas, then moments);
   /// all zero between calls.

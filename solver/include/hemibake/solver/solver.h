@@ -96,7 +96,7 @@ class CancelToken {
 struct Stats {
   uint64_t shots = 0;            ///< patch shots (Southwell steps)
   uint64_t hemicubes = 0;        ///< hemicubes placed (a patch shoots from one or more sub-areas)
-  uint64_t projections = 0;      ///< whole-scene projections onto a hemicube
+  uint64_t projections = 0;      ///< projections onto a hemicube (of the whole scene, or of what may hide a near piece's receivers)
   uint64_t elements_projected = 0;  ///< elements given to those projections, summed
   uint64_t rounds = 0;           ///< repeated shots after splits (the paper's cancelled shots)
   uint64_t splits = 0;           ///< elements split
@@ -108,7 +108,7 @@ struct Stats {
   uint64_t patches = 0;          ///< input patches
   uint64_t peak_fragments = 0;   ///< most pixel fragments held at once
   double seconds = 0.0;          ///< wall time in run()/step()
-  double seconds_projecting = 0.0;  ///< in whole-scene projections (incl. resolving pixel lists)
+  double seconds_projecting = 0.0;  ///< in those projections (incl. resolving pixel lists)
   double seconds_reusing = 0.0;     ///< in evaluating children from their parent's pixels
   double unshot_fraction = 1.0;     ///< unshot power / emitted power
   double emitted_power = 0.0;       ///< sum over patches of emission (RGB summed) times area
