@@ -110,6 +110,21 @@ double polygon_diameter(const Corners& c, uint32_t n) {
   return d;
 }
 
+// Reorders ids[begin, end) around its middle (returned) by the points key(id) along the widest
+// axis of their bounding box [lo, hi]: a median cut, ties broken by id so that it is deterministic.
+template <typename Key>
+uint32_t median_cut(std::vector<uint32_t>& ids, uint32_t begin, uint32_t end, const glm::dvec3& lo,
+                    const glm::dvec3& hi, Key key) {
+  const glm::dvec3 ext = hi - lo;
+  const int axis = ext.x >= ext.y && ext.x >= ext.z ? 0 : ext.y >= ext.z ? 1 : 2;
+  const uint32_t mid = begin + (end - begin) / 2;
+  std::nth_element(ids.begin() + begin, ids.begin() + mid, ids.begin() + end, [&](uint32_t a, uint32_t b) {
+    const double ka = key(a)[axis], kb = key(b)[axis];
+    return ka != kb ? ka < kb : a < b;
+  });
+  return mid;
+}
+
 glm::dvec3 polygon_centre(const Corners& c, uint32_t n) {
   if (n == 3) return (c[0] + c[1] + c[2]) / 3.0;
   // Area centroid of a convex quad: area-weighted centroids of its two triangles.
@@ -942,12 +957,9 @@ void Solver::Impl::build_cluster(uint32_t id, uint32_t begin, uint32_t end) {
   }
   if (end - begin > 1) {
     // Median cut of the patch centres across their widest extent.
-    const glm::dvec3 ext = chi - clo;
-    const int axis = ext.x >= ext.y && ext.x >= ext.z ? 0 : ext.y >= ext.z ? 1 : 2;
-    const uint32_t mid = begin + (end - begin) / 2;
-    auto key = [&](uint32_t q) { return polygon_centre(patches[q].corners, patches[q].corner_count)[axis]; };
-    std::nth_element(cluster_patch.begin() + begin, cluster_patch.begin() + mid, cluster_patch.begin() + end,
-                     [&](uint32_t a, uint32_t b) { return key(a) != key(b) ? key(a) < key(b) : a < b; });
+    const uint32_t mid = median_cut(cluster_patch, begin, end, clo, chi, [&](uint32_t q) {
+      return polygon_centre(patches[q].corners, patches[q].corner_count);
+    });
     node.child = static_cast<uint32_t>(c_nodes.size());
     c_nodes.resize(c_nodes.size() + 2);
     build_cluster(node.child, begin, mid);
@@ -1024,12 +1036,8 @@ void Solver::Impl::build_patch_tree(uint32_t id, uint32_t begin, uint32_t end) {
     chi = glm::max(chi, p_lo[q] + p_hi[q]);
   }
   if (end - begin > 4) {
-    const glm::dvec3 ext = chi - clo;
-    const int axis = ext.x >= ext.y && ext.x >= ext.z ? 0 : ext.y >= ext.z ? 1 : 2;
-    const uint32_t mid = begin + (end - begin) / 2;
-    auto key = [&](uint32_t q) { return p_lo[q][axis] + p_hi[q][axis]; };
-    std::nth_element(tree_patch.begin() + begin, tree_patch.begin() + mid, tree_patch.begin() + end,
-                     [&](uint32_t a, uint32_t b) { return key(a) != key(b) ? key(a) < key(b) : a < b; });
+    const uint32_t mid =
+        median_cut(tree_patch, begin, end, clo, chi, [&](uint32_t q) { return p_lo[q] + p_hi[q]; });
     node.child = static_cast<uint32_t>(tree.size());
     tree.resize(tree.size() + 2);
     build_patch_tree(node.child, begin, mid);
