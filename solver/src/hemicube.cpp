@@ -5,6 +5,7 @@
 #include "hemicube_engine.h"
 
 #include "hemibake/solver/hemicube.h"
+#include "scan_walk.h"
 
 #include <glm/geometric.hpp>
 
@@ -262,7 +263,6 @@ void Hemicube::rasterize(const Face& face, uint32_t element, uint32_t group, Met
       std::clamp(static_cast<int>(std::ceil(ymax)), win.y0 + 1, static_cast<int>(face.height));
   win.width = x1 - win.x0;
   win.height = y1 - win.y0;
-  const size_t cells = static_cast<size_t>(win.width) * static_cast<size_t>(win.height);
 
   // Depth: 1/depth is affine in the face's (a, b) for a planar polygon, so it is evaluated from the
   // plane and clamped to the polygon's own range against rounding.
@@ -275,67 +275,51 @@ void Hemicube::rasterize(const Face& face, uint32_t element, uint32_t group, Met
                      glm::dot(plane_normal, face.forward));
   const double inv_h = plane_offset != 0.0 ? 1.0 / plane_offset : 0.0;
   const double step = 2.0 / n_;
-  // (x, y) in face pixel coordinates.
-  auto inv_depth_at = [&](double x, double y) {
-    const double a = -1.0 + x * step;
-    const double b = face.b_min + y * step;
-    const double v = (m.x * a + m.y * b + m.z) * inv_h;
-    return std::clamp(static_cast<float>(v), inv_lo, inv_hi);
-  };
+  // 1/depth at face pixel coordinates (x, y), a = -1 + x step and b = b_min + y step on the face:
+  // (m.x a + m.y b + m.z) / h, affine in (x, y); here in the window's coordinates.
+  const double depth_x = m.x * step * inv_h, depth_y = m.y * step * inv_h;
+  const double depth_0 = (m.x * (-1.0 + win.x0 * step) + m.y * (face.b_min + win.y0 * step) + m.z) * inv_h;
+  // The window's lower-left pixel; pixel (col, row) of the window is base + row n + col.
+  const uint32_t base = face.offset + static_cast<uint32_t>(win.y0) * n_ + static_cast<uint32_t>(win.x0);
 
-  // For children: walk the parent's fragments (sorted by pixel) alongside.
+  // For children: walk the parent's fragments (sorted by pixel) alongside. Fragments go out in
+  // increasing pixel order (the scan converter's sweep meets rows upwards).
   size_t pj = 0;
-  auto parent_trans = [&](uint32_t pixel, float& trans) {
-    while (pj < parent.size() && parent[pj].pixel < pixel) ++pj;
-    if (pj < parent.size() && parent[pj].pixel == pixel) {
-      trans = parent[pj].trans;
-      return true;
-    }
-    return false;  // only rounding puts a child outside its parent's pixels
-  };
   // `cx`, `cy`: where in the pixel (0..1) the polygon's covered part is centred.
-  auto emit = [&](int col, int row, float area, double cx, double cy) {
-    const int px = win.x0 + col, py = win.y0 + row;
+  auto emit = [&](int col, int row, float area, double cx, double cy) __attribute__((always_inline)) {
     Fragment fr;
-    fr.pixel = face.offset + static_cast<uint32_t>(py) * n_ + static_cast<uint32_t>(px);
+    fr.pixel = base + static_cast<uint32_t>(row) * n_ + static_cast<uint32_t>(col);
     fr.element = element;
-    fr.group = group;
     fr.area = area;
     if (child) {
-      if (!parent_trans(fr.pixel, fr.trans)) return;
+      while (pj < parent.size() && parent[pj].pixel < fr.pixel) ++pj;
+      // Only rounding puts a child outside its parent's pixels.
+      if (pj == parent.size() || parent[pj].pixel != fr.pixel) return;
+      fr.trans = parent[pj].trans;
       fr.group = parent[pj].group;
     } else {
-      fr.inv_depth = inv_depth_at(px + cx, py + cy);
+      fr.group = group;
+      const double v = depth_0 + depth_x * (col + cx) + depth_y * (row + cy);
+      fr.inv_depth = std::clamp(static_cast<float>(v), inv_lo, inv_hi);
     }
     out.push_back(fr);
   };
 
   if (method == Method::kAntiAliased) {
-    if (s.area.size() < cells) {
-      s.area.resize(cells);
-      s.moment_x.resize(cells);
-      s.moment_y.resize(cells);
-    }
-    const std::span<double> area(s.area.data(), cells);
     if (child) {
-      scan_convert_area(s.poly2, win, area, s.scan);
+      detail::scan_walk<false>(s.poly2, win, s.scan, [&](int col, int row, double a, double, double) __attribute__((always_inline)) {
+        if (a > 1e-9) emit(col, row, static_cast<float>(std::min(a, 1.0)), 0.5, 0.5);
+      });
     } else {
       // The depth that orders a partly covered pixel is the polygon's mean depth over the part it
       // covers (1/depth is affine, so its mean is its value at that part's centroid). The pixel
       // centre would misorder surfaces that meet inside a pixel, such as a block standing on a
       // floor.
-      scan_convert_moments(s.poly2, win, area, std::span(s.moment_x.data(), cells),
-                           std::span(s.moment_y.data(), cells), s.scan);
-    }
-    for (int row = 0; row < win.height; ++row) {
-      for (int col = 0; col < win.width; ++col) {
-        const size_t cell = static_cast<size_t>(row) * win.width + col;
-        const double a = area[cell];
-        if (a <= 1e-9) continue;
-        const double cx = child ? 0.5 : std::clamp(s.moment_x[cell] / a, 0.0, 1.0);
-        const double cy = child ? 0.5 : std::clamp(s.moment_y[cell] / a, 0.0, 1.0);
-        emit(col, row, static_cast<float>(std::min(a, 1.0)), cx, cy);
-      }
+      detail::scan_walk<true>(s.poly2, win, s.scan, [&](int col, int row, double a, double mx, double my) __attribute__((always_inline)) {
+        if (a <= 1e-9) return;
+        emit(col, row, static_cast<float>(std::min(a, 1.0)), std::clamp(mx / a, 0.0, 1.0),
+             std::clamp(my / a, 0.0, 1.0));
+      });
     }
     return;
   }

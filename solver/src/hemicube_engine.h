@@ -48,7 +48,6 @@ struct ClipPolygon {
 /// Per-thread scratch for projecting polygons.
 struct ProjectScratch {
   ScanScratch scan;
-  std::vector<double> area, moment_x, moment_y;
   ClipPolygon clip_a, clip_b;
   std::array<glm::dvec3, ClipPolygon::kMax> local;  // the polygon in the hemicube's frame
   int local_n = 0;

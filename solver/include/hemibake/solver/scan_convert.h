@@ -23,6 +23,8 @@ struct ScanScratch {
   /// Per pixel: the edge pieces' own sums and the paper's column carry C (areas, then moments);
   /// all zero between calls.
   std::vector<double> cells;
+  std::vector<double> carry;        ///< the column carries of one sweep
+  std::vector<glm::dvec2> local;    ///< the polygon in window coordinates
 };
 
 /// Writes into `area` (width * height values, row-major from the bottom row) the area of every
