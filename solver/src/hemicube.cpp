@@ -56,6 +56,17 @@ void clip_plane(const ClipPolygon& in, ClipPolygon& out, Dist dist) {
   if (out.n < 3) out.n = 0;
 }
 
+// A point of the hemicube's frame in face f's (right, up, forward) (see kLocalFaces).
+inline glm::dvec3 to_face(size_t f, const glm::dvec3& l) {
+  switch (f) {
+    case 0: return l;
+    case 1: return glm::dvec3(l.y, l.z, l.x);
+    case 2: return glm::dvec3(-l.y, l.z, -l.x);
+    case 3: return glm::dvec3(-l.x, l.z, l.y);
+    default: return glm::dvec3(l.x, l.z, -l.y);
+  }
+}
+
 glm::dvec3 newell_normal(std::span<const glm::dvec3> p) {
   glm::dvec3 n(0.0);
   for (size_t i = 0; i < p.size(); ++i) {
@@ -166,8 +177,38 @@ int Hemicube::common_face(const ProjectScratch& s) const {
   return face;
 }
 
-bool Hemicube::clip_to_face(size_t f, ProjectScratch& s) const {
+bool Hemicube::clip_to_face(size_t f, ProjectScratch& s, bool inside) const {
   const Face& face = faces_[f];
+  if (inside) {
+    // Every corner lies strictly inside the face's frustum (common_face): nothing to clip, unless
+    // a corner is so near the eye that 1/depth is not to be trusted.
+    const double half_n = 0.5 * n_;
+    double scale = 0.0;
+    for (int i = 0; i < s.local_n; ++i) {
+      const glm::dvec3& l = s.local[i];
+      scale = std::max(scale, std::abs(l.x) + std::abs(l.y) + std::abs(l.z));
+    }
+    s.poly2.clear();
+    s.inv_depths.clear();
+    bool near = false;
+    for (int i = 0; i < s.local_n && !near; ++i) {
+      const glm::dvec3 q = to_face(f, s.local[i]);
+      near = q.z < 1e-9 * scale;
+      const double inv_z = 1.0 / q.z;
+      const double x = std::clamp((q.x * inv_z + 1.0) * half_n, 0.0, static_cast<double>(n_));
+      const double y = std::clamp((q.y * inv_z - face.b_min) * half_n, 0.0, static_cast<double>(face.height));
+      if (!s.poly2.empty() && s.poly2.back() == glm::dvec2(x, y)) continue;
+      s.poly2.emplace_back(x, y);
+      s.inv_depths.push_back(static_cast<float>(inv_z));
+    }
+    if (!near) {
+      while (s.poly2.size() > 1 && s.poly2.back() == s.poly2.front()) {
+        s.poly2.pop_back();
+        s.inv_depths.pop_back();
+      }
+      return s.poly2.size() >= 3;
+    }
+  }
   ClipPolygon& a = s.clip_a;
   ClipPolygon& b = s.clip_b;
   a.n = 0;
@@ -177,15 +218,7 @@ bool Hemicube::clip_to_face(size_t f, ProjectScratch& s) const {
   unsigned all_out = 0x1f, any_out = 0;
   for (int i = 0; i < s.local_n; ++i) {
     const glm::dvec3& l = s.local[i];
-    // The face's (right, up, forward) in the hemicube's frame (see kLocalFaces).
-    glm::dvec3 q;
-    switch (f) {
-      case 0: q = l; break;
-      case 1: q = glm::dvec3(l.y, l.z, l.x); break;
-      case 2: q = glm::dvec3(-l.y, l.z, -l.x); break;
-      case 3: q = glm::dvec3(-l.x, l.z, l.y); break;
-      default: q = glm::dvec3(l.x, l.z, -l.y); break;
-    }
+    const glm::dvec3 q = to_face(f, l);
     scale = std::max(scale, std::abs(q.x) + std::abs(q.y) + std::abs(q.z));
     unsigned out = 0;
     out |= (q.z - q.x < 0.0) ? 1u : 0u;
@@ -359,7 +392,7 @@ void Hemicube::project(std::span<const glm::dvec3> polygon, uint32_t element, ui
   const int single = common_face(scratch);
   for (size_t f = 0; f < faces_.size(); ++f) {
     if (single >= 0 && static_cast<int>(f) != single) continue;
-    if (!clip_to_face(f, scratch)) continue;
+    if (!clip_to_face(f, scratch, single >= 0)) continue;
     rasterize(faces_[f], element, group, method, normal, offset, {}, false, scratch, out);
   }
 }
@@ -376,7 +409,7 @@ void Hemicube::project_child(std::span<const glm::dvec3> polygon, uint32_t eleme
     const uint32_t end_pixel = face.offset + face.height * n_;
     size_t end = begin;
     while (end < parent.size() && parent[end].pixel < end_pixel) ++end;
-    if (end > begin && clip_to_face(f, scratch)) {
+    if (end > begin && clip_to_face(f, scratch, false)) {
       rasterize(face, element, 0, method, glm::dvec3(0.0), 0.0, parent.subspan(begin, end - begin),
                 true, scratch, out);
     }

@@ -91,9 +91,10 @@ class Hemicube {
     uint32_t height = 0;            // rows
     uint32_t offset = 0;            // first global pixel index
   };
-  // Clips to face f and maps to pixel coordinates; false when nothing is left.
   void to_local(std::span<const glm::dvec3> polygon, ProjectScratch& scratch) const;
-  bool clip_to_face(size_t face, ProjectScratch& scratch) const;
+  // Clips to face f and maps to pixel coordinates; false when nothing is left. `inside`: every
+  // corner is known to lie inside the face's frustum (only the near plane may still cut).
+  bool clip_to_face(size_t face, ProjectScratch& scratch, bool inside) const;
   // The face whose frustum holds every corner of the polygon in `scratch.local`, or -1.
   int common_face(const ProjectScratch& scratch) const;
   void rasterize(const Face& face, uint32_t element, uint32_t group, Method method,

@@ -253,6 +253,7 @@ struct Solver::Impl {
   uint64_t stamp = 0;
   std::vector<detail::ProjectScratch> scratch;
   std::vector<std::vector<Fragment>> chunk_frags;
+  std::vector<std::vector<uint32_t>> gather_chunks;  // per chunk: elements a hemicube must see
   std::vector<uint32_t> order, pixel_start;
   std::vector<double> shot_b, vmin, vmax;
   std::vector<double> f_recv, f_open;  // per accepted receiver: F(element -> piece), visible and open
@@ -660,21 +661,31 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
         }
       }
     }
-    std::vector<uint32_t> stack;
-    for (uint32_t q : whole_scene ? tree_patch : near_patches) {
-      stack.push_back(p_root[q]);
-      while (!stack.empty()) {
-        const uint32_t x = stack.back();
-        stack.pop_back();
-        if (e_mark[x] != mark) {
-          if (overlaps(x)) seen.push_back(x);
-        } else if (e_child[x] == kNone) {
-          seen.push_back(x);  // a receiver
-        } else {
-          for (uint32_t k = 4; k-- > 0;) stack.push_back(e_child[x] + k);
+    // Each patch's quadtree on its own, so the patches are shared among the threads (their lists
+    // joined in order).
+    const std::vector<uint32_t>& patch_list = whole_scene ? tree_patch : near_patches;
+    gather_chunks.resize(std::max<size_t>(gather_chunks.size(), pool.chunk_count(patch_list.size())));
+    pool.parallel_for(patch_list.size(), [&](size_t begin, size_t end, size_t c) {
+      std::vector<uint32_t>& out = gather_chunks[c];
+      out.clear();
+      std::vector<uint32_t> stack;
+      for (size_t i = begin; i < end; ++i) {
+        stack.push_back(p_root[patch_list[i]]);
+        while (!stack.empty()) {
+          const uint32_t x = stack.back();
+          stack.pop_back();
+          if (e_mark[x] != mark) {
+            if (overlaps(x)) out.push_back(x);
+          } else if (e_child[x] == kNone) {
+            out.push_back(x);  // a receiver
+          } else {
+            for (uint32_t k = 4; k-- > 0;) stack.push_back(e_child[x] + k);
+          }
         }
       }
-    }
+    });
+    for (size_t c = 0; c < pool.chunk_count(patch_list.size()); ++c)
+      seen.insert(seen.end(), gather_chunks[c].begin(), gather_chunks[c].end());
   };
   gather_seen();
 
