@@ -277,7 +277,7 @@ bool Hemicube::clip_to_face(size_t f, ProjectScratch& s, bool inside) const {
   return s.poly2.size() >= 3;
 }
 
-void Hemicube::rasterize(const Face& face, uint32_t element, uint32_t group, Method method,
+void Hemicube::rasterize(const Face& face, uint32_t element, Method method,
                          const glm::dvec3& plane_normal, double plane_offset,
                          std::span<const Fragment> parent, bool child, ProjectScratch& s,
                          std::vector<Fragment>& out) const {
@@ -329,9 +329,7 @@ void Hemicube::rasterize(const Face& face, uint32_t element, uint32_t group, Met
       // Only rounding puts a child outside its parent's pixels.
       if (pj == parent.size() || parent[pj].pixel != fr.pixel) return;
       fr.trans = parent[pj].trans;
-      fr.group = parent[pj].group;
     } else {
-      fr.group = group;
       const double v = depth_0 + depth_x * (col + cx) + depth_y * (row + cy);
       fr.inv_depth = std::clamp(static_cast<float>(v), inv_lo, inv_hi);
     }
@@ -378,8 +376,8 @@ void Hemicube::rasterize(const Face& face, uint32_t element, uint32_t group, Met
   }
 }
 
-void Hemicube::project(std::span<const glm::dvec3> polygon, uint32_t element, uint32_t group,
-                       Method method, ProjectScratch& scratch, std::vector<Fragment>& out,
+void Hemicube::project(std::span<const glm::dvec3> polygon, uint32_t element, Method method,
+                       ProjectScratch& scratch, std::vector<Fragment>& out,
                        const glm::dvec3* plane_normal) const {
   to_local(polygon, scratch);
   bool any_in_front = false;
@@ -393,7 +391,7 @@ void Hemicube::project(std::span<const glm::dvec3> polygon, uint32_t element, ui
   for (size_t f = 0; f < faces_.size(); ++f) {
     if (single >= 0 && static_cast<int>(f) != single) continue;
     if (!clip_to_face(f, scratch, single >= 0)) continue;
-    rasterize(faces_[f], element, group, method, normal, offset, {}, false, scratch, out);
+    rasterize(faces_[f], element, method, normal, offset, {}, false, scratch, out);
   }
 }
 
@@ -410,7 +408,7 @@ void Hemicube::project_child(std::span<const glm::dvec3> polygon, uint32_t eleme
     size_t end = begin;
     while (end < parent.size() && parent[end].pixel < end_pixel) ++end;
     if (end > begin && clip_to_face(f, scratch, false)) {
-      rasterize(face, element, 0, method, glm::dvec3(0.0), 0.0, parent.subspan(begin, end - begin),
+      rasterize(face, element, method, glm::dvec3(0.0), 0.0, parent.subspan(begin, end - begin),
                 true, scratch, out);
     }
     begin = end;
@@ -418,7 +416,8 @@ void Hemicube::project_child(std::span<const glm::dvec3> polygon, uint32_t eleme
 }
 
 void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
-             const GroupAdjacency& adjacency, ThreadPool& pool, std::vector<uint32_t>& order,
+             std::span<const uint32_t> group_of, const GroupAdjacency& adjacency, ThreadPool& pool,
+             std::vector<uint32_t>& order,
              std::vector<uint32_t>& pixel_start) {
   // Counting sort of fragment indices by pixel (stable: ties keep projection order).
   pixel_start.assign(static_cast<size_t>(pixel_count) + 1, 0);
@@ -462,7 +461,7 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
       // One or two surfaces (most shared pixels: inside a subdivided patch, along an edge where two
       // meet, one in front of another): the general rule below, without lists or sorting.
       {
-        uint32_t g[2] = {fragments[order[lo]].group, 0};
+        uint32_t g[2] = {group_of[fragments[order[lo]].element], 0};
         bool second = false;
         double sum[2] = {0.0, 0.0};
         float depth[2] = {std::numeric_limits<float>::lowest(), std::numeric_limits<float>::lowest()};
@@ -470,12 +469,12 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
         for (uint32_t k = lo; k < hi; ++k) {
           const Fragment& f = fragments[order[k]];
           int slot = 0;
-          if (f.group != g[0]) {
-            if (second && f.group != g[1]) {
+          if (group_of[f.element] != g[0]) {
+            if (second && group_of[f.element] != g[1]) {
               few = false;
               break;
             }
-            g[1] = f.group;
+            g[1] = group_of[f.element];
             second = true;
             slot = 1;
           }
@@ -497,14 +496,14 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
           }
           for (uint32_t k = lo; k < hi; ++k) {
             Fragment& f = fragments[order[k]];
-            f.trans = trans[f.group == g[0] ? 0 : 1];
+            f.trans = trans[group_of[f.element] == g[0] ? 0 : 1];
           }
           continue;
         }
       }
       // Sum the coverage of each occlusion group: pieces of one surface never hide each other.
       by_group.clear();
-      for (uint32_t k = lo; k < hi; ++k) by_group.emplace_back(fragments[order[k]].group, order[k]);
+      for (uint32_t k = lo; k < hi; ++k) by_group.emplace_back(group_of[fragments[order[k]].element], order[k]);
       std::sort(by_group.begin(), by_group.end());
       groups.clear();
       for (const auto& [g, fi] : by_group) {
@@ -586,7 +585,9 @@ std::vector<double> hemicube_form_factors(const glm::dvec3& eye, const glm::dvec
   cube.place(eye, glm::normalize(normal), up_hint);
   detail::ProjectScratch scratch;
   std::vector<detail::Fragment> frags;
-  auto group_of = [&](uint32_t i) { return polygons[i].group != kNone ? polygons[i].group : 0x80000000u + i; };
+  std::vector<uint32_t> group_of(polygons.size());
+  for (uint32_t i = 0; i < polygons.size(); ++i)
+    group_of[i] = polygons[i].group != kNone ? polygons[i].group : 0x80000000u + i;
   for (uint32_t i = 0; i < polygons.size(); ++i) {
     const auto& poly = polygons[i].corners;
     if (poly.size() < 3) continue;
@@ -594,12 +595,12 @@ std::vector<double> hemicube_form_factors(const glm::dvec3& eye, const glm::dvec
     if (glm::dot(pn, eye - poly[0]) <= 0.0) continue;  // facing away
     // Long loops are cut into a fan of triangles: the clipper holds a bounded number of corners.
     if (poly.size() <= 8) {
-      cube.project(poly, i, group_of(i), method, scratch, frags);
+      cube.project(poly, i, method, scratch, frags);
       continue;
     }
     for (size_t k = 1; k + 1 < poly.size(); ++k) {
       const std::array<glm::dvec3, 3> tri{poly[0], poly[k], poly[k + 1]};
-      cube.project(tri, i, group_of(i), method, scratch, frags);
+      cube.project(tri, i, method, scratch, frags);
     }
   }
   // Polygons with a common edge (the same two corner points) are neighbours, as in a solve.
@@ -618,12 +619,12 @@ std::vector<double> hemicube_form_factors(const glm::dvec3& eye, const glm::dvec
     }
     for (const auto& [edge, list] : edges)
       for (size_t x = 0; x < list.size(); ++x)
-        for (size_t y = x + 1; y < list.size(); ++y) adjacency.add(group_of(list[x]), group_of(list[y]));
+        for (size_t y = x + 1; y < list.size(); ++y) adjacency.add(group_of[list[x]], group_of[list[y]]);
     adjacency.finish();
   }
   detail::ThreadPool pool(1);
   std::vector<uint32_t> order, starts;
-  detail::resolve(frags, cube.pixel_count(), method, adjacency, pool, order, starts);
+  detail::resolve(frags, cube.pixel_count(), method, group_of, adjacency, pool, order, starts);
   std::vector<double> ff(polygons.size(), 0.0);
   const auto& dff = cube.delta_form_factors();
   for (const auto& f : frags) ff[f.element] += static_cast<double>(f.area) * f.trans * dff[f.pixel];

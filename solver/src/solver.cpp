@@ -213,6 +213,7 @@ struct Solver::Impl {
 
   // Elements, structure of arrays. Children of an element are consecutive.
   std::vector<uint32_t> e_patch, e_parent, e_child;
+  std::vector<uint32_t> e_group;  // the patch's occlusion group
   std::vector<std::array<uint32_t, 4>> e_corner;
   std::vector<double> e_area;
   std::vector<glm::dvec3> e_centre;  // bounding sphere
@@ -328,6 +329,7 @@ uint32_t Solver::Impl::add_element(uint32_t patch, uint32_t parent,
                                    const glm::dvec3& unshot) {
   const uint32_t id = static_cast<uint32_t>(e_patch.size());
   e_patch.push_back(patch);
+  e_group.push_back(prep.occlusion_group[patch]);
   e_parent.push_back(parent);
   e_child.push_back(kNone);
   e_corner.push_back(corners);
@@ -430,8 +432,8 @@ void Solver::Impl::project(uint32_t shooter_patch, std::span<const uint32_t> ele
       // Back-face culling of the parent patch, seen from the hemicube's centre (section 2.2).
       if (p == shooter_patch || glm::dot(prep.normal[p], eye - patches[p].corners[0]) <= eps) continue;
       corners_of(el, poly);
-      cube->project(std::span(poly.data(), patches[p].corner_count), el, prep.occlusion_group[p],
-                   params.method, scratch[c], out, &prep.normal[p]);
+      cube->project(std::span(poly.data(), patches[p].corner_count), el, params.method, scratch[c], out,
+                   &prep.normal[p]);
       f_end[el] = static_cast<uint32_t>(out.size());
     }
   });
@@ -444,7 +446,7 @@ void Solver::Impl::project(uint32_t shooter_patch, std::span<const uint32_t> ele
       f_end[elements[i]] += base;
     }
   }
-  detail::resolve(frags, cube->pixel_count(), params.method, prep.adjacency, pool, order, pixel_start);
+  detail::resolve(frags, cube->pixel_count(), params.method, e_group, prep.adjacency, pool, order, pixel_start);
   stats.peak_fragments = std::max<uint64_t>(stats.peak_fragments, frags.size());
   stats.seconds_projecting += seconds_since(t0);
 }
