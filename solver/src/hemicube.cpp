@@ -437,6 +437,18 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
       float inv_depth;
       float trans;
     };
+    // Neighbouring pixels mostly ask about the same two surfaces: the last answer is kept.
+    uint32_t asked_a = 0, asked_b = 0;
+    bool asked_answer = false, asked_any = false;
+    auto adjacent = [&](uint32_t a, uint32_t b) {
+      if (!asked_any || a != asked_a || b != asked_b) {
+        asked_a = a;
+        asked_b = b;
+        asked_answer = adjacency.adjacent(a, b);
+        asked_any = true;
+      }
+      return asked_answer;
+    };
     std::vector<std::pair<uint32_t, uint32_t>> by_group;  // (group, fragment)
     std::vector<GroupSum> groups;
     std::vector<uint32_t> layers;
@@ -461,42 +473,46 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
       // One or two surfaces (most shared pixels: inside a subdivided patch, along an edge where two
       // meet, one in front of another): the general rule below, without lists or sorting.
       {
-        uint32_t g[2] = {group_of[fragments[order[lo]].element], 0};
-        bool second = false;
-        double sum[2] = {0.0, 0.0};
-        float depth[2] = {std::numeric_limits<float>::lowest(), std::numeric_limits<float>::lowest()};
+        // Scalars rather than arrays indexed by the fragment's surface: no store-to-load chain.
+        const uint32_t g0 = group_of[fragments[order[lo]].element];
+        uint32_t g1 = g0;
+        double sum0 = 0.0, sum1 = 0.0;
+        float depth0 = std::numeric_limits<float>::lowest(), depth1 = depth0;
         bool few = true;
         for (uint32_t k = lo; k < hi; ++k) {
           const Fragment& f = fragments[order[k]];
-          int slot = 0;
-          if (group_of[f.element] != g[0]) {
-            if (second && group_of[f.element] != g[1]) {
-              few = false;
-              break;
-            }
-            g[1] = group_of[f.element];
-            second = true;
-            slot = 1;
+          const uint32_t g = group_of[f.element];
+          if (g == g0) {
+            sum0 += f.area;
+            depth0 = std::max(depth0, f.inv_depth);
+            continue;
           }
-          sum[slot] += f.area;
-          depth[slot] = std::max(depth[slot], f.inv_depth);
+          if (g1 != g0 && g != g1) {
+            few = false;
+            break;
+          }
+          g1 = g;
+          sum1 += f.area;
+          depth1 = std::max(depth1, f.inv_depth);
         }
         if (few) {
-          float trans[2];
-          if (!second || adjacency.adjacent(g[0], g[1])) {
-            const double total = sum[0] + sum[1];
-            trans[0] = trans[1] = static_cast<float>(total > 1.0 ? 1.0 / total : 1.0);
+          float trans0, trans1;
+          if (g1 == g0 || adjacent(g0, g1)) {
+            const double total = sum0 + sum1;
+            trans0 = trans1 = static_cast<float>(total > 1.0 ? 1.0 / total : 1.0);
           } else {
             // Nearest first; ties go to the lower group id.
-            const int near = depth[0] != depth[1] ? (depth[0] > depth[1] ? 0 : 1) : (g[0] < g[1] ? 0 : 1);
-            const int far = 1 - near;
-            trans[near] = static_cast<float>(sum[near] > 1.0 ? 1.0 / sum[near] : 1.0);
-            const double t = 1.0 - std::min(sum[near], 1.0);
-            trans[far] = static_cast<float>(sum[far] > 1.0 ? t / sum[far] : t);
+            const bool first_near = depth0 != depth1 ? depth0 > depth1 : g0 < g1;
+            const double near_sum = first_near ? sum0 : sum1, far_sum = first_near ? sum1 : sum0;
+            const float near_trans = static_cast<float>(near_sum > 1.0 ? 1.0 / near_sum : 1.0);
+            const double t = 1.0 - std::min(near_sum, 1.0);
+            const float far_trans = static_cast<float>(far_sum > 1.0 ? t / far_sum : t);
+            trans0 = first_near ? near_trans : far_trans;
+            trans1 = first_near ? far_trans : near_trans;
           }
           for (uint32_t k = lo; k < hi; ++k) {
             Fragment& f = fragments[order[k]];
-            f.trans = trans[group_of[f.element] == g[0] ? 0 : 1];
+            f.trans = group_of[f.element] == g0 ? trans0 : trans1;
           }
           continue;
         }
@@ -522,7 +538,7 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
       if (!adjacency.empty() && groups.size() > 1) {
         for (uint32_t i = 0; i < groups.size(); ++i)
           for (uint32_t j = i + 1; j < groups.size(); ++j)
-            if (adjacency.adjacent(groups[i].group, groups[j].group)) {
+            if (adjacent(groups[i].group, groups[j].group)) {
               const uint32_t ri = find(i), rj = find(j);
               if (ri != rj) groups[std::max(ri, rj)].root = std::min(ri, rj);
             }
