@@ -1,20 +1,11 @@
 // Solid-area scan conversion, after Figure 4 of "Anti-aliased hemicubes for performance improvement
-// in radiosity solutions".
-//
-// The area of a polygon inside a pixel is the signed sum, over the polygon's edges, of the area
-// between each edge and the pixel's bottom border, restricted to the pixel. An edge piece inside the
-// pixel contributes the trapezoid (x_e - x_l)(y_e + y_l)/2 (coordinates from the pixel's lower-left
-// corner); an edge piece in a pixel higher up in the same column contributes its full pixel height
-// over its x-extent, which the column carry C hands down to every pixel below it. Vertical edges
-// contribute nothing, so only x-extents matter.
+// in radiosity solutions": the public entry points, writing arrays. The method is in scan_walk.h,
+// which the hemicube calls directly.
 #include "hemibake/solver/scan_convert.h"
 
 #include "scan_walk.h"
 
-#include <algorithm>
 #include <cassert>
-#include <cmath>
-#include <cstdint>
 
 namespace hemibake::solver {
 

@@ -225,8 +225,8 @@ struct RandomCase {
   glm::dvec2 lo, hi;  // a box inside the window for the polygon
 };
 
-RandomCase random_case(std::mt19937_64& rng) {
-  std::uniform_int_distribution<int> origin(-60, 60), size(1, 12);
+RandomCase random_case(std::mt19937_64& rng, int max_size = 12) {
+  std::uniform_int_distribution<int> origin(-60, 60), size(1, max_size);
   RandomCase c;
   c.win = {origin(rng), origin(rng), size(rng), size(rng)};
   // A sub-box of the window, sometimes the whole window (polygon touching the window's border).
@@ -243,32 +243,74 @@ RandomCase random_case(std::mt19937_64& rng) {
   return c;
 }
 
+// A random convex polygon (3 to 12 points' hull) in the case's box; a third snap to a
+// quarter-pixel grid (vertices on pixel corners and borders, edges along borders), odd trials run
+// clockwise. Empty when the hull is degenerate.
+Poly random_convex(std::mt19937_64& rng, const RandomCase& c, int trial) {
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::uniform_int_distribution<int> count(3, 12);
+  Poly pts;
+  const int n = count(rng);
+  for (int i = 0; i < n; ++i) pts.push_back(c.lo + (c.hi - c.lo) * glm::dvec2(u(rng), u(rng)));
+  if (trial % 3 == 0) {
+    for (glm::dvec2& p : pts) p = glm::round(p * 4.0) / 4.0;
+  }
+  Poly hull = convex_hull(pts);
+  if (hull.size() < 3 || std::abs(shoelace2(hull)) < 1e-6) return {};
+  if (trial % 2 == 1) hull = reversed(hull);
+  return hull;
+}
+
+// A random star polygon (`min_n` to 24 vertices, min_n >= 4, at increasing angles around a kernel
+// point, random radii) scaled into the case's box, and its kernel point; odd trials run clockwise.
+// Empty when the box is too thin.
+std::pair<Poly, glm::dvec2> random_star(std::mt19937_64& rng, const RandomCase& c, int trial, int min_n = 5) {
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::uniform_int_distribution<int> count(min_n, 24);
+  // Consecutive angles differ by less than 1.9 / n turns, under pi from 4 vertices on, so the origin
+  // is in the kernel and the fan from it tiles the polygon.
+  const int n = count(rng);
+  Poly star;
+  for (int i = 0; i < n; ++i) {
+    const double angle = 2.0 * std::numbers::pi * (i + 0.9 * u(rng)) / n;
+    const double radius = 0.05 + 0.95 * u(rng);
+    star.push_back(radius * glm::dvec2(std::cos(angle), std::sin(angle)));
+  }
+  // An axis-aligned scale and shift into the box: lines stay lines, the kernel point moves along,
+  // so the fan still tiles the polygon.
+  glm::dvec2 bmin(1e300), bmax(-1e300);
+  for (const glm::dvec2& p : star) {
+    bmin = glm::min(bmin, p);
+    bmax = glm::max(bmax, p);
+  }
+  const glm::dvec2 scale = (c.hi - c.lo) / (bmax - bmin);
+  if (std::min(scale.x, scale.y) < 1e-3) return {};
+  for (glm::dvec2& p : star) p = c.lo + (p - bmin) * scale;
+  const glm::dvec2 kernel = c.lo - bmin * scale;
+  if (trial % 2 == 1) star = reversed(star);
+  return {star, kernel};
+}
+
+// Areas and moments of every pixel, and the area sum, against the exact ones.
+void expect_exact(const Poly& poly, const std::vector<Poly>& convex_pieces, const PixelWindow& win) {
+  SCOPED_TRACE(describe(poly, win));
+  const Errors e = max_pixel_errors(poly, convex_pieces, win);
+  EXPECT_LE(e.area, kAreaTolerance);
+  EXPECT_LE(e.moment, kAreaTolerance);
+  EXPECT_NEAR(scan(poly, win).sum, 0.5 * std::abs(shoelace2(poly)), kAreaTolerance);
+}
+
 TEST(ScanConvert, PixelAreasAndMomentsEqualThoseOfRandomConvexPolygonsClippedToEachPixel) {
   const uint64_t seed = test_seed();
   SCOPED_TRACE(seed_note(seed));
   std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u(0.0, 1.0);
-  std::uniform_int_distribution<int> count(3, 12);
   int tested = 0;
   for (int trial = 0; trial < 3000; ++trial) {
     const RandomCase c = random_case(rng);
-    Poly pts;
-    const int n = count(rng);
-    for (int i = 0; i < n; ++i) pts.push_back(c.lo + (c.hi - c.lo) * glm::dvec2(u(rng), u(rng)));
-    // A third of the polygons snap to a quarter-pixel grid: vertices on pixel corners and borders,
-    // edges along borders.
-    if (trial % 3 == 0) {
-      for (glm::dvec2& p : pts) p = glm::round(p * 4.0) / 4.0;
-    }
-    Poly hull = convex_hull(pts);
-    if (hull.size() < 3 || std::abs(shoelace2(hull)) < 1e-6) continue;
-    if (trial % 2 == 1) hull = reversed(hull);  // clockwise
+    const Poly hull = random_convex(rng, c, trial);
+    if (hull.empty()) continue;
     ++tested;
-    SCOPED_TRACE(describe(hull, c.win));
-    const Errors e = max_pixel_errors(hull, {hull}, c.win);
-    EXPECT_LE(e.area, kAreaTolerance);
-    EXPECT_LE(e.moment, kAreaTolerance);
-    EXPECT_NEAR(scan(hull, c.win).sum, 0.5 * std::abs(shoelace2(hull)), kAreaTolerance);
+    expect_exact(hull, {hull}, c.win);
     if (HasFailure()) return;
   }
   EXPECT_GT(tested, 2000);
@@ -278,38 +320,37 @@ TEST(ScanConvert, PixelAreasAndMomentsEqualThoseOfRandomNonConvexStarPolygonsCli
   const uint64_t seed = test_seed();
   SCOPED_TRACE(seed_note(seed));
   std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u(0.0, 1.0);
-  std::uniform_int_distribution<int> count(5, 24);
   for (int trial = 0; trial < 3000; ++trial) {
     const RandomCase c = random_case(rng);
-    // Vertices at increasing angles around the origin with random radii. Consecutive angles
-    // differ by less than pi, so the origin is in the kernel and the fan from it tiles the polygon.
-    const int n = count(rng);
-    Poly star;
-    for (int i = 0; i < n; ++i) {
-      const double angle = 2.0 * std::numbers::pi * (i + 0.9 * u(rng)) / n;
-      const double radius = 0.05 + 0.95 * u(rng);
-      star.push_back(radius * glm::dvec2(std::cos(angle), std::sin(angle)));
-    }
-    // An axis-aligned scale and shift into the box: lines stay lines, the kernel point moves along,
-    // so the fan still tiles the polygon.
-    glm::dvec2 bmin(1e300), bmax(-1e300);
-    for (const glm::dvec2& p : star) {
-      bmin = glm::min(bmin, p);
-      bmax = glm::max(bmax, p);
-    }
-    const glm::dvec2 scale = (c.hi - c.lo) / (bmax - bmin);
-    if (std::min(scale.x, scale.y) < 1e-3) continue;
-    for (glm::dvec2& p : star) p = c.lo + (p - bmin) * scale;
-    const glm::dvec2 kernel = c.lo - bmin * scale;
-    if (trial % 2 == 1) star = reversed(star);  // clockwise
-    SCOPED_TRACE(describe(star, c.win));
-    const Errors e = max_pixel_errors(star, fan(star, kernel), c.win);
-    EXPECT_LE(e.area, kAreaTolerance);
-    EXPECT_LE(e.moment, kAreaTolerance);
-    EXPECT_NEAR(scan(star, c.win).sum, 0.5 * std::abs(shoelace2(star)), kAreaTolerance);
+    const auto [star, kernel] = random_star(rng, c, trial);
+    if (star.empty()) continue;
+    expect_exact(star, fan(star, kernel), c.win);
     if (HasFailure()) return;
   }
+}
+
+// Windows of up to 2 x 2 pixels are cut at the pixel borders rather than walked edge by edge (and
+// polygons of more than 16 corners are walked even there): both ways against the exact areas.
+TEST(ScanConvert, WindowsOfUpToTwoByTwoPixelsGiveExactAreasAndMoments) {
+  const uint64_t seed = test_seed();
+  SCOPED_TRACE(seed_note(seed));
+  std::mt19937_64 rng(seed);
+  int tested = 0;
+  for (int trial = 0; trial < 4000; ++trial) {
+    const RandomCase c = random_case(rng, 2);
+    if (trial % 2 == 0) {
+      const Poly hull = random_convex(rng, c, trial / 2);
+      if (hull.empty()) continue;
+      expect_exact(hull, {hull}, c.win);
+    } else {
+      const auto [star, kernel] = random_star(rng, c, trial / 2, 4);
+      if (star.empty()) continue;
+      expect_exact(star, fan(star, kernel), c.win);
+    }
+    ++tested;
+    if (HasFailure()) return;
+  }
+  EXPECT_GT(tested, 3000);
 }
 
 TEST(ScanConvert, OneScratchReusedAcrossWindowsAndModesGivesTheResultsOfFreshOnes) {
