@@ -35,6 +35,7 @@
 #include <algorithm>
 #include <chrono>
 #include <functional>
+#include <memory>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -74,6 +75,9 @@ constexpr double kNearError = 0.25;
 constexpr uint32_t kMinResolution = 20;
 // Coarser hemicubes may shoot at most this share of all the power shot (see coarser_levels).
 constexpr double kCoarseShare = 0.25;
+// Cluster pieces carrying at least this share of the emitted power take a finer hemicube
+// (finer_level).
+constexpr double kFinePower = 1e-3;
 // Pieces carrying at least this share of the emitted power refine for receivers whose plane cuts
 // through them, however far (shoot_piece).
 constexpr double kStraddlePower = 0.05;
@@ -192,6 +196,7 @@ struct Solver::Impl {
   void replace_split(std::vector<uint32_t>& list) const;
   void grow_scratch();
   int coarser_levels(double power) const;
+  bool finer_level(const Piece& piece, double power) const;
   void project(uint32_t shooter_patch, std::span<const uint32_t> elements);
   void project_children(const std::vector<uint32_t>& parents);
   void sum_form_factors(std::span<const uint32_t> elements);
@@ -245,6 +250,7 @@ struct Solver::Impl {
   // receivers half as far, which project as large, so its hemicube needs half the resolution; weak
   // shots may use coarser ones still (coarser_levels).
   std::vector<detail::Hemicube> cubes;
+  std::unique_ptr<detail::Hemicube> finer_cube;  // for strong cluster shots (finer_level)
   detail::Hemicube* cube = nullptr;  // the one in use
   detail::ThreadPool pool;
   std::vector<Fragment> frags;
@@ -500,6 +506,19 @@ void Solver::Impl::project_children(const std::vector<uint32_t>& parents) {
 // loses energy at lower resolution, so it always keeps its own. When every shot is weak (thousands
 // of small patches), their errors add up: coarser hemicubes may shoot at most kCoarseShare of all the
 // power shot so far (shoot_piece), which took a 1746-patch room from 7.5 % to 6.1 % RMS error.
+// Whether a shooting piece takes a hemicube of twice its level's resolution (at most 400). A
+// cluster shoots for many small patches, and its receivers are the scene's many small patches, whose
+// silhouettes a hemicube resolves coarsely (pixels mixing a piece of furniture and the wall behind
+// it); there a hemicube's cost is mostly per projected element, so twice the resolution costs
+// little more. Whole-scene cluster hemicubes carrying at least kFinePower of the emitted power take
+// it: on the 6758-patch furnished room, RMS error 4.6 % to 3.8 % for 11 % more instructions (from
+// 0.03 % of the power on: 3.6 % for 23 % more), where resolution 140 for every hemicube gives 3.7 %
+// for about 30 % more time.
+bool Solver::Impl::finer_level(const Piece& piece, double power) const {
+  return params.method == Method::kAntiAliased && piece.points.size() > 4 && piece.depth == 0 &&
+         power >= kFinePower * emitted_power;
+}
+
 int Solver::Impl::coarser_levels(double power) const {
   if (params.method != Method::kAntiAliased) return 0;
   return (power < 0.05 * emitted_power ? 1 : 0) + (power < 0.005 * emitted_power ? 1 : 0);
@@ -692,13 +711,24 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   gather_seen();
 
   // Coarser hemicubes for weak pieces, as long as what they shot stays a small part of all shot.
-  int coarser = coarser_levels(power);
+  // Strong cluster pieces finer instead (finer_level).
+  const bool finer = finer_level(piece, power);
+  int coarser = finer ? 0 : coarser_levels(power);
   if (coarser > 0 && power_coarse + power > kCoarseShare * (power_shot + power)) coarser = 0;
   power_shot += power;
   if (coarser > 0) power_coarse += power;
   ++stats.hemicubes;
   ++stamp;
-  cube = &cubes[std::min<size_t>(static_cast<size_t>(piece.depth) + coarser, cubes.size() - 1)];
+  const size_t level = std::min<size_t>(static_cast<size_t>(piece.depth) + coarser, cubes.size() - 1);
+  cube = &cubes[level];
+  if (finer) {
+    // Made when first needed; at most 400 (or the resolution itself, if finer already): pixels cost
+    // memory and time.
+    if (!finer_cube)
+      finer_cube =
+          std::make_unique<detail::Hemicube>(std::max(params.resolution, std::min(2 * params.resolution, 400u)));
+    cube = finer_cube.get();
+  }
   cube->place(centre, normal, piece.up);
   project(p, seen);
   sum_form_factors(accepted);  // the occluders' own form factors are not needed
