@@ -103,13 +103,14 @@ void scan_walk(std::span<const glm::dvec2> polygon, const PixelWindow& window, S
   const glm::dvec2 origin(window.x0, window.y0);
   for (size_t i = 0; i < n; ++i) local[i] = polygon[i] - origin;
 
-  if (w <= 2 && h <= 2 && n <= 16) {
+  constexpr size_t kMaxCut = 16;  // one cut of n corners gives at most 3n/2: 24, then 36
+  if (w <= 2 && h <= 2 && n <= kMaxCut) {
     // Areas and moments of the parts left (x < 1) and below (y < 1) and of the part both left and
     // below; the other pixels' by difference from the whole. Signs follow the loop's orientation.
     const LoopMoments whole = loop_moments(local.data(), n);
     const double s = whole.area >= 0.0 ? 1.0 : -1.0;
-    std::array<glm::dvec2, 32> a, b;  // uninitialised: cut_loop writes what is read
-    std::array<glm::dvec2, 64> c;
+    std::array<glm::dvec2, 3 * kMaxCut / 2> a, b;  // uninitialised: cut_loop writes what is read
+    std::array<glm::dvec2, 9 * kMaxCut / 4> c;
     LoopMoments left, bottom, both;
     size_t na = 0;
     if (w == 2) {

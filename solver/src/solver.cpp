@@ -506,6 +506,11 @@ void Solver::Impl::project_children(const std::vector<uint32_t>& parents) {
 // loses energy at lower resolution, so it always keeps its own. When every shot is weak (thousands
 // of small patches), their errors add up: coarser hemicubes may shoot at most kCoarseShare of all the
 // power shot so far (shoot_piece), which took a 1746-patch room from 7.5 % to 6.1 % RMS error.
+int Solver::Impl::coarser_levels(double power) const {
+  if (params.method != Method::kAntiAliased) return 0;
+  return (power < 0.05 * emitted_power ? 1 : 0) + (power < 0.005 * emitted_power ? 1 : 0);
+}
+
 // Whether a shooting piece takes a hemicube of twice its level's resolution (at most 400). A
 // cluster shoots for many small patches, and its receivers are the scene's many small patches, whose
 // silhouettes a hemicube resolves coarsely (pixels mixing a piece of furniture and the wall behind
@@ -515,13 +520,9 @@ void Solver::Impl::project_children(const std::vector<uint32_t>& parents) {
 // 0.03 % of the power on: 3.6 % for 23 % more), where resolution 140 for every hemicube gives 3.7 %
 // for about 30 % more time.
 bool Solver::Impl::finer_level(const Piece& piece, double power) const {
+  // Clusters at depth 0 are the whole-scene shots (step); their quarters go down the levels.
   return params.method == Method::kAntiAliased && piece.points.size() > 4 && piece.depth == 0 &&
          power >= kFinePower * emitted_power;
-}
-
-int Solver::Impl::coarser_levels(double power) const {
-  if (params.method != Method::kAntiAliased) return 0;
-  return (power < 0.05 * emitted_power ? 1 : 0) + (power < 0.005 * emitted_power ? 1 : 0);
 }
 
 std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<uint32_t> receivers, bool whole_scene) {
@@ -721,12 +722,11 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   ++stamp;
   const size_t level = std::min<size_t>(static_cast<size_t>(piece.depth) + coarser, cubes.size() - 1);
   cube = &cubes[level];
-  if (finer) {
-    // Made when first needed; at most 400 (or the resolution itself, if finer already): pixels cost
-    // memory and time.
-    if (!finer_cube)
-      finer_cube =
-          std::make_unique<detail::Hemicube>(std::max(params.resolution, std::min(2 * params.resolution, 400u)));
+  const uint32_t finer_resolution = std::max(params.resolution, std::min(2 * params.resolution, 400u));
+  if (finer && finer_resolution > params.resolution) {
+    // Made when first needed; at most 400 (pixels cost memory and time), and none at all where the
+    // resolution is that fine already.
+    if (!finer_cube) finer_cube = std::make_unique<detail::Hemicube>(finer_resolution);
     cube = finer_cube.get();
   }
   cube->place(centre, normal, piece.up);
