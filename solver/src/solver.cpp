@@ -322,6 +322,7 @@ Solver::Impl::Impl(const Scene& scene, const Params& p)
   const size_t chunks = std::max<size_t>(1, pool.chunk_count(std::numeric_limits<uint32_t>::max()));
   scratch.resize(chunks);
   chunk_frags.resize(chunks);
+  gather_chunks.resize(chunks);
 }
 
 uint32_t Solver::Impl::midpoint(uint32_t a, uint32_t b) {
@@ -686,7 +687,6 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
     // Each patch's quadtree on its own, so the patches are shared among the threads (their lists
     // joined in order).
     const std::vector<uint32_t>& patch_list = whole_scene ? tree_patch : near_patches;
-    gather_chunks.resize(std::max<size_t>(gather_chunks.size(), pool.chunk_count(patch_list.size())));
     pool.parallel_for(patch_list.size(), [&](size_t begin, size_t end, size_t c) {
       std::vector<uint32_t>& out = gather_chunks[c];
       out.clear();

@@ -458,8 +458,10 @@ double hemicube_square_average(const Poly& receiver, Method method, const dvec3&
 // measured over 60 runs (random hemicube rotations) at up to 1.2e-4 relative for the parallel
 // squares and 3e-5 for the perpendicular ones.
 constexpr double kAaSquaresRelativeTolerance = 5e-4;
-// The classical hemicube's errors at the 36 points partly cancel in the mean: measured up to 0.42%.
-constexpr double kClassicalSquaresRelativeTolerance = 1e-2;
+// The classical hemicube's errors at the 36 points partly cancel in the mean, but how much depends
+// on the hemicube's rotation: over 600 runs (random rotations) up to 1.4 % (0.42 % over the first
+// 60; a 1 % bound failed about once in 300 runs, seed 18194689156291024500).
+constexpr double kClassicalSquaresRelativeTolerance = 2.5e-2;
 
 // Both hemicubes' mean form factor from the source square to `receiver` against `exact`, with the
 // hemicube turned about its normal at random.
