@@ -132,6 +132,7 @@ struct Run {
   double seconds = 0.0;
   uint64_t shots = 0;       // aa / classical: shots; hr: gathering iterations
   uint64_t hemicubes = 0;
+  uint64_t replayed = 0;    // aa / classical: shots that replayed an earlier shot's form factors
   uint64_t elements = 0;
   uint64_t links = 0;
   Error error;
@@ -170,6 +171,7 @@ Run run_method(const Scene& scene, const std::string& method, uint32_t threads, 
             out.seconds = std::min(out.seconds, st.seconds);
             out.shots = st.shots;
             out.hemicubes = st.hemicubes;
+            out.replayed = st.replayed_shots;
             mesh = solver.mesh();
           }
         }
@@ -183,15 +185,16 @@ Run run_method(const Scene& scene, const std::string& method, uint32_t threads, 
 }
 
 void print_runs_header() {
-  std::printf("| method | threads | time (s) | shots (hr: iterations) | hemicubes | elements | links | "
+  std::printf("| method | threads | time (s) | shots (hr: iterations) | replayed shots | hemicubes | elements | links | "
               "RMS error | RMS error, reference noise removed | max error | energy / reference's | peak memory (MB) |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
 }
 
 void print_run(const Run& r) {
-  std::printf("| %s | %s | %.3f | %llu | %llu | %llu | %llu | %.4f | %.4f | %.4f | %.4f | %.1f |\n", r.method,
+  std::printf("| %s | %s | %.3f | %llu | %llu | %llu | %llu | %llu | %.4f | %.4f | %.4f | %.4f | %.1f |\n", r.method,
               r.threads == 0 ? "all" : std::to_string(r.threads).c_str(),
-              r.seconds, static_cast<unsigned long long>(r.shots), static_cast<unsigned long long>(r.hemicubes),
+              r.seconds, static_cast<unsigned long long>(r.shots), static_cast<unsigned long long>(r.replayed),
+              static_cast<unsigned long long>(r.hemicubes),
               static_cast<unsigned long long>(r.elements), static_cast<unsigned long long>(r.links), r.error.rms,
               r.error.rms_clean, r.error.max, r.error.energy, r.peak_kib / 1024.0);
   std::fflush(stdout);
@@ -284,9 +287,14 @@ int main(int argc, char** argv) {
                 room.patches.size());
     print_runs_header();
     for (const char* m : {"aa", "classical", "hr"}) print_run(run_method(room, m, 0, 256));
+    Params fresh;
+    fresh.shot_cache_mb = 0;
+    Run r = run_method(room, "aa", 0, 256, fresh);
+    std::snprintf(r.method, sizeof r.method, "aa, no replays");
+    print_run(r);
     Params alone;
     alone.cluster_size = 0.0;
-    Run r = run_method(room, "aa", 0, 256, alone);
+    r = run_method(room, "aa", 0, 256, alone);
     std::snprintf(r.method, sizeof r.method, "aa, no clusters");
     print_run(r);
     std::printf("\n");
@@ -295,15 +303,16 @@ int main(int argc, char** argv) {
   if (mode == "--scaling") {
     // How cost grows with the number of input patches: the furnished room cut finer and finer.
     std::printf("## Scaling: the furnished room at several patch counts (paper's settings, all threads)\n\n");
-    std::printf("| input patches | aa time (s) | aa shots | aa elements | aa time per shot (ms) | aa time per shot per 1000 elements (ms) | aa peak memory (MB) | hr time (s) | hr links | hr elements | hr links per patch | hr peak memory (MB) |\n");
-    std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    std::printf("| input patches | aa time (s) | aa shots | aa replayed shots | aa elements | aa time per shot (ms) | aa time per shot per 1000 elements (ms) | aa peak memory (MB) | hr time (s) | hr links | hr elements | hr links per patch | hr peak memory (MB) |\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (uint32_t target : {400u, 800u, 1600u, 3200u, 6300u, 12600u, 25200u}) {
       const Scene room = make_furnished_room(target);
       const Run aa = run_method(room, "aa", 0, 0);
       const Run hr = run_method(room, "hr", 0, 0);
       const double per_shot = aa.seconds / static_cast<double>(std::max<uint64_t>(1, aa.shots)) * 1e3;
-      std::printf("| %zu | %.2f | %llu | %llu | %.3f | %.4f | %.1f | %.2f | %llu | %llu | %.0f | %.1f |\n", room.patches.size(),
-                  aa.seconds, static_cast<unsigned long long>(aa.shots), static_cast<unsigned long long>(aa.elements),
+      std::printf("| %zu | %.2f | %llu | %llu | %llu | %.3f | %.4f | %.1f | %.2f | %llu | %llu | %.0f | %.1f |\n",
+                  room.patches.size(), aa.seconds, static_cast<unsigned long long>(aa.shots),
+                  static_cast<unsigned long long>(aa.replayed), static_cast<unsigned long long>(aa.elements),
                   per_shot, per_shot / (static_cast<double>(aa.elements) / 1000.0), aa.peak_kib / 1024.0, hr.seconds,
                   static_cast<unsigned long long>(hr.links), static_cast<unsigned long long>(hr.elements),
                   static_cast<double>(hr.links) / static_cast<double>(room.patches.size()), hr.peak_kib / 1024.0);
@@ -314,10 +323,10 @@ int main(int argc, char** argv) {
   }
 
   std::printf("## Cornell box (resolution 100, FEPS 0.001, AEPS 0.0001, until unshot < 0.001 of emitted)\n\n");
-  std::printf("| method | visibility of children | threads | time (s) | shots | hemicubes | elements | "
+  std::printf("| method | visibility of children | threads | time (s) | shots | replayed shots | hemicubes | elements | "
               "splits | repeated shots | scene projections | projecting (s) | children from parent (s) | "
               "peak memory (MB) |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   struct Config {
     Method method;
     bool reuse;
@@ -333,10 +342,11 @@ int main(int argc, char** argv) {
     p.threads = c.threads;
     const Result r = isolated([&] { return solve(cornell, p); });
     const Stats& s = r.stats;
-    std::printf("| %s | %s | %s | %.3f | %llu | %llu | %llu | %llu | %llu | %llu | %.3f | %.3f | %.1f |\n",
+    std::printf("| %s | %s | %s | %.3f | %llu | %llu | %llu | %llu | %llu | %llu | %llu | %.3f | %.3f | %.1f |\n",
                 c.method == Method::kAntiAliased ? "aa" : "classical",
                 c.reuse ? "reused from parent" : "re-projected", c.threads == 0 ? "all" : "1", s.seconds,
-                static_cast<unsigned long long>(s.shots), static_cast<unsigned long long>(s.hemicubes),
+                static_cast<unsigned long long>(s.shots), static_cast<unsigned long long>(s.replayed_shots),
+                static_cast<unsigned long long>(s.hemicubes),
                 static_cast<unsigned long long>(s.elements), static_cast<unsigned long long>(s.splits),
                 static_cast<unsigned long long>(s.rounds), static_cast<unsigned long long>(s.projections),
                 s.seconds_projecting, s.seconds_reusing, r.peak_kib / 1024.0);
@@ -367,6 +377,7 @@ int main(int argc, char** argv) {
     p.cluster_size = 0.0;  // every patch shoots alone: one whole-scene hemicube per shot
     p.max_shots = 40;
     p.shooter_size = 10.0;
+    p.shot_cache_mb = 0;  // every shot projects
     const Result r = isolated([&] { return solve(box, p); });
     const double per = r.stats.seconds / static_cast<double>(r.stats.hemicubes) * 1e3;
     std::printf("| %llu | %llu | %.3f | %.4f |\n", static_cast<unsigned long long>(r.stats.elements),

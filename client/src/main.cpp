@@ -45,7 +45,8 @@ constexpr const char* kSolverOptions =
     "  --max-shots N           shot limit\n"
     "  --max-elements N        element limit (default 2000000)\n"
     "  --threads N             threads (default: all cores)\n"
-    "  --no-reuse              re-project the scene after splits instead of reusing pixels\n";
+    "  --no-reuse              re-project the scene after splits instead of reusing pixels\n"
+    "  --shot-cache-mb N       memory for replaying a shooter's earlier form factors (default 256; 0: off)\n";
 
 void usage(FILE* out) {
   std::fprintf(out,
@@ -169,6 +170,7 @@ std::string parse(int argc, char** argv, int first, bool bake, Options& o) {
     else if (opt == "--max-shots" && whole) o.params.max_shots = static_cast<uint64_t>(x);
     else if (opt == "--max-elements" && whole) o.params.max_elements = static_cast<uint64_t>(x);
     else if (opt == "--threads" && whole) o.params.threads = static_cast<uint32_t>(x);
+    else if (opt == "--shot-cache-mb" && whole && x <= 1048576) o.params.shot_cache_mb = static_cast<uint32_t>(x);
     else if (opt == "--position-bits" && whole && x <= 30) o.write.position_bits = static_cast<int>(x);
     else if (opt == "--texcoord-bits" && whole && x <= 30) o.write.texcoord_bits = static_cast<int>(x);
     else if (opt == "--draco-speed" && whole && x <= 10) o.write.encode_speed = o.write.decode_speed = static_cast<int>(x);
@@ -177,7 +179,7 @@ std::string parse(int argc, char** argv, int first, bool bake, Options& o) {
     else if (opt == "--rays" && whole && x >= 1 && x <= 1024) o.rays = static_cast<uint32_t>(x);
     else if (opt == "--samples" && whole && x >= 1 && x <= 1000000) o.samples = static_cast<uint32_t>(x);
     else if (opt == "--patches" && whole && x >= 100 && x <= 1000000) o.patches = static_cast<uint32_t>(x);
-    else if (opt == "--resolution" || opt == "--max-shots" || opt == "--max-elements" || opt == "--threads" ||
+    else if (opt == "--resolution" || opt == "--max-shots" || opt == "--max-elements" || opt == "--threads" || opt == "--shot-cache-mb" ||
              opt == "--position-bits" || opt == "--texcoord-bits" || opt == "--draco-speed" ||
              opt == "--exposure" || opt == "--max-triangles" || opt == "--rays" || opt == "--samples" || opt == "--patches")
       return opt + " is out of range (got '" + val + "')";
@@ -202,9 +204,10 @@ void solve(hemibake::solver::Solver& solver) {
 }
 
 void print_stats(const hemibake::solver::Stats& st) {
-  std::printf("  %s after %.3f s: %llu shots, %llu hemicubes, %llu elements, unshot %.5f\n",
+  std::printf("  %s after %.3f s: %llu shots (%llu replayed), %llu hemicubes, %llu elements, unshot %.5f\n",
               st.converged ? "converged" : st.cancelled ? "cancelled" : "stopped at a limit", st.seconds,
-              static_cast<unsigned long long>(st.shots), static_cast<unsigned long long>(st.hemicubes),
+              static_cast<unsigned long long>(st.shots), static_cast<unsigned long long>(st.replayed_shots),
+              static_cast<unsigned long long>(st.hemicubes),
               static_cast<unsigned long long>(st.elements), st.unshot_fraction);
   std::printf("  splits: %llu (form factor %llu, visibility %llu, gradient %llu), projections %llu of %llu elements in all, reused children %llu\n",
               static_cast<unsigned long long>(st.splits), static_cast<unsigned long long>(st.splits_form_factor),

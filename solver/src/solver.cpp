@@ -167,6 +167,7 @@ struct Solver::Impl {
     uint32_t element;  // kNone: a geometric piece of a leaf
     glm::dvec3 unshot;
     int depth;
+    uint32_t source;   // `element`, or for a geometric piece the leaf it was cut from
   };
   // What one hemicube shoots from: a piece of a patch, or a cluster of coplanar patches.
   struct Piece {
@@ -177,7 +178,30 @@ struct Solver::Impl {
     std::vector<glm::dvec3> points;   // points whose hull holds the piece (facing tests)
     int depth;                        // hemicube level (each halves the resolution)
     bool may_refine;                  // near receivers are left to sub-pieces
+    // Where dB comes from (for replays): the unshot power of the leaves under `src`, divided by
+    // src_area.
+    std::vector<uint32_t> src;
+    double src_area;
   };
+  // A shot's form factors, kept for a replay (step): per piece, in the order they shot, its
+  // sources and the receivers that took light with their F(element -> piece).
+  struct ShotRecord {
+    struct Piece {
+      uint32_t src_begin, src_end, recv_begin, recv_end;
+      double src_area, area;
+      bool coarse;  // shot from a hemicube coarser than its level (kCoarseShare)
+    };
+    double power = 0.0;  // the unit's unshot power when it shot
+    std::vector<Piece> pieces;
+    std::vector<uint32_t> src, recv;
+    std::vector<float> f;
+    size_t bytes() const {
+      return sizeof(ShotRecord) + pieces.capacity() * sizeof(Piece) +
+             (src.capacity() + recv.capacity()) * sizeof(uint32_t) + f.capacity() * sizeof(float);
+    }
+  };
+  bool replay(uint32_t unit);
+  void forget_records();
   // A node of a cluster's binary tree over its patches (by median cuts of their centres).
   struct ClusterNode {
     uint32_t begin = 0, end = 0;  // its patches: cluster_patch[begin, end)
@@ -233,6 +257,13 @@ struct Solver::Impl {
   std::vector<uint32_t> cluster_patch;
   std::vector<uint32_t> unit_patch, unit_node, p_unit;
   std::vector<double> u_unshot;  // unshot power per unit
+  // Replays: per unit, its last shot's form factors, while the mesh has not changed since (no
+  // element added: records_elements == e_patch.size()).
+  std::vector<ShotRecord> u_record;
+  size_t record_bytes = 0;
+  size_t records_elements = 0;
+  ShotRecord* recording = nullptr;  // the shot being recorded
+  bool record_broken = false;       // a piece of it was skipped (no power): not replayable
 
   // Bounding-box tree over the patches (median cuts), for finding what lies near a hemicube.
   struct BoxNode {
@@ -883,6 +914,24 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
 
   // Southwell step: distribute this piece's unshot radiosity to the receivers that took it here.
   form_factors();
+  if (recording != nullptr) {
+    ShotRecord& r = *recording;
+    ShotRecord::Piece rp;
+    rp.src_begin = static_cast<uint32_t>(r.src.size());
+    r.src.insert(r.src.end(), piece.src.begin(), piece.src.end());
+    rp.src_end = static_cast<uint32_t>(r.src.size());
+    rp.recv_begin = static_cast<uint32_t>(r.recv.size());
+    for (uint32_t e : accepted) {
+      if (f_recv[e] <= 0.0) continue;
+      r.recv.push_back(e);
+      r.f.push_back(static_cast<float>(f_recv[e]));
+    }
+    rp.recv_end = static_cast<uint32_t>(r.recv.size());
+    rp.src_area = piece.src_area;
+    rp.area = area;
+    rp.coarse = coarser > 0;
+    r.pieces.push_back(rp);
+  }
   for (uint32_t e : accepted) {
     if (f_recv[e] <= 0.0) continue;
     const uint32_t q = e_patch[e];
@@ -909,7 +958,13 @@ void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<u
   } else if (node.element != kNone) {
     piece.dB = e_unshot[node.element];
   }
-  if (channel_sum(piece.dB) <= 0.0 || receivers.empty()) return;
+  if (receivers.empty()) return;
+  if (channel_sum(piece.dB) <= 0.0) {
+    record_broken = true;  // a replay could not know this piece
+    return;
+  }
+  piece.src.assign(1, node.source);
+  piece.src_area = node.element != kNone ? piece.area : e_area[node.source];
   piece.centre = polygon_centre(node.c, n);
   piece.up = node.c[1] - node.c[0];
   piece.diameter = polygon_diameter(node.c, n);
@@ -925,6 +980,7 @@ void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<u
     child_corners(node.c, n, k, kid.c);
     kid.depth = node.depth + 1;
     kid.element = is_leaf ? kNone : e_child[node.element] + k;
+    kid.source = is_leaf ? node.source : kid.element;
     kid.unshot = piece.dB;  // a geometric piece of a leaf shares the leaf's unshot radiosity
     shoot_node(p, kid, near, false);
   }
@@ -938,8 +994,8 @@ void Solver::Impl::shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bo
     const uint32_t p = cluster_patch[node.begin];
     Corners root{};
     corners_of(p_root[p], root);
-    shoot_node(p, {root, p_root[p], glm::dvec3(0.0), std::min(depth / 2, kMaxShooterDepth)}, std::move(receivers),
-               whole_scene);
+    shoot_node(p, {root, p_root[p], glm::dvec3(0.0), std::min(depth / 2, kMaxShooterDepth), p_root[p]},
+               std::move(receivers), whole_scene);
     return;
   }
   Piece piece;
@@ -947,7 +1003,12 @@ void Solver::Impl::shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bo
   glm::dvec3 power(0.0);
   for (uint32_t i = node.begin; i < node.end; ++i)
     for_leaves(p_root[cluster_patch[i]], [&](uint32_t e) { power += e_unshot[e] * e_area[e]; });
-  if (channel_sum(power) <= 0.0) return;
+  if (channel_sum(power) <= 0.0) {
+    record_broken = true;
+    return;
+  }
+  for (uint32_t i = node.begin; i < node.end; ++i) piece.src.push_back(p_root[cluster_patch[i]]);
+  piece.src_area = node.area;
   piece.area = node.area;
   piece.dB = power / node.area;
   piece.centre = node.centre;
@@ -1116,7 +1177,7 @@ void Solver::Impl::shoot_patch(uint32_t p) {
   std::vector<ShooterNode> stack, tops;
   Corners root{};
   corners_of(p_root[p], root);
-  stack.push_back({root, p_root[p], glm::dvec3(0.0), 0});
+  stack.push_back({root, p_root[p], glm::dvec3(0.0), 0, p_root[p]});
   while (!stack.empty()) {
     ShooterNode node = stack.back();
     stack.pop_back();
@@ -1132,15 +1193,60 @@ void Solver::Impl::shoot_patch(uint32_t p) {
       child_corners(node.c, n, k, kid.c);
       kid.depth = node.depth + 1;
       kid.element = leaf ? kNone : e_child[node.element] + k;
+      kid.source = leaf ? node.source : kid.element;
       kid.unshot = node.unshot;
       stack.push_back(kid);
     }
   }
   grow_scratch();
   for (const ShooterNode& top : tops) shoot_node(p, top, leaves, true);
-  for_leaves(p_root[p], [&](uint32_t e) { e_unshot[e] = glm::dvec3(0.0); });
-  p_unshot[p] = 0.0;
-  u_unshot[p_unit[p]] = 0.0;
+}
+
+void Solver::Impl::forget_records() {
+  u_record.clear();
+  u_record.shrink_to_fit();
+  record_bytes = 0;
+}
+
+// A shooter that shoots again (its patches received light since) would place the same hemicubes
+// and, as long as no element has been split since, see the same receivers: their form factors are
+// those of its last shot. A replay takes them from that shot's record and only recomputes each
+// piece's unshot radiosity. The record must come from a shot with at least the power of this one:
+// the refinement near the shooter, the hemicubes' resolution and the subdivision criteria all ask
+// less of a weaker shot, so it would have placed coarser hemicubes and split nothing more.
+bool Solver::Impl::replay(uint32_t unit) {
+  if (u_record.empty() || records_elements != e_patch.size()) return false;
+  const ShotRecord& r = u_record[unit];
+  if (r.pieces.empty() || u_unshot[unit] > r.power) return false;
+  std::vector<glm::dvec3> dBs(r.pieces.size());
+  double total = 0.0, coarse = 0.0;
+  for (size_t i = 0; i < r.pieces.size(); ++i) {
+    const ShotRecord::Piece& rp = r.pieces[i];
+    glm::dvec3 power(0.0);
+    for (uint32_t k = rp.src_begin; k < rp.src_end; ++k)
+      for_leaves(r.src[k], [&](uint32_t e) { power += e_unshot[e] * e_area[e]; });
+    dBs[i] = power / rp.src_area;
+    const double shot = channel_sum(dBs[i]) * rp.area;
+    total += shot;
+    if (rp.coarse) coarse += shot;
+  }
+  // Coarser hemicubes may not shoot more than their share (coarser_levels): shoot anew instead.
+  if (coarse > 0.0 && power_coarse + coarse > kCoarseShare * (power_shot + total)) return false;
+  power_shot += total;
+  power_coarse += coarse;
+  for (size_t i = 0; i < r.pieces.size(); ++i) {
+    const ShotRecord::Piece& rp = r.pieces[i];
+    for (uint32_t k = rp.recv_begin; k < rp.recv_end; ++k) {
+      const uint32_t e = r.recv[k];
+      const uint32_t q = e_patch[e];
+      const glm::dvec3 gain = patches[q].reflectance * dBs[i] * static_cast<double>(r.f[k]);
+      e_b[e] += gain;
+      e_unshot[e] += gain;
+      p_unshot[q] += channel_sum(gain) * e_area[e];
+      u_unshot[p_unit[q]] += channel_sum(gain) * e_area[e];
+    }
+  }
+  return true;
 }
 
 bool Solver::Impl::step() {
@@ -1159,19 +1265,54 @@ bool Solver::Impl::step() {
   uint32_t best = 0;
   for (uint32_t u = 1; u < u_unshot.size(); ++u)
     if (u_unshot[u] > u_unshot[best]) best = u;
-  if (unit_node[best] == kNone) {
-    shoot_patch(unit_patch[best]);
+  if (replay(best)) {
+    ++stats.replayed_shots;
   } else {
-    grow_scratch();
-    shoot_cluster(unit_node[best], leaves, true, 0);
+    // A fresh shot, recorded for a replay while the cache has room.
+    ShotRecord record;
+    record.power = u_unshot[best];
+    const size_t elements_before = e_patch.size();
+    const size_t budget = static_cast<size_t>(params.shot_cache_mb) << 20;
+    recording = budget > 0 ? &record : nullptr;
+    record_broken = false;
+    if (unit_node[best] == kNone) {
+      shoot_patch(unit_patch[best]);
+    } else {
+      grow_scratch();
+      shoot_cluster(unit_node[best], leaves, true, 0);
+    }
+    recording = nullptr;
+    // Splits change the receivers: every record is stale, this one too.
+    if (e_patch.size() != elements_before || records_elements != e_patch.size()) {
+      forget_records();
+      records_elements = e_patch.size();
+    }
+    if (budget > 0 && !record_broken && e_patch.size() == elements_before && !record.pieces.empty()) {
+      record.pieces.shrink_to_fit();
+      record.src.shrink_to_fit();
+      record.recv.shrink_to_fit();
+      record.f.shrink_to_fit();
+      const size_t old = u_record.empty() ? 0 : u_record[best].bytes();
+      if (record_bytes - old + record.bytes() <= budget) {
+        if (u_record.empty()) u_record.resize(unit_node.size());
+        record_bytes = record_bytes - old + record.bytes();
+        u_record[best] = std::move(record);
+      }
+    }
+  }
+  if (unit_node[best] != kNone) {
     const ClusterNode& c = c_nodes[unit_node[best]];
     for (uint32_t i = c.begin; i < c.end; ++i) {
       const uint32_t q = cluster_patch[i];
       for_leaves(p_root[q], [&](uint32_t e) { e_unshot[e] = glm::dvec3(0.0); });
       p_unshot[q] = 0.0;
     }
-    u_unshot[best] = 0.0;
+  } else {
+    const uint32_t p = unit_patch[best];
+    for_leaves(p_root[p], [&](uint32_t e) { e_unshot[e] = glm::dvec3(0.0); });
+    p_unshot[p] = 0.0;
   }
+  u_unshot[best] = 0.0;
   ++stats.shots;
   update_unshot_total();
   stats.seconds += seconds_since(t0);

@@ -63,6 +63,9 @@ struct Params {
                                 ///< clusters up to this wide; 0 = every patch shoots alone
   bool reuse_visibility = true; ///< children take visibility from their parent's pixels; false
                                 ///< re-projects the whole scene after every split (for comparison)
+  uint32_t shot_cache_mb = 256; ///< memory for the form factors of earlier shots, replayed when the
+                                ///< same shooter shoots again with no more power and an unchanged
+                                ///< mesh (see README); 0 = every shot projects anew
 };
 
 /// Returns an empty string when the parameters are usable, else a message naming the bad one.
@@ -96,6 +99,7 @@ class CancelToken {
 struct Stats {
   uint64_t shots = 0;            ///< patch shots (Southwell steps)
   uint64_t hemicubes = 0;        ///< hemicubes placed (a patch shoots from one or more sub-areas)
+  uint64_t replayed_shots = 0;   ///< shots that reused the form factors of the shooter's earlier shot
   uint64_t projections = 0;      ///< projections onto a hemicube (of the whole scene, or of what may hide a near piece's receivers)
   uint64_t elements_projected = 0;  ///< elements given to those projections, summed
   uint64_t rounds = 0;           ///< repeated shots after splits (the paper's cancelled shots)
