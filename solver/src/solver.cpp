@@ -201,7 +201,6 @@ struct Solver::Impl {
     }
   };
   bool replay(uint32_t unit);
-  void forget_records();
   // A node of a cluster's binary tree over its patches (by median cuts of their centres).
   struct ClusterNode {
     uint32_t begin = 0, end = 0;  // its patches: cluster_patch[begin, end)
@@ -257,11 +256,9 @@ struct Solver::Impl {
   std::vector<uint32_t> cluster_patch;
   std::vector<uint32_t> unit_patch, unit_node, p_unit;
   std::vector<double> u_unshot;  // unshot power per unit
-  // Replays: per unit, its last shot's form factors, while the mesh has not changed since (no
-  // element added: records_elements == e_patch.size()).
+  // Replays: per unit, the form factors of its last shot (replay()).
   std::vector<ShotRecord> u_record;
   size_t record_bytes = 0;
-  size_t records_elements = 0;
   ShotRecord* recording = nullptr;  // the shot being recorded
   bool record_broken = false;       // a piece of it was skipped (no power): not replayable
 
@@ -1202,22 +1199,21 @@ void Solver::Impl::shoot_patch(uint32_t p) {
   for (const ShooterNode& top : tops) shoot_node(p, top, leaves, true);
 }
 
-void Solver::Impl::forget_records() {
-  u_record.clear();
-  u_record.shrink_to_fit();
-  record_bytes = 0;
-}
-
-// A shooter that shoots again (its patches received light since) would place the same hemicubes
-// and, as long as no element has been split since, see the same receivers: their form factors are
-// those of its last shot. A replay takes them from that shot's record and only recomputes each
-// piece's unshot radiosity. The record must come from a shot with at least the power of this one:
-// the refinement near the shooter, the hemicubes' resolution and the subdivision criteria all ask
-// less of a weaker shot, so it would have placed coarser hemicubes and split nothing more.
+// A shooter that shoots again (its patches received light since) places the same hemicubes and, as
+// long as none of the receivers it lit has been split since, finds the same form factors: a split
+// occluder's children hide exactly what it hid, and a receiver it did not light (wholly hidden)
+// has wholly hidden children. A replay takes them from the last shot's record and only recomputes
+// each piece's unshot radiosity. The record must come from a shot with at least the power of this
+// one: the refinement near the shooter, the hemicubes' resolution and the subdivision criteria all
+// ask less of a weaker shot, so it would have placed coarser hemicubes and split nothing more
+// (the recorded shot ended with a round that split nothing).
 bool Solver::Impl::replay(uint32_t unit) {
-  if (u_record.empty() || records_elements != e_patch.size()) return false;
+  if (u_record.empty()) return false;
   const ShotRecord& r = u_record[unit];
   if (r.pieces.empty() || u_unshot[unit] > r.power) return false;
+  // A receiver split since needs form factors for its children: shoot anew.
+  for (uint32_t e : r.recv)
+    if (e_child[e] != kNone) return false;
   std::vector<glm::dvec3> dBs(r.pieces.size());
   double total = 0.0, coarse = 0.0;
   for (size_t i = 0; i < r.pieces.size(); ++i) {
@@ -1271,7 +1267,6 @@ bool Solver::Impl::step() {
     // A fresh shot, recorded for a replay while the cache has room.
     ShotRecord record;
     record.power = u_unshot[best];
-    const size_t elements_before = e_patch.size();
     const size_t budget = static_cast<size_t>(params.shot_cache_mb) << 20;
     recording = budget > 0 ? &record : nullptr;
     record_broken = false;
@@ -1282,12 +1277,7 @@ bool Solver::Impl::step() {
       shoot_cluster(unit_node[best], leaves, true, 0);
     }
     recording = nullptr;
-    // Splits change the receivers: every record is stale, this one too.
-    if (e_patch.size() != elements_before || records_elements != e_patch.size()) {
-      forget_records();
-      records_elements = e_patch.size();
-    }
-    if (budget > 0 && !record_broken && e_patch.size() == elements_before && !record.pieces.empty()) {
+    if (budget > 0 && !record_broken && !record.pieces.empty()) {
       record.pieces.shrink_to_fit();
       record.src.shrink_to_fit();
       record.recv.shrink_to_fit();
