@@ -204,9 +204,10 @@ void solve(hemibake::solver::Solver& solver) {
 }
 
 void print_stats(const hemibake::solver::Stats& st) {
-  std::printf("  %s after %.3f s: %llu shots (%llu replayed), %llu hemicubes, %llu elements, unshot %.5f\n",
+  std::printf("  %s after %.3f s: %llu shots (%llu replayed, %llu of them partly anew), %llu hemicubes, %llu elements, unshot %.5f\n",
               st.converged ? "converged" : st.cancelled ? "cancelled" : "stopped at a limit", st.seconds,
               static_cast<unsigned long long>(st.shots), static_cast<unsigned long long>(st.replayed_shots),
+              static_cast<unsigned long long>(st.replays_reshot),
               static_cast<unsigned long long>(st.hemicubes),
               static_cast<unsigned long long>(st.elements), st.unshot_fraction);
   std::printf("  splits: %llu (form factor %llu, visibility %llu, gradient %llu), projections %llu of %llu elements in all, reused children %llu\n",

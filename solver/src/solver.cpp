@@ -209,7 +209,7 @@ struct Solver::Impl {
     double area = 0.0, diameter = 0.0;
     std::array<glm::dvec3, 8> box{};  // corners of the bounding box of its patches' corners
   };
-  void shoot_patch(uint32_t p);
+  void shoot_patch(uint32_t p, const std::vector<uint32_t>& receivers, bool whole_scene);
   void shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers, bool whole_scene);
   void shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bool whole_scene, int depth);
   std::vector<uint32_t> shoot_piece(const Piece& piece, std::vector<uint32_t> receivers, bool whole_scene);
@@ -1166,7 +1166,7 @@ void Solver::Impl::grow_scratch() {
   vmax.resize(vpos.size(), std::numeric_limits<double>::lowest());
 }
 
-void Solver::Impl::shoot_patch(uint32_t p) {
+void Solver::Impl::shoot_patch(uint32_t p, const std::vector<uint32_t>& receivers, bool whole_scene) {
   const uint32_t n = patches[p].corner_count;
   // The patch shoots from pieces no wider than shooter_limit (a leaf wider than that is cut
   // geometrically; its pieces share its unshot radiosity); each piece refines further for the
@@ -1196,7 +1196,7 @@ void Solver::Impl::shoot_patch(uint32_t p) {
     }
   }
   grow_scratch();
-  for (const ShooterNode& top : tops) shoot_node(p, top, leaves, true);
+  for (const ShooterNode& top : tops) shoot_node(p, top, receivers, whole_scene);
 }
 
 // A shooter that shoots again (its patches received light since) places the same hemicubes and, as
@@ -1209,11 +1209,23 @@ void Solver::Impl::shoot_patch(uint32_t p) {
 // (the recorded shot ended with a round that split nothing).
 bool Solver::Impl::replay(uint32_t unit) {
   if (u_record.empty()) return false;
-  const ShotRecord& r = u_record[unit];
+  ShotRecord& r = u_record[unit];
   if (r.pieces.empty() || u_unshot[unit] > r.power) return false;
-  // A receiver split since needs form factors for its children: shoot anew.
-  for (uint32_t e : r.recv)
-    if (e_child[e] != kNone) return false;
+  // Receivers split since need form factors for their children. When they are few, the rest is
+  // replayed and the children are shot anew from the same shooter, its hemicubes seeing only what
+  // may hide them (as near-field hemicubes do); otherwise the whole shot is made anew.
+  std::vector<uint8_t> stale(r.recv.size(), 0);
+  size_t stale_count = 0;
+  ++mark;
+  for (size_t k = 0; k < r.recv.size(); ++k)
+    if (e_child[r.recv[k]] != kNone) stale[k] = 1, ++stale_count, e_mark[r.recv[k]] = mark;
+  if (stale_count * 4 > r.recv.size()) return false;
+  // A shot that split a receiver recorded it in its earlier pieces and its children in the later
+  // ones: the children are shot anew from the whole shooter, so none of their entries replays.
+  if (stale_count > 0)
+    for (size_t k = 0; k < r.recv.size(); ++k)
+      for (uint32_t x = e_parent[r.recv[k]]; x != kNone && !stale[k]; x = e_parent[x])
+        if (e_mark[x] == mark) stale[k] = 1, ++stale_count;
   std::vector<glm::dvec3> dBs(r.pieces.size());
   double total = 0.0, coarse = 0.0;
   for (size_t i = 0; i < r.pieces.size(); ++i) {
@@ -1233,6 +1245,7 @@ bool Solver::Impl::replay(uint32_t unit) {
   for (size_t i = 0; i < r.pieces.size(); ++i) {
     const ShotRecord::Piece& rp = r.pieces[i];
     for (uint32_t k = rp.recv_begin; k < rp.recv_end; ++k) {
+      if (stale[k]) continue;
       const uint32_t e = r.recv[k];
       const uint32_t q = e_patch[e];
       const glm::dvec3 gain = patches[q].reflectance * dBs[i] * static_cast<double>(r.f[k]);
@@ -1241,6 +1254,76 @@ bool Solver::Impl::replay(uint32_t unit) {
       p_unshot[q] += channel_sum(gain) * e_area[e];
       u_unshot[p_unit[q]] += channel_sum(gain) * e_area[e];
     }
+  }
+  if (stale_count == 0) return true;
+
+  // The split receivers, each once and none below another (the shot expands them to their leaves).
+  std::vector<uint32_t> redo;
+  for (size_t k = 0; k < r.recv.size(); ++k) {
+    if (e_mark[r.recv[k]] != mark) continue;
+    bool below = false;
+    for (uint32_t x = e_parent[r.recv[k]]; x != kNone && !below; x = e_parent[x]) below = e_mark[x] == mark;
+    if (!below) redo.push_back(r.recv[k]);
+  }
+  std::sort(redo.begin(), redo.end());
+  redo.erase(std::unique(redo.begin(), redo.end()), redo.end());
+  ShotRecord part;
+  part.power = u_unshot[unit];
+  // The unit's power is counted above already; the partial shot's pieces do not count again.
+  const double shot_before = power_shot, coarse_before = power_coarse;
+  recording = &part;
+  record_broken = false;
+  grow_scratch();
+  if (unit_node[unit] == kNone) shoot_patch(unit_patch[unit], redo, false);
+  else shoot_cluster(unit_node[unit], redo, false, 0);
+  recording = nullptr;
+  power_shot = shot_before;
+  power_coarse = coarse_before;
+  ++stats.replays_reshot;
+
+  // The record now holds the replayed receivers and the partial shot's.
+  const size_t old_bytes = r.bytes();
+  if (record_broken) {
+    r = ShotRecord{};
+    record_bytes -= old_bytes;
+    return true;
+  }
+  ShotRecord merged;
+  merged.power = std::min(r.power, part.power);
+  merged.src = std::move(r.src);
+  for (const ShotRecord::Piece& rp : r.pieces) {
+    ShotRecord::Piece np = rp;
+    np.recv_begin = static_cast<uint32_t>(merged.recv.size());
+    for (uint32_t k = rp.recv_begin; k < rp.recv_end; ++k) {
+      if (stale[k]) continue;
+      merged.recv.push_back(r.recv[k]);
+      merged.f.push_back(r.f[k]);
+    }
+    np.recv_end = static_cast<uint32_t>(merged.recv.size());
+    if (np.recv_end > np.recv_begin) merged.pieces.push_back(np);
+  }
+  const uint32_t src_offset = static_cast<uint32_t>(merged.src.size());
+  const uint32_t recv_offset = static_cast<uint32_t>(merged.recv.size());
+  merged.src.insert(merged.src.end(), part.src.begin(), part.src.end());
+  merged.recv.insert(merged.recv.end(), part.recv.begin(), part.recv.end());
+  merged.f.insert(merged.f.end(), part.f.begin(), part.f.end());
+  for (ShotRecord::Piece np : part.pieces) {
+    np.src_begin += src_offset;
+    np.src_end += src_offset;
+    np.recv_begin += recv_offset;
+    np.recv_end += recv_offset;
+    merged.pieces.push_back(np);
+  }
+  merged.pieces.shrink_to_fit();
+  merged.recv.shrink_to_fit();
+  merged.f.shrink_to_fit();
+  const size_t budget = static_cast<size_t>(params.shot_cache_mb) << 20;
+  record_bytes -= old_bytes;
+  if (record_bytes + merged.bytes() <= budget) {
+    record_bytes += merged.bytes();
+    r = std::move(merged);
+  } else {
+    r = ShotRecord{};
   }
   return true;
 }
@@ -1271,7 +1354,7 @@ bool Solver::Impl::step() {
     recording = budget > 0 ? &record : nullptr;
     record_broken = false;
     if (unit_node[best] == kNone) {
-      shoot_patch(unit_patch[best]);
+      shoot_patch(unit_patch[best], leaves, true);
     } else {
       grow_scratch();
       shoot_cluster(unit_node[best], leaves, true, 0);

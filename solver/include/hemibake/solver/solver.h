@@ -100,6 +100,7 @@ struct Stats {
   uint64_t shots = 0;            ///< patch shots (Southwell steps)
   uint64_t hemicubes = 0;        ///< hemicubes placed (a patch shoots from one or more sub-areas)
   uint64_t replayed_shots = 0;   ///< shots that reused the form factors of the shooter's earlier shot
+  uint64_t replays_reshot = 0;   ///< ... of which shot anew to the children of receivers split since
   uint64_t projections = 0;      ///< projections onto a hemicube (of the whole scene, or of what may hide a near piece's receivers)
   uint64_t elements_projected = 0;  ///< elements given to those projections, summed
   uint64_t rounds = 0;           ///< repeated shots after splits (the paper's cancelled shots)
