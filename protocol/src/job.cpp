@@ -73,6 +73,9 @@ std::string apply_params(const std::map<std::string, std::string>& values, JobSp
       p.reuse_visibility = b;
     } else if (key == "cluster_size") {
       ok = number(value, p.cluster_size);
+    } else if (key == "shot_cache_mb") {
+      ok = whole(value, 1u << 20, n);
+      p.shot_cache_mb = static_cast<uint32_t>(n);
     } else if (key == "rays") {
       ok = whole(value, 1024, n) && n >= 1;
       spec.rays = static_cast<uint32_t>(n);
@@ -117,6 +120,7 @@ std::string params_json(const JobSpec& spec) {
   j["threads"] = p.threads;
   j["reuse"] = p.reuse_visibility;
   j["cluster_size"] = p.cluster_size;
+  j["shot_cache_mb"] = p.shot_cache_mb;
   j["rays"] = spec.rays;
   j["samples"] = spec.samples;
   j["draco"] = w.draco;

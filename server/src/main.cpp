@@ -29,6 +29,7 @@ void usage(FILE* out) {
       "  --max-streams N         concurrent event streams (default 64)\n"
       "  --job-seconds S         time budget per job (default 3600)\n"
       "  --max-elements N        element budget per job (default 2000000)\n"
+      "  --max-shot-cache-mb N   memory per job for replayed shots (default 256; caps the job's shot_cache_mb)\n"
       "  --max-triangles N       largest scene in triangles (default 2000000)\n"
       "  --max-attempts N        restarts of a job interrupted by a crash (default 3)\n"
       "  --expire-hours H        delete finished jobs and results after H hours (default 168)\n",
@@ -85,6 +86,7 @@ int main(int argc, char** argv) {
     else if (opt == "--max-streams") ho.max_streams = static_cast<size_t>(need_num());
     else if (opt == "--job-seconds") so.job_seconds = need_num();
     else if (opt == "--max-elements") so.max_elements = static_cast<uint64_t>(need_num());
+    else if (opt == "--max-shot-cache-mb") so.max_shot_cache_mb = static_cast<uint32_t>(std::min(need_num(), 1048576.0));
     else if (opt == "--max-triangles") so.max_triangles = static_cast<uint64_t>(need_num());
     else if (opt == "--max-attempts") so.max_attempts = static_cast<int>(need_num());
     else if (opt == "--expire-hours") so.expire_seconds = need_num() * 3600.0;

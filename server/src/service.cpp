@@ -206,6 +206,7 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
   }
   spec.params.threads = options_.solver_threads;
   spec.params.max_elements = std::min<uint64_t>(spec.params.max_elements, options_.max_elements);
+  spec.params.shot_cache_mb = std::min(spec.params.shot_cache_mb, options_.max_shot_cache_mb);
   protocol::LoadLimits limits;
   limits.allow_external_files = false;
   limits.max_file_bytes = options_.max_body_bytes;

@@ -10,7 +10,7 @@ TEST(JobParams, EveryNameIsAppliedAndRoundTrips) {
   JobSpec spec;
   const std::string err = apply_params({{"method", "classical"}, {"resolution", "64"}, {"feps", "0.002"}, {"aeps", "0.0005"},
                                         {"beps", "0.1"}, {"convergence", "0.01"}, {"max_shots", "500"},
-                                        {"max_elements", "9000"}, {"threads", "3"}, {"reuse", "false"}, {"cluster_size", "0.3"}, {"rays", "16"},
+                                        {"max_elements", "9000"}, {"threads", "3"}, {"reuse", "false"}, {"cluster_size", "0.3"}, {"shot_cache_mb", "64"}, {"rays", "16"},
                                         {"samples", "64"}, {"draco", "no"}, {"position_bits", "16"},
                                         {"texcoord_bits", "10"}, {"draco_speed", "3"}, {"exposure", "2.5"}},
                                        spec);
@@ -26,6 +26,7 @@ TEST(JobParams, EveryNameIsAppliedAndRoundTrips) {
   EXPECT_EQ(spec.params.threads, 3u);
   EXPECT_FALSE(spec.params.reuse_visibility);
   EXPECT_EQ(spec.params.cluster_size, 0.3);
+  EXPECT_EQ(spec.params.shot_cache_mb, 64u);
   EXPECT_EQ(spec.rays, 16u);
   EXPECT_EQ(spec.samples, 64u);
   EXPECT_FALSE(spec.write.draco);

@@ -21,7 +21,7 @@ struct JobSpec {
 
 /// Applies named parameters (the command line's names without dashes: method (aa, classical, hr,
 /// reference), resolution, feps, aeps, beps, convergence, max_shots, max_elements, threads, reuse,
-/// cluster_size, rays, samples, draco, position_bits, texcoord_bits, draco_speed, exposure) to `spec`. Returns an empty string, or a message naming
+/// cluster_size, shot_cache_mb, rays, samples, draco, position_bits, texcoord_bits, draco_speed, exposure) to `spec`. Returns an empty string, or a message naming
 /// the first unknown or bad parameter.
 std::string apply_params(const std::map<std::string, std::string>& values, JobSpec& spec);
 

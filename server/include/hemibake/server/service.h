@@ -31,6 +31,7 @@ struct ServiceOptions {
   int max_attempts = 3;             ///< restarts of a job interrupted by a crash
   double job_seconds = 3600;        ///< per-job time budget
   uint64_t max_elements = 2'000'000;  ///< per-job element budget (caps the parameter)
+  uint32_t max_shot_cache_mb = 256;   ///< per-job memory for replayed shots (caps the parameter)
   uint64_t max_triangles = 2'000'000;
   double expire_seconds = 7 * 24 * 3600.0;  ///< finished jobs and results are deleted after this
   std::vector<std::string> tokens;  ///< bearer tokens; empty: no authentication
