@@ -31,6 +31,7 @@
 
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
+#include <glm/vector_relational.hpp>
 
 #include <algorithm>
 #include <chrono>
@@ -189,9 +190,13 @@ struct Solver::Impl {
     struct Piece {
       uint32_t src_begin, src_end, recv_begin, recv_end;
       double src_area, area;
-      bool coarse;  // shot from a hemicube coarser than its level (kCoarseShare)
+      glm::dvec3 dB;  // the unshot radiosity it shot when recorded
+      double headroom;  // a replay may shoot up to this times dB (shoot_piece)
+      bool coarse;    // shot from a hemicube coarser than its level (kCoarseShare)
+      bool extra;     // shot for children of split receivers: its power counts once, elsewhere
     };
     double power = 0.0;  // the unit's unshot power when it shot
+    size_t fresh_pieces = 0;  // pieces of the shot that made it (replays may add more)
     std::vector<Piece> pieces;
     std::vector<uint32_t> src, recv;
     std::vector<float> f;
@@ -608,15 +613,18 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   // kNearError of the radiosity tolerance: it gains at most rho * dB * F, with F at most
   // A / (pi g^2) at a gap g between them (at most 1), and the hemicube's point view of the piece
   // errs by about (D / 2g)^2 of that (D the piece's diameter); within half a diameter, always.
-  auto may_matter = [&](uint32_t e) {
+  // The point view's possible error for a close receiver (infinite where it always matters).
+  auto near_error = [&](uint32_t e) {
     const double gap = glm::distance(centre, e_centre[e]) - e_radius[e] - 0.5 * piece.diameter;
-    if (gap <= 0.5 * piece.diameter) return true;
+    if (gap <= 0.5 * piece.diameter) return std::numeric_limits<double>::infinity();
     // A receiver whose plane cuts the piece (the rule above) may get nothing at all from the centre.
-    if (glm::distance(centre, e_centre[e]) - e_radius[e] >= kNearFactor * piece.diameter) return true;
+    if (glm::distance(centre, e_centre[e]) - e_radius[e] >= kNearFactor * piece.diameter)
+      return std::numeric_limits<double>::infinity();
     const double f = std::min(1.0, area / (std::numbers::pi * gap * gap));
     const double share = 0.25 * piece.diameter * piece.diameter / (gap * gap);
-    return mean(patches[e_patch[e]].reflectance * dB) * f * share > kNearError * b_tolerance;
+    return mean(patches[e_patch[e]].reflectance * dB) * f * share;
   };
+  auto may_matter = [&](uint32_t e) { return near_error(e) > kNearError * b_tolerance; };
   std::vector<uint8_t> goes_near(current.size(), 0);
   if (piece.may_refine)
     pool.parallel_for(current.size(), [&](size_t begin, size_t end, size_t) {
@@ -845,6 +853,12 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
     });
   };
 
+  // For a replay (step): by how much this piece's dB could grow before its last round would have
+  // split something. The criteria scale with dB, so each gives limit / value.
+  double split_room = std::numeric_limits<double>::infinity();
+  auto within = [](double& room, double limit, double value) {
+    if (value > 0.0) room = std::min(room, limit / value);
+  };
   for (int round = 0; round < 64; ++round) {
     form_factors();
     // This shot's radiosity at every accepted receiver, and its spread around every vertex.
@@ -880,6 +894,19 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
         stats.splits_gradient += split_it;
       }
       if (split_it) to_split.push_back(e);
+    }
+    if (recording != nullptr) {
+      split_room = std::numeric_limits<double>::infinity();
+      for (uint32_t e : accepted) {
+        if (e_area[e] < min_parent_area) continue;
+        if (e_stamp[e] == stamp && e_ff_open[e] > 0.0) {
+          within(split_room, params.feps, e_ff[e] * weight);
+          if (e_ff[e] > 0.0 && e_ff[e] < e_ff_open[e])
+            within(split_room, b_tolerance, mean(patches[e_patch[e]].reflectance * dB) * f_open[e] - shot_b[e]);
+        }
+        for (uint32_t k = 0; k < corner_count(e); ++k)
+          within(split_room, b_tolerance, vmax[e_corner[e][k]] - vmin[e_corner[e][k]]);
+      }
     }
     // Reset the vertex spreads for the next round (only the touched vertices).
     for (uint32_t e : accepted)
@@ -918,15 +945,37 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
     r.src.insert(r.src.end(), piece.src.begin(), piece.src.end());
     rp.src_end = static_cast<uint32_t>(r.src.size());
     rp.recv_begin = static_cast<uint32_t>(r.recv.size());
+    // Unlit receivers too: once split, their children may be lit (a near receiver's exact form
+    // factor, a different route to the sub-pieces), so a replay must know to shoot them anew.
     for (uint32_t e : accepted) {
-      if (f_recv[e] <= 0.0) continue;
       r.recv.push_back(e);
-      r.f.push_back(static_cast<float>(f_recv[e]));
+      r.f.push_back(static_cast<float>(std::max(0.0, f_recv[e])));
     }
     rp.recv_end = static_cast<uint32_t>(r.recv.size());
     rp.src_area = piece.src_area;
     rp.area = area;
+    rp.dB = dB;
+    // Headroom: the least factor on dB at which a fresh shot of this piece would decide anything
+    // differently from this one. Power thresholds: refinement of weak pieces, the straddle rule,
+    // coarser and finer hemicubes (stronger shots get finer ones); the split criteria; and the
+    // close receivers left to this hemicube because the point view's error seemed small.
+    double headroom = split_room;
+    const bool patch_piece = piece.points.size() <= 4;
+    if (patch_piece && !piece.may_refine && piece.depth < kMaxShooterDepth) within(headroom, params.feps * emitted_power, power);
+    if (patch_piece && power < kStraddlePower * emitted_power) within(headroom, kStraddlePower * emitted_power, power);
+    if (params.method == Method::kAntiAliased) {
+      if (power < 0.005 * emitted_power) within(headroom, 0.005 * emitted_power, power);
+      else if (power < 0.05 * emitted_power) within(headroom, 0.05 * emitted_power, power);
+      if (!patch_piece && piece.depth == 0 && power < kFinePower * emitted_power) within(headroom, kFinePower * emitted_power, power);
+    }
+    // (The near-field rule bounds an error rather than deciding a structure: a replay may let it
+    // grow to twice its bound, half the radiosity tolerance.)
+    if (piece.may_refine)
+      for (uint32_t e : accepted)
+        if (is_close(e)) within(headroom, 2.0 * kNearError * b_tolerance, near_error(e));
+    rp.headroom = headroom;
     rp.coarse = coarser > 0;
+    rp.extra = false;
     r.pieces.push_back(rp);
   }
   for (uint32_t e : accepted) {
@@ -1200,32 +1249,36 @@ void Solver::Impl::shoot_patch(uint32_t p, const std::vector<uint32_t>& receiver
 }
 
 // A shooter that shoots again (its patches received light since) places the same hemicubes and, as
-// long as none of the receivers it lit has been split since, finds the same form factors: a split
-// occluder's children hide exactly what it hid, and a receiver it did not light (wholly hidden)
-// has wholly hidden children. A replay takes them from the last shot's record and only recomputes
-// each piece's unshot radiosity. The record must come from a shot with at least the power of this
-// one: the refinement near the shooter, the hemicubes' resolution and the subdivision criteria all
-// ask less of a weaker shot, so it would have placed coarser hemicubes and split nothing more
-// (the recorded shot ended with a round that split nothing).
+// long as none of its receivers has been split since, finds the same form factors: a split
+// occluder's children hide exactly what it hid. A replay takes them from the last shot's record and
+// only recomputes each piece's unshot radiosity. Every piece must shoot no more than when it was
+// recorded, in every channel: the refinement near the shooter, the hemicubes' resolution and the
+// subdivision criteria all ask less of a weaker shot, so it would have placed coarser hemicubes and
+// split nothing more (the recorded shot ended with a round that split nothing).
 bool Solver::Impl::replay(uint32_t unit) {
   if (u_record.empty()) return false;
   ShotRecord& r = u_record[unit];
-  if (r.pieces.empty() || u_unshot[unit] > r.power) return false;
+  if (r.pieces.empty()) return false;
+  auto drop = [&] {
+    record_bytes -= r.bytes();
+    r = ShotRecord{};
+    return false;
+  };
   // Receivers split since need form factors for their children. When they are few, the rest is
   // replayed and the children are shot anew from the same shooter, its hemicubes seeing only what
-  // may hide them (as near-field hemicubes do); otherwise the whole shot is made anew.
+  // may hide them (as near-field hemicubes do); otherwise the whole shot is made anew. A shot that
+  // split a receiver recorded it in its earlier pieces and its children in later ones: the children
+  // are shot anew from the whole shooter, so none of their entries replays either.
   std::vector<uint8_t> stale(r.recv.size(), 0);
   size_t stale_count = 0;
   ++mark;
   for (size_t k = 0; k < r.recv.size(); ++k)
     if (e_child[r.recv[k]] != kNone) stale[k] = 1, ++stale_count, e_mark[r.recv[k]] = mark;
-  if (stale_count * 4 > r.recv.size()) return false;
-  // A shot that split a receiver recorded it in its earlier pieces and its children in the later
-  // ones: the children are shot anew from the whole shooter, so none of their entries replays.
   if (stale_count > 0)
     for (size_t k = 0; k < r.recv.size(); ++k)
       for (uint32_t x = e_parent[r.recv[k]]; x != kNone && !stale[k]; x = e_parent[x])
         if (e_mark[x] == mark) stale[k] = 1, ++stale_count;
+  if (stale_count * 4 > r.recv.size()) return drop();  // splits are for good: it never replays again
   std::vector<glm::dvec3> dBs(r.pieces.size());
   double total = 0.0, coarse = 0.0;
   for (size_t i = 0; i < r.pieces.size(); ++i) {
@@ -1234,6 +1287,15 @@ bool Solver::Impl::replay(uint32_t unit) {
     for (uint32_t k = rp.src_begin; k < rp.src_end; ++k)
       for_leaves(r.src[k], [&](uint32_t e) { power += e_unshot[e] * e_area[e]; });
     dBs[i] = power / rp.src_area;
+    // The most any channel grew: every decision of the shot is a sum of channels with non-negative
+    // weights, so it grew by at most this factor.
+    double growth = 0.0;
+    for (int c = 0; c < 3; ++c) {
+      if (dBs[i][c] <= 0.0) continue;
+      growth = rp.dB[c] > 0.0 ? std::max(growth, dBs[i][c] / rp.dB[c]) : std::numeric_limits<double>::infinity();
+    }
+    if (growth > rp.headroom) return false;
+    if (rp.extra) continue;
     const double shot = channel_sum(dBs[i]) * rp.area;
     total += shot;
     if (rp.coarse) coarse += shot;
@@ -1245,7 +1307,7 @@ bool Solver::Impl::replay(uint32_t unit) {
   for (size_t i = 0; i < r.pieces.size(); ++i) {
     const ShotRecord::Piece& rp = r.pieces[i];
     for (uint32_t k = rp.recv_begin; k < rp.recv_end; ++k) {
-      if (stale[k]) continue;
+      if (stale[k] || r.f[k] <= 0.0f) continue;
       const uint32_t e = r.recv[k];
       const uint32_t q = e_patch[e];
       const glm::dvec3 gain = patches[q].reflectance * dBs[i] * static_cast<double>(r.f[k]);
@@ -1281,44 +1343,40 @@ bool Solver::Impl::replay(uint32_t unit) {
   power_coarse = coarse_before;
   ++stats.replays_reshot;
 
-  // The record now holds the replayed receivers and the partial shot's.
-  const size_t old_bytes = r.bytes();
-  if (record_broken) {
-    r = ShotRecord{};
-    record_bytes -= old_bytes;
+  // The record now holds the replayed receivers and the partial shot's pieces. Each partial shot
+  // adds pieces (with the sources of the shooter's own): past four times the fresh shot's, the
+  // record is dropped, and the next shot makes a compact one.
+  if (record_broken || r.pieces.size() + part.pieces.size() > 4 * r.fresh_pieces) {
+    drop();
     return true;
   }
   ShotRecord merged;
   merged.power = std::min(r.power, part.power);
-  merged.src = std::move(r.src);
-  for (const ShotRecord::Piece& rp : r.pieces) {
-    ShotRecord::Piece np = rp;
+  merged.fresh_pieces = r.fresh_pieces;
+  auto add = [&](const ShotRecord& from, ShotRecord::Piece np, bool extra, const uint8_t* skip) {
+    const uint32_t src_begin = np.src_begin, src_end = np.src_end, recv_begin = np.recv_begin, recv_end = np.recv_end;
     np.recv_begin = static_cast<uint32_t>(merged.recv.size());
-    for (uint32_t k = rp.recv_begin; k < rp.recv_end; ++k) {
-      if (stale[k]) continue;
-      merged.recv.push_back(r.recv[k]);
-      merged.f.push_back(r.f[k]);
+    for (uint32_t k = recv_begin; k < recv_end; ++k) {
+      if (skip != nullptr && skip[k]) continue;
+      merged.recv.push_back(from.recv[k]);
+      merged.f.push_back(from.f[k]);
     }
     np.recv_end = static_cast<uint32_t>(merged.recv.size());
-    if (np.recv_end > np.recv_begin) merged.pieces.push_back(np);
-  }
-  const uint32_t src_offset = static_cast<uint32_t>(merged.src.size());
-  const uint32_t recv_offset = static_cast<uint32_t>(merged.recv.size());
-  merged.src.insert(merged.src.end(), part.src.begin(), part.src.end());
-  merged.recv.insert(merged.recv.end(), part.recv.begin(), part.recv.end());
-  merged.f.insert(merged.f.end(), part.f.begin(), part.f.end());
-  for (ShotRecord::Piece np : part.pieces) {
-    np.src_begin += src_offset;
-    np.src_end += src_offset;
-    np.recv_begin += recv_offset;
-    np.recv_end += recv_offset;
+    if (np.recv_end == np.recv_begin) return;
+    np.src_begin = static_cast<uint32_t>(merged.src.size());
+    merged.src.insert(merged.src.end(), from.src.begin() + src_begin, from.src.begin() + src_end);
+    np.src_end = static_cast<uint32_t>(merged.src.size());
+    np.extra = np.extra || extra;
     merged.pieces.push_back(np);
-  }
+  };
+  for (const ShotRecord::Piece& rp : r.pieces) add(r, rp, false, stale.data());
+  for (const ShotRecord::Piece& rp : part.pieces) add(part, rp, true, nullptr);
   merged.pieces.shrink_to_fit();
+  merged.src.shrink_to_fit();
   merged.recv.shrink_to_fit();
   merged.f.shrink_to_fit();
   const size_t budget = static_cast<size_t>(params.shot_cache_mb) << 20;
-  record_bytes -= old_bytes;
+  record_bytes -= r.bytes();
   if (record_bytes + merged.bytes() <= budget) {
     record_bytes += merged.bytes();
     r = std::move(merged);
@@ -1347,10 +1405,15 @@ bool Solver::Impl::step() {
   if (replay(best)) {
     ++stats.replayed_shots;
   } else {
-    // A fresh shot, recorded for a replay while the cache has room.
+    // A fresh shot, recorded for a replay while the cache has room (in place of the unit's
+    // record, which could not be replayed).
     ShotRecord record;
     record.power = u_unshot[best];
     const size_t budget = static_cast<size_t>(params.shot_cache_mb) << 20;
+    if (!u_record.empty()) {
+      record_bytes -= u_record[best].bytes();
+      u_record[best] = ShotRecord{};
+    }
     recording = budget > 0 ? &record : nullptr;
     record_broken = false;
     if (unit_node[best] == kNone) {
@@ -1361,14 +1424,14 @@ bool Solver::Impl::step() {
     }
     recording = nullptr;
     if (budget > 0 && !record_broken && !record.pieces.empty()) {
+      record.fresh_pieces = record.pieces.size();
       record.pieces.shrink_to_fit();
       record.src.shrink_to_fit();
       record.recv.shrink_to_fit();
       record.f.shrink_to_fit();
-      const size_t old = u_record.empty() ? 0 : u_record[best].bytes();
-      if (record_bytes - old + record.bytes() <= budget) {
+      if (record_bytes + record.bytes() <= budget) {
         if (u_record.empty()) u_record.resize(unit_node.size());
-        record_bytes = record_bytes - old + record.bytes();
+        record_bytes += record.bytes();
         u_record[best] = std::move(record);
       }
     }
