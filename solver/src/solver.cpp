@@ -961,15 +961,18 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
     // close receivers left to this hemicube because the point view's error seemed small.
     double headroom = split_room;
     const bool patch_piece = piece.points.size() <= 4;
-    if (patch_piece && !piece.may_refine && piece.depth < kMaxShooterDepth) within(headroom, params.feps * emitted_power, power);
+    // Two rules save work rather than decide structure, and a replay may exceed them by up to
+    // twice: a weak piece that was not refined (its close receivers took exact form factors) stays
+    // so up to twice FEPS of the emitted power, and a close receiver left to this hemicube because
+    // its point view errs by under a quarter of the radiosity tolerance stays so until half of it.
+    if (patch_piece && !piece.may_refine && piece.depth < kMaxShooterDepth)
+      within(headroom, 2.0 * params.feps * emitted_power, power);
     if (patch_piece && power < kStraddlePower * emitted_power) within(headroom, kStraddlePower * emitted_power, power);
     if (params.method == Method::kAntiAliased) {
       if (power < 0.005 * emitted_power) within(headroom, 0.005 * emitted_power, power);
       else if (power < 0.05 * emitted_power) within(headroom, 0.05 * emitted_power, power);
       if (!patch_piece && piece.depth == 0 && power < kFinePower * emitted_power) within(headroom, kFinePower * emitted_power, power);
     }
-    // (The near-field rule bounds an error rather than deciding a structure: a replay may let it
-    // grow to twice its bound, half the radiosity tolerance.)
     if (piece.may_refine)
       for (uint32_t e : accepted)
         if (is_close(e)) within(headroom, 2.0 * kNearError * b_tolerance, near_error(e));
