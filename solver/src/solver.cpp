@@ -201,6 +201,7 @@ struct Solver::Impl {
     std::vector<uint32_t> src, recv;
     std::vector<float> f;
     size_t bytes() const {
+      if (pieces.capacity() + src.capacity() + recv.capacity() + f.capacity() == 0) return 0;  // none
       return sizeof(ShotRecord) + pieces.capacity() * sizeof(Piece) +
              (src.capacity() + recv.capacity()) * sizeof(uint32_t) + f.capacity() * sizeof(float);
     }
@@ -859,6 +860,7 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   auto within = [](double& room, double limit, double value) {
     if (value > 0.0) room = std::min(room, limit / value);
   };
+  bool settled = false;  // the last round split nothing (or could not: the element limit)
   for (int round = 0; round < 64; ++round) {
     form_factors();
     // This shot's radiosity at every accepted receiver, and its spread around every vertex.
@@ -914,12 +916,19 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
         vmin[e_corner[e][k]] = std::numeric_limits<double>::max();
         vmax[e_corner[e][k]] = std::numeric_limits<double>::lowest();
       }
-    if (to_split.empty()) break;
+    if (to_split.empty()) {
+      settled = true;
+      break;
+    }
     const uint64_t room = params.max_elements > leaves.size() ? (params.max_elements - leaves.size()) / 3 : 0;
     if (to_split.size() > room) {
       stats.element_limit = true;
       to_split.resize(room);
-      if (to_split.empty()) break;
+      if (to_split.empty()) {
+        settled = true;
+        split_room = std::numeric_limits<double>::infinity();  // no split is possible any more
+        break;
+      }
     }
     // The shot is cancelled and repeated with the split elements.
     ++stats.rounds;
@@ -938,6 +947,7 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
 
   // Southwell step: distribute this piece's unshot radiosity to the receivers that took it here.
   form_factors();
+  if (!settled) record_broken = true;  // 64 rounds still splitting: no headroom to record
   if (recording != nullptr) {
     ShotRecord& r = *recording;
     ShotRecord::Piece rp;
@@ -1297,7 +1307,7 @@ bool Solver::Impl::replay(uint32_t unit) {
       if (dBs[i][c] <= 0.0) continue;
       growth = rp.dB[c] > 0.0 ? std::max(growth, dBs[i][c] / rp.dB[c]) : std::numeric_limits<double>::infinity();
     }
-    if (growth > rp.headroom) return false;
+    if (std::isinf(growth) || growth > rp.headroom) return false;
     if (rp.extra) continue;
     const double shot = channel_sum(dBs[i]) * rp.area;
     total += shot;
