@@ -195,7 +195,6 @@ struct Solver::Impl {
       bool coarse;    // shot from a hemicube coarser than its level (kCoarseShare)
       bool extra;     // shot for children of split receivers: its power counts once, elsewhere
     };
-    double power = 0.0;  // the unit's unshot power when it shot
     size_t fresh_pieces = 0;  // pieces of the shot that made it (replays may add more)
     std::vector<Piece> pieces;
     std::vector<uint32_t> src, recv;
@@ -207,6 +206,8 @@ struct Solver::Impl {
     }
   };
   bool replay(uint32_t unit);
+  void keep_record(uint32_t unit, ShotRecord record);
+  void receive(uint32_t e, const glm::dvec3& dB, double f);
   // A node of a cluster's binary tree over its patches (by median cuts of their centres).
   struct ClusterNode {
     uint32_t begin = 0, end = 0;  // its patches: cluster_patch[begin, end)
@@ -991,15 +992,8 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
     rp.extra = false;
     r.pieces.push_back(rp);
   }
-  for (uint32_t e : accepted) {
-    if (f_recv[e] <= 0.0) continue;
-    const uint32_t q = e_patch[e];
-    const glm::dvec3 gain = patches[q].reflectance * dB * f_recv[e];
-    e_b[e] += gain;
-    e_unshot[e] += gain;
-    p_unshot[q] += channel_sum(gain) * e_area[e];
-    u_unshot[p_unit[q]] += channel_sum(gain) * e_area[e];
-  }
+  for (uint32_t e : accepted)
+    if (f_recv[e] > 0.0) receive(e, dB, f_recv[e]);
   return near;
 }
 
@@ -1273,8 +1267,7 @@ bool Solver::Impl::replay(uint32_t unit) {
   ShotRecord& r = u_record[unit];
   if (r.pieces.empty()) return false;
   auto drop = [&] {
-    record_bytes -= r.bytes();
-    r = ShotRecord{};
+    keep_record(unit, {});
     return false;
   };
   // Receivers split since need form factors for their children. When they are few, the rest is
@@ -1319,16 +1312,8 @@ bool Solver::Impl::replay(uint32_t unit) {
   power_coarse += coarse;
   for (size_t i = 0; i < r.pieces.size(); ++i) {
     const ShotRecord::Piece& rp = r.pieces[i];
-    for (uint32_t k = rp.recv_begin; k < rp.recv_end; ++k) {
-      if (stale[k] || r.f[k] <= 0.0f) continue;
-      const uint32_t e = r.recv[k];
-      const uint32_t q = e_patch[e];
-      const glm::dvec3 gain = patches[q].reflectance * dBs[i] * static_cast<double>(r.f[k]);
-      e_b[e] += gain;
-      e_unshot[e] += gain;
-      p_unshot[q] += channel_sum(gain) * e_area[e];
-      u_unshot[p_unit[q]] += channel_sum(gain) * e_area[e];
-    }
+    for (uint32_t k = rp.recv_begin; k < rp.recv_end; ++k)
+      if (!stale[k] && r.f[k] > 0.0f) receive(r.recv[k], dBs[i], r.f[k]);
   }
   if (stale_count == 0) return true;
 
@@ -1343,7 +1328,6 @@ bool Solver::Impl::replay(uint32_t unit) {
   std::sort(redo.begin(), redo.end());
   redo.erase(std::unique(redo.begin(), redo.end()), redo.end());
   ShotRecord part;
-  part.power = u_unshot[unit];
   // The unit's power is counted above already; the partial shot's pieces do not count again.
   const double shot_before = power_shot, coarse_before = power_coarse;
   recording = &part;
@@ -1364,7 +1348,6 @@ bool Solver::Impl::replay(uint32_t unit) {
     return true;
   }
   ShotRecord merged;
-  merged.power = std::min(r.power, part.power);
   merged.fresh_pieces = r.fresh_pieces;
   auto add = [&](const ShotRecord& from, ShotRecord::Piece np, bool extra, const uint8_t* skip) {
     const uint32_t src_begin = np.src_begin, src_end = np.src_end, recv_begin = np.recv_begin, recv_end = np.recv_end;
@@ -1384,19 +1367,34 @@ bool Solver::Impl::replay(uint32_t unit) {
   };
   for (const ShotRecord::Piece& rp : r.pieces) add(r, rp, false, stale.data());
   for (const ShotRecord::Piece& rp : part.pieces) add(part, rp, true, nullptr);
-  merged.pieces.shrink_to_fit();
-  merged.src.shrink_to_fit();
-  merged.recv.shrink_to_fit();
-  merged.f.shrink_to_fit();
-  const size_t budget = static_cast<size_t>(params.shot_cache_mb) << 20;
-  record_bytes -= r.bytes();
-  if (record_bytes + merged.bytes() <= budget) {
-    record_bytes += merged.bytes();
-    r = std::move(merged);
-  } else {
-    r = ShotRecord{};
-  }
+  keep_record(unit, std::move(merged));
   return true;
+}
+
+// Puts `record` in place of the unit's record, if the records' memory allows.
+void Solver::Impl::keep_record(uint32_t unit, ShotRecord record) {
+  if (!u_record.empty()) {
+    record_bytes -= u_record[unit].bytes();
+    u_record[unit] = ShotRecord{};
+  }
+  if (record.pieces.empty()) return;
+  record.pieces.shrink_to_fit();
+  record.src.shrink_to_fit();
+  record.recv.shrink_to_fit();
+  record.f.shrink_to_fit();
+  if (record_bytes + record.bytes() > static_cast<size_t>(params.shot_cache_mb) << 20) return;
+  if (u_record.empty()) u_record.resize(unit_node.size());
+  record_bytes += record.bytes();
+  u_record[unit] = std::move(record);
+}
+
+void Solver::Impl::receive(uint32_t e, const glm::dvec3& dB, double f) {
+  const uint32_t q = e_patch[e];
+  const glm::dvec3 gain = patches[q].reflectance * dB * f;
+  e_b[e] += gain;
+  e_unshot[e] += gain;
+  p_unshot[q] += channel_sum(gain) * e_area[e];
+  u_unshot[p_unit[q]] += channel_sum(gain) * e_area[e];
 }
 
 bool Solver::Impl::step() {
@@ -1421,13 +1419,8 @@ bool Solver::Impl::step() {
     // A fresh shot, recorded for a replay while the cache has room (in place of the unit's
     // record, which could not be replayed).
     ShotRecord record;
-    record.power = u_unshot[best];
-    const size_t budget = static_cast<size_t>(params.shot_cache_mb) << 20;
-    if (!u_record.empty()) {
-      record_bytes -= u_record[best].bytes();
-      u_record[best] = ShotRecord{};
-    }
-    recording = budget > 0 ? &record : nullptr;
+    keep_record(best, {});
+    recording = params.shot_cache_mb > 0 ? &record : nullptr;
     record_broken = false;
     if (unit_node[best] == kNone) {
       shoot_patch(unit_patch[best], leaves, true);
@@ -1436,17 +1429,9 @@ bool Solver::Impl::step() {
       shoot_cluster(unit_node[best], leaves, true, 0);
     }
     recording = nullptr;
-    if (budget > 0 && !record_broken && !record.pieces.empty()) {
+    if (params.shot_cache_mb > 0 && !record_broken) {
       record.fresh_pieces = record.pieces.size();
-      record.pieces.shrink_to_fit();
-      record.src.shrink_to_fit();
-      record.recv.shrink_to_fit();
-      record.f.shrink_to_fit();
-      if (record_bytes + record.bytes() <= budget) {
-        if (u_record.empty()) u_record.resize(unit_node.size());
-        record_bytes += record.bytes();
-        u_record[best] = std::move(record);
-      }
+      keep_record(best, std::move(record));
     }
   }
   if (unit_node[best] != kNone) {
