@@ -408,6 +408,13 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "hemibake: unknown command '%s' (try --help)\n", argv[1]);
     return 2;
   }
+  // `hemibake bake --help` asks for help, not for an option called --help.
+  for (int i = 2; i < argc; ++i) {
+    if (std::strcmp(argv[i], "--help") == 0 || std::strcmp(argv[i], "-h") == 0) {
+      usage(stdout);
+      return 0;
+    }
+  }
   Options o;
   if (std::string err = parse(argc, argv, 2, command != "cornell" && command != "room" && command != "list", o); !err.empty()) {
     std::fprintf(stderr, "hemibake: %s\n", err.c_str());

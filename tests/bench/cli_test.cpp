@@ -64,3 +64,18 @@ TEST(Cli, RoomRendersWithEveryMethod) {
 }
 
 }  // namespace
+
+// Every command answers --help with the usage text on standard output and status 0, as the
+// top-level --help does (it used to take --help for an option wanting a value).
+TEST(Cli, EveryCommandAnswersHelp) {
+  for (const std::string command : {"bake", "cornell", "room", "render", "submit", "status", "fetch", "list"}) {
+    const std::string out = (std::filesystem::temp_directory_path() /
+                             ("hemibake-help-" + command + "-" + std::to_string(getpid()) + ".txt")).string();
+    const std::string line = std::string(HEMIBAKE_CLIENT) + " " + command + " --help > " + out + " 2>&1";
+    EXPECT_EQ(std::system(line.c_str()), 0) << line;
+    const std::string text = read_all(out);
+    std::filesystem::remove(out);
+    EXPECT_NE(text.find("usage:"), std::string::npos) << command << ": " << text;
+    EXPECT_NE(text.find("--resolution"), std::string::npos) << command;
+  }
+}
