@@ -2,7 +2,13 @@
 
 #include <sqlite3.h>
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <chrono>
+#include <cstring>
 #include <filesystem>
 #include <random>
 
@@ -118,11 +124,26 @@ std::unique_ptr<Store> Store::open(const std::string& dir, std::string& error) {
     error = "cannot create data directory '" + dir + "': " + ec.message();
     return nullptr;
   }
+  // One server per data directory: a second one would re-queue the first one's running jobs at
+  // its start (recover) and bake them twice. The lock dies with the process, even on SIGKILL.
+  const std::string lock_path = (std::filesystem::path(dir) / "hemibake.lock").string();
+  const int lock_fd = ::open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (lock_fd < 0) {
+    error = "cannot open " + lock_path + ": " + std::strerror(errno);
+    return nullptr;
+  }
+  if (::flock(lock_fd, LOCK_EX | LOCK_NB) != 0) {
+    error = errno == EWOULDBLOCK ? "the data directory '" + dir + "' is in use by another hemibake-server; stop it or give --data another directory"
+                                 : "cannot lock " + lock_path + ": " + std::strerror(errno);
+    ::close(lock_fd);
+    return nullptr;
+  }
   const std::string path = (std::filesystem::path(dir) / "hemibake.db").string();
   sqlite3* db = nullptr;
   if (sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX, nullptr) != SQLITE_OK) {
     error = "cannot open " + path + ": " + (db ? sqlite3_errmsg(db) : "out of memory");
     sqlite3_close(db);
+    ::close(lock_fd);
     return nullptr;
   }
   // WAL: readers never wait for the writer; synchronous=FULL: a committed job survives power loss.
@@ -142,15 +163,19 @@ std::unique_ptr<Store> Store::open(const std::string& dir, std::string& error) {
       "  data TEXT NOT NULL, PRIMARY KEY (job, seq));";
   char* msg = nullptr;
   if (sqlite3_exec(db, schema, nullptr, nullptr, &msg) != SQLITE_OK) {
-    error = std::string("cannot set up the job store: ") + (msg ? msg : "?");
+    error = "cannot set up the job store " + path + ": " + (msg ? msg : "?");
     sqlite3_free(msg);
     sqlite3_close(db);
+    ::close(lock_fd);
     return nullptr;
   }
-  return std::unique_ptr<Store>(new Store(db));
+  return std::unique_ptr<Store>(new Store(db, lock_fd));
 }
 
-Store::~Store() { sqlite3_close(db_); }
+Store::~Store() {
+  sqlite3_close(db_);
+  ::close(lock_fd_);
+}
 
 std::string Store::create(const std::string& scene, const std::string& content_type, const std::string& params,
                           const std::string& cache_key, const std::string& idempotency_key, bool& existed) {

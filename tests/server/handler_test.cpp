@@ -86,6 +86,21 @@ TEST(Handler, TokensProtectEverythingButHealthChecks) {
   EXPECT_EQ(f.call("GET", "/metrics", "", {{"authorization", "Bearer t0ken"}}).status, 200);
 }
 
+// A second server on the same data directory would re-queue the first one's running jobs at its
+// start and bake them twice: it is refused, and the directory is free again once the first stops.
+TEST(Handler, SecondServiceOnTheSameDataDirectoryIsRefused) {
+  Fixture f;
+  ServiceOptions o;
+  o.data_dir = f.dir;
+  o.workers = 1;
+  std::string error;
+  EXPECT_FALSE(Service::start(o, error));
+  EXPECT_NE(error.find("in use by another hemibake-server"), std::string::npos) << error;
+  f.service.reset();
+  error.clear();
+  EXPECT_TRUE(Service::start(o, error)) << error;
+}
+
 TEST(Handler, QueryStringsDecode) {
   const auto q = parse_query("a=1&b=x%20y&c=&d&e=%2F%2f+z");
   EXPECT_EQ(q.at("a"), "1");

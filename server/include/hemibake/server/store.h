@@ -43,7 +43,8 @@ struct Event {
 /// Thread-safe: one connection, calls serialised by a mutex.
 class Store {
  public:
-  /// Opens (creating) `dir`/hemibake.db. Returns null and sets `error` on failure.
+  /// Opens (creating) `dir`/hemibake.db and holds an exclusive lock on `dir`/hemibake.lock while it
+  /// lives. Returns null and sets `error` on failure, also when another process holds the lock.
   static std::unique_ptr<Store> open(const std::string& dir, std::string& error);
   ~Store();
 
@@ -76,8 +77,9 @@ class Store {
   size_t count(JobState state);
 
  private:
-  explicit Store(sqlite3* db) : db_(db) {}
+  Store(sqlite3* db, int lock_fd) : db_(db), lock_fd_(lock_fd) {}
   sqlite3* db_;
+  int lock_fd_;  ///< flock'ed: one server per data directory
   std::mutex mutex_;
 };
 
