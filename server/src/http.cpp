@@ -184,14 +184,22 @@ class Session : public std::enable_shared_from_this<Session> {
 }  // namespace
 
 struct HttpServer::Impl {
-  Impl(Service& s, net::io_context& ctx, const HttpOptions& o) : service(s), io(ctx), options(o), acceptor(net::make_strand(ctx)) {}
+  Impl(Service& s, net::io_context& ctx, const HttpOptions& o)
+      : service(s), io(ctx), options(o), acceptor(net::make_strand(ctx)), retry(acceptor.get_executor()) {}
   void accept() {
     acceptor.async_accept(net::make_strand(io), [this](beast::error_code ec, tcp::socket socket) {
+      if (!acceptor.is_open()) return;
       if (ec) {
-        if (!acceptor.is_open()) return;
-      } else {
-        std::make_shared<Session>(std::move(socket), service, options, streams)->run();
+        // Out of file descriptors (or another transient failure): the pending connection stays in
+        // the backlog, so accepting again at once would spin a core. Wait until connections close.
+        if (!failing) std::fprintf(stderr, "hemibake-server: cannot accept connections: %s\n", ec.message().c_str());
+        failing = true;
+        retry.expires_after(std::chrono::milliseconds(100));
+        retry.async_wait([this](beast::error_code) { accept(); });
+        return;
       }
+      failing = false;
+      std::make_shared<Session>(std::move(socket), service, options, streams)->run();
       accept();
     });
   }
@@ -199,6 +207,8 @@ struct HttpServer::Impl {
   net::io_context& io;
   HttpOptions options;
   tcp::acceptor acceptor;
+  net::steady_timer retry;
+  bool failing = false;  // log a run of accept failures once
   std::atomic<size_t> streams{0};
 };
 
@@ -234,6 +244,7 @@ void HttpServer::stop() {
   net::dispatch(impl_->acceptor.get_executor(), [impl = impl_.get()] {
     beast::error_code ec;
     impl->acceptor.close(ec);
+    impl->retry.cancel();
   });
 }
 

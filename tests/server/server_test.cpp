@@ -17,6 +17,7 @@
 #include <set>
 #include <sstream>
 #include <string>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <thread>
 #include <unistd.h>
@@ -41,13 +42,19 @@ std::string read_file(const std::string& path) {
 // A hemibake-server process on a free loopback port.
 class ServerProcess {
  public:
-  ServerProcess(const std::string& data_dir, std::vector<std::string> extra = {}, std::vector<std::string> env = {}) {
+  // `max_files` > 0 sets the server's limit of open file descriptors.
+  ServerProcess(const std::string& data_dir, std::vector<std::string> extra = {}, std::vector<std::string> env = {},
+                rlim_t max_files = 0) {
     int fds[2];
     if (pipe(fds) != 0) std::abort();
     pid_ = fork();
     if (pid_ == 0) {
       dup2(fds[1], STDOUT_FILENO);
       close(fds[0]);
+      if (max_files > 0) {
+        const rlimit limit{max_files, max_files};
+        setrlimit(RLIMIT_NOFILE, &limit);
+      }
       for (const auto& e : env) putenv(const_cast<char*>(e.c_str()));
       std::vector<std::string> args = {HEMIBAKE_SERVER, "--listen", "127.0.0.1:0", "--data", data_dir};
       args.insert(args.end(), extra.begin(), extra.end());
@@ -69,6 +76,7 @@ class ServerProcess {
   }
   ~ServerProcess() { stop(SIGTERM); }
   unsigned short port() const { return port_; }
+  pid_t pid() const { return pid_; }
   void stop(int sig) {
     if (pid_ <= 0) return;
     kill(pid_, sig);
@@ -414,6 +422,36 @@ TEST(Client, BakesOnTheServerAndReportsErrors) {
   EXPECT_NE(std::system(missing.c_str()), 0);
   const std::string unreachable = std::string(HEMIBAKE_CLIENT) + " list --server http://127.0.0.1:1 2>/dev/null";
   EXPECT_NE(std::system(unreachable.c_str()), 0);
+}
+
+// CPU time (user + system) a process has used, in clock ticks.
+long cpu_ticks(pid_t pid) {
+  std::istringstream stat(read_file("/proc/" + std::to_string(pid) + "/stat"));
+  std::string field;
+  std::getline(stat, field, ')');  // pid and (comm), which may hold spaces
+  std::vector<std::string> rest;
+  while (stat >> field) rest.push_back(field);
+  return rest.size() > 12 ? std::stol(rest[11]) + std::stol(rest[12]) : -1;
+}
+
+// More connections than file descriptors: the server does not spin on the failing accept, and
+// serves again once connections close.
+TEST(Server, RunningOutOfFileDescriptorsDoesNotSpin) {
+  ServerProcess server(temp_dir("fds"), {"--workers", "1"}, {}, 48);
+  ASSERT_NE(server.port(), 0);
+  net::io_context io;
+  std::vector<tcp::socket> idle;
+  for (int i = 0; i < 80; ++i) {
+    idle.emplace_back(io);
+    idle.back().connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), server.port()));
+  }
+  std::this_thread::sleep_for(300ms);
+  const long before = cpu_ticks(server.pid());
+  std::this_thread::sleep_for(2s);
+  const long used = cpu_ticks(server.pid()) - before;
+  EXPECT_LT(used, sysconf(_SC_CLK_TCK) / 4) << "clock ticks in 2 s with descriptors exhausted";
+  idle.clear();
+  EXPECT_EQ(request(server.port(), http::verb::get, "/healthz").status, 200);
 }
 
 // Many clients at once, bounded in number and time: every request answered, no error.
