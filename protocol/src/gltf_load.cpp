@@ -19,6 +19,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <optional>
 #include <sstream>
 #include <unordered_map>
@@ -32,6 +33,8 @@ namespace fs = std::filesystem;
 constexpr double kMaxReflectance = 0.95;
 // Accessors with more elements than this are refused before any arithmetic on their size.
 constexpr uint64_t kMaxAccessorCount = 1ull << 28;
+// A sparse accessor is made dense in memory; without a bufferView nothing in the file bounds its size.
+constexpr uint64_t kMaxSparseBytes = 1ull << 28;
 
 struct LoaderContext {
   std::string base_dir;
@@ -143,6 +146,7 @@ struct View {
   int component_type = 0;
   int components = 0;
   bool normalized = false;
+  std::shared_ptr<const std::vector<uint8_t>> owned;  // a sparse accessor's elements, made dense
 };
 
 int component_size(int type) {
@@ -168,50 +172,6 @@ int component_count(int type) {
     case TINYGLTF_TYPE_MAT4: return 16;
     default: return 0;
   }
-}
-
-// Checks accessor `index` for use as `what` and returns a view of it, or an error message.
-std::string view_accessor(const tinygltf::Model& m, int index, const std::string& what, View& out) {
-  std::ostringstream err;
-  const std::string name = "accessor " + std::to_string(index) + " (" + what + ")";
-  if (index < 0 || static_cast<size_t>(index) >= m.accessors.size())
-    return what + " refers to accessor " + std::to_string(index) + ", which does not exist";
-  const tinygltf::Accessor& a = m.accessors[index];
-  if (a.sparse.isSparse) return name + " is sparse; sparse accessors are not supported";
-  const int csize = component_size(a.componentType);
-  const int ncomp = component_count(a.type);
-  if (csize == 0 || ncomp == 0) return name + " has an invalid componentType or type";
-  if (a.count == 0) return name + " has no elements";
-  if (a.count > kMaxAccessorCount) return name + " has too many elements (" + std::to_string(a.count) + ")";
-  if (a.bufferView < 0 || static_cast<size_t>(a.bufferView) >= m.bufferViews.size())
-    return name + " has no valid bufferView";
-  const tinygltf::BufferView& bv = m.bufferViews[a.bufferView];
-  if (bv.buffer < 0 || static_cast<size_t>(bv.buffer) >= m.buffers.size())
-    return "bufferView " + std::to_string(a.bufferView) + " refers to buffer " + std::to_string(bv.buffer) + ", which does not exist";
-  const tinygltf::Buffer& buf = m.buffers[bv.buffer];
-  if (bv.byteOffset > buf.data.size() || bv.byteLength > buf.data.size() - bv.byteOffset)
-    return "bufferView " + std::to_string(a.bufferView) + " (offset " + std::to_string(bv.byteOffset) +
-           ", length " + std::to_string(bv.byteLength) + ") lies outside buffer " + std::to_string(bv.buffer) +
-           " (" + std::to_string(buf.data.size()) + " bytes)";
-  const size_t element = static_cast<size_t>(csize) * static_cast<size_t>(ncomp);
-  const size_t stride = bv.byteStride != 0 ? bv.byteStride : element;
-  if (stride < element || stride % static_cast<size_t>(csize) != 0 || stride > 252)
-    return "bufferView " + std::to_string(a.bufferView) + " has byteStride " + std::to_string(bv.byteStride) +
-           ", invalid for " + name;
-  if (a.byteOffset % static_cast<size_t>(csize) != 0) return name + " has a misaligned byteOffset";
-  // Last byte used: byteOffset + stride * (count - 1) + element, within the view (no overflow:
-  // count and stride are bounded above).
-  const uint64_t need = static_cast<uint64_t>(a.byteOffset) + static_cast<uint64_t>(stride) * (a.count - 1) + element;
-  if (a.byteOffset > bv.byteLength || need > bv.byteLength)
-    return name + " needs " + std::to_string(need) + " bytes but bufferView " + std::to_string(a.bufferView) +
-           " has " + std::to_string(bv.byteLength);
-  out.data = buf.data.data() + bv.byteOffset + a.byteOffset;
-  out.stride = stride;
-  out.count = a.count;
-  out.component_type = a.componentType;
-  out.components = ncomp;
-  out.normalized = a.normalized;
-  return {};
 }
 
 double read_component(const View& v, size_t i, int c) {
@@ -244,6 +204,107 @@ double read_component(const View& v, size_t i, int c) {
     }
     default: return 0.0;
   }
+}
+
+// The first of `count` elements of `element` bytes, `stride` apart, from byte `offset` of
+// bufferView `view`, after checking that they lie inside it; or an error message about `name`.
+std::string view_bytes(const tinygltf::Model& m, int view, uint64_t offset, uint64_t count, size_t element,
+                       size_t stride, const std::string& name, const uint8_t*& data) {
+  if (view < 0 || static_cast<size_t>(view) >= m.bufferViews.size()) return name + " has no valid bufferView";
+  const tinygltf::BufferView& bv = m.bufferViews[view];
+  if (bv.buffer < 0 || static_cast<size_t>(bv.buffer) >= m.buffers.size())
+    return "bufferView " + std::to_string(view) + " refers to buffer " + std::to_string(bv.buffer) + ", which does not exist";
+  const tinygltf::Buffer& buf = m.buffers[bv.buffer];
+  if (bv.byteOffset > buf.data.size() || bv.byteLength > buf.data.size() - bv.byteOffset)
+    return "bufferView " + std::to_string(view) + " (offset " + std::to_string(bv.byteOffset) +
+           ", length " + std::to_string(bv.byteLength) + ") lies outside buffer " + std::to_string(bv.buffer) +
+           " (" + std::to_string(buf.data.size()) + " bytes)";
+  // Last byte used: offset + stride * (count - 1) + element, within the view (no overflow: count,
+  // stride and offset are bounded above).
+  const uint64_t need = offset + static_cast<uint64_t>(stride) * (count - 1) + element;
+  if (offset > bv.byteLength || need > bv.byteLength)
+    return name + " needs " + std::to_string(need) + " bytes but bufferView " + std::to_string(view) +
+           " has " + std::to_string(bv.byteLength);
+  data = buf.data.data() + bv.byteOffset + offset;
+  return {};
+}
+
+// Checks accessor `index` for use as `what` and returns a view of it, or an error message. A
+// sparse accessor (glTF 2.0, section 3.6.2.3: its bufferView's elements, or zeros without one,
+// with the elements at `sparse.indices` replaced by `sparse.values`) is made dense in a copy.
+std::string view_accessor(const tinygltf::Model& m, int index, const std::string& what, View& out) {
+  const std::string name = "accessor " + std::to_string(index) + " (" + what + ")";
+  if (index < 0 || static_cast<size_t>(index) >= m.accessors.size())
+    return what + " refers to accessor " + std::to_string(index) + ", which does not exist";
+  const tinygltf::Accessor& a = m.accessors[index];
+  const int csize = component_size(a.componentType);
+  const int ncomp = component_count(a.type);
+  if (csize == 0 || ncomp == 0) return name + " has an invalid componentType or type";
+  if (a.count == 0) return name + " has no elements";
+  if (a.count > kMaxAccessorCount) return name + " has too many elements (" + std::to_string(a.count) + ")";
+  const size_t element = static_cast<size_t>(csize) * static_cast<size_t>(ncomp);
+  out = View();
+  out.count = a.count;
+  out.component_type = a.componentType;
+  out.components = ncomp;
+  out.normalized = a.normalized;
+  if (a.bufferView >= 0 || !a.sparse.isSparse) {
+    if (a.bufferView < 0 || static_cast<size_t>(a.bufferView) >= m.bufferViews.size())
+      return name + " has no valid bufferView";
+    const tinygltf::BufferView& bv = m.bufferViews[a.bufferView];
+    const size_t stride = bv.byteStride != 0 ? bv.byteStride : element;
+    if (stride < element || stride % static_cast<size_t>(csize) != 0 || stride > 252)
+      return "bufferView " + std::to_string(a.bufferView) + " has byteStride " + std::to_string(bv.byteStride) +
+             ", invalid for " + name;
+    if (a.byteOffset % static_cast<size_t>(csize) != 0) return name + " has a misaligned byteOffset";
+    if (std::string e = view_bytes(m, a.bufferView, a.byteOffset, a.count, element, stride, name, out.data); !e.empty())
+      return e;
+    out.stride = stride;
+  }
+  if (!a.sparse.isSparse) return {};
+
+  const auto& sp = a.sparse;
+  if (a.count * element > kMaxSparseBytes) return name + " is sparse and too large to expand (" + std::to_string(a.count) + " elements)";
+  if (sp.count <= 0 || static_cast<size_t>(sp.count) > a.count)
+    return name + " has sparse.count " + std::to_string(sp.count) + "; it must be 1 to count (" + std::to_string(a.count) + ")";
+  View indices;
+  indices.count = static_cast<size_t>(sp.count);
+  indices.component_type = sp.indices.componentType;
+  indices.components = 1;
+  indices.stride = static_cast<size_t>(component_size(sp.indices.componentType));
+  if (sp.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
+      sp.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+      sp.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+    return name + " has sparse indices that are not unsigned byte, short or int";
+  if (sp.indices.byteOffset < 0 || sp.values.byteOffset < 0 ||
+      static_cast<size_t>(sp.indices.byteOffset) % indices.stride != 0 || sp.values.byteOffset % csize != 0)
+    return name + " has a negative or misaligned sparse byteOffset";
+  const uint8_t* values = nullptr;
+  if (std::string e = view_bytes(m, sp.indices.bufferView, static_cast<uint64_t>(sp.indices.byteOffset), indices.count,
+                                 indices.stride, indices.stride, name + " sparse indices", indices.data);
+      !e.empty())
+    return e;
+  if (std::string e = view_bytes(m, sp.values.bufferView, static_cast<uint64_t>(sp.values.byteOffset), indices.count,
+                                 element, element, name + " sparse values", values);
+      !e.empty())
+    return e;
+  auto dense = std::make_shared<std::vector<uint8_t>>(a.count * element, uint8_t{0});
+  if (out.data)
+    for (size_t i = 0; i < a.count; ++i) std::memcpy(dense->data() + i * element, out.data + i * out.stride, element);
+  double previous = -1.0;
+  for (size_t k = 0; k < indices.count; ++k) {
+    const double i = read_component(indices, k, 0);
+    // The specification requires strictly increasing indices; that also makes each one unique.
+    if (i >= static_cast<double>(a.count) || i <= previous)
+      return name + " has sparse index " + std::to_string(static_cast<uint64_t>(i)) + " at " + std::to_string(k) +
+             ": the indices must increase and be below count (" + std::to_string(a.count) + ")";
+    previous = i;
+    std::memcpy(dense->data() + static_cast<size_t>(i) * element, values + k * element, element);
+  }
+  out.data = dense->data();
+  out.stride = element;
+  out.owned = std::move(dense);
+  return {};
 }
 
 glm::dmat4 local_matrix(const tinygltf::Node& n) {
@@ -316,16 +377,57 @@ std::optional<glm::dvec3> value_rgb(const tinygltf::Value& v) {
   return out;
 }
 
+// KHR_texture_transform: uv' = T(offset) R(rotation) S(scale) uv (the extension's matrix, with
+// rotation counter-clockwise in UV space).
+struct UvTransform {
+  glm::dvec2 offset{0.0}, scale{1.0};
+  double rotation = 0.0;
+  glm::dvec2 apply(const glm::dvec2& uv) const {
+    const double c = std::cos(rotation), s = std::sin(rotation);
+    const glm::dvec2 q = scale * uv;
+    return offset + glm::dvec2(c * q.x + s * q.y, -s * q.x + c * q.y);
+  }
+};
+
 struct MaterialInfo {
   glm::dvec3 factor{1.0};          // baseColorFactor rgb
   int base_texture = -1;
   int base_texcoord = 0;
+  UvTransform base_transform;
   glm::dvec3 emissive{0.0};        // emissiveFactor times strength
   int emissive_texture = -1;
   int emissive_texcoord = 0;
+  UvTransform emissive_transform;
   std::optional<glm::dvec3> reflectance_override, emission_override;
   bool double_sided = false;
 };
+
+// A texture reference's set and transform (KHR_texture_transform's texCoord overrides the set).
+std::string texture_mapping(const tinygltf::TextureInfo& info, const std::string& what, int& texcoord, UvTransform& t) {
+  texcoord = info.texCoord;
+  const auto it = info.extensions.find("KHR_texture_transform");
+  if (it == info.extensions.end()) return {};
+  const tinygltf::Value& x = it->second;
+  auto number = [](const tinygltf::Value& v, double& out) {
+    if (!v.IsNumber() && !v.IsInt()) return false;
+    out = v.GetNumberAsDouble();
+    return std::isfinite(out);
+  };
+  auto pair = [&](const char* key, glm::dvec2& out) {
+    if (!x.Has(key)) return true;
+    const tinygltf::Value& v = x.Get(key);
+    return v.IsArray() && v.ArrayLen() == 2 && number(v.Get(0), out.x) && number(v.Get(1), out.y);
+  };
+  if (!pair("offset", t.offset) || !pair("scale", t.scale) || (x.Has("rotation") && !number(x.Get("rotation"), t.rotation)))
+    return what + " has an invalid KHR_texture_transform";
+  if (x.Has("texCoord")) {
+    double set = 0.0;
+    if (!number(x.Get("texCoord"), set) || set < 0.0 || set > 255.0 || set != std::floor(set))
+      return what + " has an invalid KHR_texture_transform texCoord";
+    texcoord = static_cast<int>(set);
+  }
+  return {};
+}
 
 std::string material_info(const tinygltf::Model& m, int index, MaterialInfo& out, std::vector<std::string>& warnings) {
   if (index < 0) {
@@ -340,7 +442,10 @@ std::string material_info(const tinygltf::Model& m, int index, MaterialInfo& out
   for (int i = 0; i < 3; ++i)
     if (!std::isfinite(out.factor[i])) return name + " has a non-finite baseColorFactor";
   out.base_texture = mat.pbrMetallicRoughness.baseColorTexture.index;
-  out.base_texcoord = mat.pbrMetallicRoughness.baseColorTexture.texCoord;
+  if (std::string e = texture_mapping(mat.pbrMetallicRoughness.baseColorTexture, name + "'s baseColorTexture",
+                                      out.base_texcoord, out.base_transform);
+      !e.empty())
+    return e;
   if (mat.emissiveFactor.size() == 3) out.emissive = glm::dvec3(mat.emissiveFactor[0], mat.emissiveFactor[1], mat.emissiveFactor[2]);
   for (int i = 0; i < 3; ++i)
     if (!std::isfinite(out.emissive[i]) || out.emissive[i] < 0.0) return name + " has an invalid emissiveFactor";
@@ -353,7 +458,10 @@ std::string material_info(const tinygltf::Model& m, int index, MaterialInfo& out
     }
   }
   out.emissive_texture = mat.emissiveTexture.index;
-  out.emissive_texcoord = mat.emissiveTexture.texCoord;
+  if (std::string e = texture_mapping(mat.emissiveTexture, name + "'s emissiveTexture", out.emissive_texcoord,
+                                      out.emissive_transform);
+      !e.empty())
+    return e;
   out.double_sided = mat.doubleSided;
   // Overrides for the bake: "extras": {"hemibake": {"reflectance": [r, g, b], "emission": [r, g, b]}}.
   if (mat.extras.IsObject() && mat.extras.Has("hemibake")) {
@@ -579,10 +687,35 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
       std::sort(used.begin(), used.end());
       used.erase(std::unique(used.begin(), used.end()), used.end());
       for (uint32_t& i : idx) i = static_cast<uint32_t>(std::lower_bound(used.begin(), used.end(), i) - used.begin());
+      // Morph targets at the instance's weights (glTF 2.0, section 3.7.2.2: the node's weights,
+      // else the mesh's, else none): position = base + sum of weight x target displacement.
+      const std::vector<double>& weights = !node.weights.empty() ? node.weights : mesh.weights;
+      std::vector<std::pair<View, double>> morphs;
+      for (size_t t = 0; t < prim.targets.size() && t < weights.size(); ++t) {
+        const auto it = prim.targets[t].find("POSITION");
+        if (weights[t] == 0.0 || it == prim.targets[t].end()) continue;
+        const std::string what = "POSITION of morph target " + std::to_string(t) + " of " + where;
+        if (!std::isfinite(weights[t])) {
+          result.error = "the weight of morph target " + std::to_string(t) + " of " + where + " (node " + std::to_string(n) +
+                         ") is not finite";
+          return result;
+        }
+        View d;
+        if (std::string e = view_accessor(m, it->second, what, d); !e.empty()) {
+          result.error = e;
+          return result;
+        }
+        if (d.components != 3 || d.count != pos.count) {
+          result.error = "accessor " + std::to_string(it->second) + " (" + what + ") must be VEC3 with one element per vertex";
+          return result;
+        }
+        morphs.emplace_back(d, weights[t]);
+      }
       std::vector<glm::dvec3> points(used.size());
       for (size_t k = 0; k < used.size(); ++k) {
         const size_t i = used[k];
-        const glm::dvec3 p(read_component(pos, i, 0), read_component(pos, i, 1), read_component(pos, i, 2));
+        glm::dvec3 p(read_component(pos, i, 0), read_component(pos, i, 1), read_component(pos, i, 2));
+        for (const auto& [d, w] : morphs) p += w * glm::dvec3(read_component(d, i, 0), read_component(d, i, 1), read_component(d, i, 2));
         if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) {
           result.error = "accessor " + std::to_string(pos_it->second) + " (POSITION of " + where +
                          ") has a non-finite value at element " + std::to_string(i);
@@ -618,6 +751,34 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
           return result;
         }
       }
+      // COLOR_0 multiplies the base colour (glTF 2.0, section 3.9.2), so it tints the reflectance.
+      // The output's COLOR_0 replaces it, so the displayed base colour (PatchSource::base) leaves it out.
+      std::vector<glm::dvec3> tint;
+      if (const auto it = prim.attributes.find("COLOR_0"); it != prim.attributes.end()) {
+        const std::string what = "COLOR_0 of " + where;
+        View cv;
+        if (std::string e = view_accessor(m, it->second, what, cv); !e.empty()) {
+          result.error = e;
+          return result;
+        }
+        const bool type_ok = cv.component_type == TINYGLTF_COMPONENT_TYPE_FLOAT ||
+                             (cv.normalized && (cv.component_type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE ||
+                                                cv.component_type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT));
+        if ((cv.components != 3 && cv.components != 4) || !type_ok || cv.count != pos.count) {
+          result.error = "accessor " + std::to_string(it->second) + " (" + what +
+                         ") must be VEC3 or VEC4, float or normalized unsigned byte or short, with one element per vertex";
+          return result;
+        }
+        tint.resize(used.size());
+        for (size_t k = 0; k < used.size(); ++k) {
+          tint[k] = glm::dvec3(read_component(cv, used[k], 0), read_component(cv, used[k], 1), read_component(cv, used[k], 2));
+          if (!std::isfinite(tint[k].x) || !std::isfinite(tint[k].y) || !std::isfinite(tint[k].z)) {
+            result.error = "accessor " + std::to_string(it->second) + " (" + what + ") has a non-finite value at element " +
+                           std::to_string(used[k]);
+            return result;
+          }
+        }
+      }
       // Triangles in glTF order (strips alternate winding; fans turn about the first vertex).
       const size_t nidx = idx.size();
       size_t ntri = 0;
@@ -631,7 +792,7 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
       // The primitive's triangles, with their colours.
       struct Tri {
         std::array<uint32_t, 3> v;
-        glm::dvec3 base, emission;
+        glm::dvec3 base, reflect, emission;  // displayed base colour; base colour x vertex colour
         double area;
         bool used;
       };
@@ -653,14 +814,19 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
         }
         glm::dvec3 base = mat.factor;
         if (!uv_base.empty()) {
-          if (auto mean = texture_mean(m, mat.base_texture, {uv_base[v[0]], uv_base[v[1]], uv_base[v[2]]})) base *= *mean;
+          const auto& tf = mat.base_transform;
+          if (auto mean = texture_mean(m, mat.base_texture, {tf.apply(uv_base[v[0]]), tf.apply(uv_base[v[1]]), tf.apply(uv_base[v[2]])}))
+            base *= *mean;
         }
         glm::dvec3 emission = mat.emissive;
         if (mat.emissive_texture >= 0 && !uv_emit.empty()) {
-          if (auto mean = texture_mean(m, mat.emissive_texture, {uv_emit[v[0]], uv_emit[v[1]], uv_emit[v[2]]}))
+          const auto& tf = mat.emissive_transform;
+          if (auto mean = texture_mean(m, mat.emissive_texture, {tf.apply(uv_emit[v[0]]), tf.apply(uv_emit[v[1]]), tf.apply(uv_emit[v[2]])}))
             emission *= *mean;
         }
-        tris.push_back({v, base, emission, area, false});
+        // The mean of the vertex colours, linear over the triangle.
+        const glm::dvec3 reflect = tint.empty() ? base : base * (tint[v[0]] + tint[v[1]] + tint[v[2]]) / 3.0;
+        tris.push_back({v, base, reflect, emission, area, false});
       }
       // Exporters split quads into triangle pairs. Pairs that form a planar convex quad become one
       // quad patch again: its elements are then quads, and its light is not cut along the diagonal.
@@ -682,7 +848,8 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
       };
       for (uint32_t t = 0; t < tris.size(); ++t)
         for (int k = 0; k < 3; ++k) by_edge[edge_key(tris[t].v[k], tris[t].v[(k + 1) % 3])].push_back(t);
-      auto emit = [&](const std::array<uint32_t, 4>& v, uint32_t count, const glm::dvec3& base, const glm::dvec3& emission) {
+      auto emit = [&](const std::array<uint32_t, 4>& v, uint32_t count, const glm::dvec3& base, const glm::dvec3& reflect,
+                      const glm::dvec3& emission) {
         PatchSource src;
         src.node = static_cast<uint32_t>(n);
         src.mesh = static_cast<uint32_t>(node.mesh);
@@ -695,7 +862,7 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
         }
         src.has_uv = !uv0.empty();
         src.base = glm::clamp(base, 0.0, 1.0);
-        patch.reflectance = glm::clamp(mat.reflectance_override.value_or(base), 0.0, kMaxReflectance);
+        patch.reflectance = glm::clamp(mat.reflectance_override.value_or(reflect), 0.0, kMaxReflectance);
         patch.emission = mat.emission_override.value_or(emission);
         patch.material = static_cast<uint32_t>(prim.material + 1);
         doc->scene.patches.push_back(patch);
@@ -749,12 +916,13 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
             tris[u].used = true;
             const double wa = tris[t].area, wb = tris[u].area;
             emit(quad, 4, (wa * tris[t].base + wb * tris[u].base) / (wa + wb),
+                 (wa * tris[t].reflect + wb * tris[u].reflect) / (wa + wb),
                  (wa * tris[t].emission + wb * tris[u].emission) / (wa + wb));
             merged = true;
             break;
           }
         }
-        if (!merged) emit({tv[0], tv[1], tv[2], 0}, 3, tris[t].base, tris[t].emission);
+        if (!merged) emit({tv[0], tv[1], tv[2], 0}, 3, tris[t].base, tris[t].reflect, tris[t].emission);
       }
     }
   }

@@ -203,6 +203,22 @@ std::string precheck_gltf(std::span<const uint8_t> bytes, bool allow_external, P
     if (!c.index(a, "bufferView", views, what, "bufferView") || !c.non_negative(a, "byteOffset", what) ||
         !c.non_negative(a, "count", what))
       return shorten(c.error);
+    if (a.contains("sparse")) {
+      // tinygltf reads these as int: larger numbers would wrap.
+      const json& sp = a["sparse"];
+      const std::string sw = what + ".sparse";
+      if (!sp.is_object() || !sp.contains("indices") || !sp.contains("values") || !sp["indices"].is_object() ||
+          !sp["values"].is_object())
+        return sw + " needs indices and values objects";
+      if (!c.non_negative(sp, "count", sw) || !c.index(sp["indices"], "bufferView", views, sw + ".indices", "bufferView") ||
+          !c.non_negative(sp["indices"], "byteOffset", sw + ".indices") ||
+          !c.index(sp["values"], "bufferView", views, sw + ".values", "bufferView") ||
+          !c.non_negative(sp["values"], "byteOffset", sw + ".values"))
+        return shorten(c.error);
+      for (const json* v : {&sp, &sp["indices"], &sp["values"]})
+        for (const char* key : {"count", "byteOffset"})
+          if (v->contains(key) && (*v)[key].get<uint64_t>() > 0x7fffffffu) return sw + " has a count or byteOffset too large";
+    }
   }
   for (size_t i = 0; i < textures; ++i)
     if (!c.index(j["textures"][i], "source", images, "texture " + std::to_string(i), "image")) return shorten(c.error);

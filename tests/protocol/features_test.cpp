@@ -993,5 +993,190 @@ TEST(TexcoordFeature, OutputUvsAreLinearOverEachSourceTriangleOfAQuad) {
   EXPECT_GT(off_diagonal, p.positions.size() / 2);
 }
 
+
+// ---- 9. What exporters write: sparse accessors, morph targets, vertex colours, texture transforms
+
+// The corners of every patch of a loaded scene, as one sorted list (independent of patch order and
+// of where each corner list starts).
+std::vector<std::array<double, 3>> all_corners(const solver::Scene& scene) {
+  std::vector<std::array<double, 3>> out;
+  for (const auto& p : scene.patches)
+    for (uint32_t k = 0; k < p.corner_count; ++k) out.push_back({p.corners[k].x, p.corners[k].y, p.corners[k].z});
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+std::vector<std::array<double, 3>> sorted(const std::vector<V>& points) {
+  std::vector<std::array<double, 3>> out;
+  for (const V& p : points) out.push_back({p.x, p.y, p.z});
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// A sparse accessor of `count` VEC3 floats: zeros (no bufferView) or the elements of `base`, with
+// the elements at `at` (increasing) replaced by `values` (glTF 2.0, section 3.6.2.3).
+int sparse_vec3(Doc& d, size_t count, const std::vector<uint32_t>& at, const std::vector<V>& values, int base = -1) {
+  std::vector<uint16_t> idx(at.begin(), at.end());
+  std::vector<float> val;
+  for (const V& v : values) val.insert(val.end(), {static_cast<float>(v.x), static_cast<float>(v.y), static_cast<float>(v.z)});
+  json a = {{"componentType", kFloat}, {"count", count}, {"type", "VEC3"},
+            {"sparse", {{"count", at.size()},
+                        {"indices", {{"bufferView", d.view(idx.data(), idx.size() * 2)}, {"componentType", kUnsignedShort}}},
+                        {"values", {{"bufferView", d.view(val.data(), val.size() * 4)}}}}}};
+  if (base >= 0) a["bufferView"] = d.gltf["accessors"][base]["bufferView"];
+  return d.accessor(a);
+}
+
+// Sparse POSITION accessors load as their dense meaning: without a bufferView the unlisted
+// elements are zero; with one, the listed elements replace the stored ones.
+TEST(SparseAccessorFeature, PositionsAreTheBaseWithTheListedElementsReplaced) {
+  Doc d;
+  const int mat = d.material(plain_material(V(0.5)));
+  // Zeros, with vertices 1, 2, 3 given: the unit quad (0,0,0) (1,0,0) (1,1,0) (0,1,0).
+  const int zeros = sparse_vec3(d, 4, {1, 2, 3}, {V(1, 0, 0), V(1, 1, 0), V(0, 1, 0)});
+  d.node({{"mesh", d.mesh(json::array({{{"attributes", {{"POSITION", zeros}}}, {"indices", d.indices({0, 1, 2, 0, 2, 3})}, {"material", mat}}}))}});
+  // A stored quad at z = 5 whose vertex 2 is replaced: (3,0,5) (4,0,5) (4.5,2,5) (3,1,5).
+  const int stored = d.positions({V(3, 0, 5), V(4, 0, 5), V(9, 9, 9), V(3, 1, 5)});
+  const int patched = sparse_vec3(d, 4, {2}, {V(4.5, 2, 5)}, stored);
+  d.node({{"mesh", d.mesh(json::array({{{"attributes", {{"POSITION", patched}}}, {"indices", d.indices({0, 1, 2, 0, 2, 3})}, {"material", mat}}}))}});
+  const LoadResult r = load_gltf_memory(d.glb_bytes(), ".");
+  ASSERT_TRUE(r.document) << r.error;
+  EXPECT_EQ(all_corners(scene_of(*r.document)),
+            sorted({V(0, 0, 0), V(1, 0, 0), V(1, 1, 0), V(0, 1, 0), V(3, 0, 5), V(4, 0, 5), V(4.5, 2, 5), V(3, 1, 5)}));
+}
+
+// Morph targets are baked at the instance's weights (glTF 2.0, section 3.7.2.2): position = base +
+// sum of weight x displacement, with the node's weights overriding the mesh's. Exporters store the
+// displacements as sparse accessors, as one target is here.
+TEST(MorphTargetFeature, PositionsAreTheBasePlusTheWeightedDisplacements) {
+  Doc d;
+  const int mat = d.material(plain_material(V(0.5)));
+  const std::vector<V> base = {V(0, 0, 0), V(1, 0, 0), V(1, 1, 0), V(0, 1, 0)};
+  const std::vector<V> up = {V(0, 0, 0), V(0, 0, 0), V(0, 2, 0), V(0, 2, 0)};  // target 0: the top edge up by 2
+  const int t0 = d.positions(up);
+  const int t1 = sparse_vec3(d, 4, {1, 2}, {V(4, 0, 0), V(4, 0, 0)});        // target 1: the right edge out by 4
+  json prim = {{"attributes", {{"POSITION", d.positions(base)}}}, {"indices", d.indices({0, 1, 2, 0, 2, 3})}, {"material", mat},
+               {"targets", json::array({json{{"POSITION", t0}}, json{{"POSITION", t1}}})}};
+  const int mesh = d.mesh(json::array({prim}));
+  d.gltf["meshes"][mesh]["weights"] = {0.5, 0.25};
+  d.node({{"mesh", mesh}});                                                     // the mesh's weights
+  d.node({{"mesh", mesh}, {"weights", {1.0, 0.0}}, {"translation", {0.0, 0.0, 3.0}}});  // its own
+  const LoadResult r = load_gltf_memory(d.glb_bytes(), ".");
+  ASSERT_TRUE(r.document) << r.error;
+  std::vector<V> expected;
+  for (size_t i = 0; i < 4; ++i) {
+    const V t1d = (i == 1 || i == 2) ? V(4, 0, 0) : V(0.0);
+    expected.push_back(base[i] + 0.5 * up[i] + 0.25 * t1d);
+    expected.push_back(base[i] + 1.0 * up[i] + V(0, 0, 3));
+  }
+  EXPECT_EQ(all_corners(scene_of(*r.document)), sorted(expected));
+}
+
+// COLOR_0 multiplies the base colour (glTF 2.0, section 3.9.2): a triangle's reflectance is the
+// factor times the mean of its vertex colours (linear over the triangle), whatever the accessor's
+// storage (float VEC4, normalized unsigned byte VEC3).
+TEST(VertexColorFeature, ReflectanceIsTheBaseColourTimesTheMeanVertexColour) {
+  Doc d;
+  const V factor(0.8, 0.6, 0.5);
+  const int mat = d.material(plain_material(factor));
+  // Two separate triangles (no quad is formed), each with its own colours.
+  const std::vector<V> tri_a = {V(0, 0, 0), V(1, 0, 0), V(0, 1, 0)};
+  const std::vector<V> tri_b = {V(3, 0, 0), V(4, 0, 0), V(3, 1, 0)};
+  const float colours_a[3][4] = {{1.0f, 0.5f, 0.0f, 1.0f}, {0.5f, 0.5f, 0.25f, 0.3f}, {0.0f, 1.0f, 0.5f, 1.0f}};
+  const uint8_t colours_b[3][4] = {{255, 0, 51, 0}, {0, 255, 102, 0}, {51, 51, 0, 0}};  // VEC3, padded to 4 bytes
+  const int ca = d.accessor({{"bufferView", d.view(colours_a, sizeof colours_a)}, {"componentType", kFloat}, {"count", 3}, {"type", "VEC4"}});
+  const int vb = d.view(colours_b, sizeof colours_b);
+  d.gltf["bufferViews"][vb]["byteStride"] = 4;
+  const int cb = d.accessor({{"bufferView", vb}, {"componentType", 5121}, {"normalized", true}, {"count", 3}, {"type", "VEC3"}});
+  json pa = d.primitive(tri_a, {}, kTriangles, mat), pb = d.primitive(tri_b, {}, kTriangles, mat);
+  pa["attributes"]["COLOR_0"] = ca;
+  pb["attributes"]["COLOR_0"] = cb;
+  d.node({{"mesh", d.mesh(json::array({pa, pb}))}});
+  const LoadResult r = load_gltf_memory(d.glb_bytes(), ".");
+  ASSERT_TRUE(r.document) << r.error;
+  const auto& patches = scene_of(*r.document).patches;
+  ASSERT_EQ(patches.size(), 2u);
+  const V mean_a = V(1.5, 2.0, 0.75) / 3.0;
+  const V mean_b = V(306.0, 306.0, 153.0) / (3.0 * 255.0);
+  for (const auto& p : patches) {
+    const V expected = factor * (p.corners[0].x < 2.0 ? mean_a : mean_b);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(p.reflectance[c], expected[c], 1e-6) << "channel " << c;
+  }
+}
+
+// Vertex colours light the bake like the same colour given as the base colour factor; the output
+// still divides by the displayed base colour (COLOR_0 replaces the input's), so base colour x the
+// output's COLOR_0 is the light, as for any material.
+TEST(VertexColorFeature, BakesLikeTheSameColourAsAFactor) {
+  const V colour(0.9, 0.4, 0.1);
+  auto scene = [&](bool as_vertex_colour) {
+    Doc d;
+    const int floor_mat = d.material(plain_material(as_vertex_colour ? V(1.0) : colour));
+    const int lamp = d.material(lamp_material(V(4.0)));
+    json p = d.primitive(rect(0, 2, 0, 2, 0, true), {0, 1, 2, 0, 2, 3}, kTriangles, floor_mat);
+    if (as_vertex_colour) {
+      const std::vector<float> c = {0.9f, 0.4f, 0.1f, 0.9f, 0.4f, 0.1f, 0.9f, 0.4f, 0.1f, 0.9f, 0.4f, 0.1f};
+      p["attributes"]["COLOR_0"] = d.accessor({{"bufferView", d.view(c.data(), c.size() * 4)}, {"componentType", kFloat}, {"count", 4}, {"type", "VEC3"}});
+    }
+    d.node({{"mesh", d.mesh(json::array({p}))}, {"name", "floor"}});
+    d.quad_node(rect(0.5, 1.5, 0.5, 1.5, 1.0, false), lamp, {{"name", "lamp"}});
+    return d.gltf_bytes();
+  };
+  const Baked a = bake(scene(true)), b = bake(scene(false));
+  ASSERT_TRUE(a.loaded.document && b.loaded.document);
+  const V la = mean_radiosity(all_of(baked_node(a.out, 0))), lb = mean_radiosity(all_of(baked_node(b.out, 0)));
+  for (int c = 0; c < 3; ++c) {
+    ASSERT_GT(lb[c], 0.0);
+    EXPECT_NEAR(la[c] / lb[c], 1.0, 0.01) << "channel " << c;
+  }
+}
+
+// A 4 x 4 PNG: the left half (u < 0.5) kRed, the right half kBlue (sRGB bytes).
+constexpr uint8_t kRed[3] = {230, 20, 20}, kBlue[3] = {20, 40, 230};
+
+std::vector<uint8_t> halves_png() {
+  std::vector<uint8_t> pixels;
+  for (int y = 0; y < 4; ++y)
+    for (int x = 0; x < 4; ++x) {
+      const uint8_t* c = x < 2 ? kRed : kBlue;
+      pixels.insert(pixels.end(), {c[0], c[1], c[2], 255});
+    }
+  std::vector<uint8_t> png;
+  stbi_write_png_to_func(
+      [](void* ctx, void* data, int size) {
+        auto* out = static_cast<std::vector<uint8_t>*>(ctx);
+        out->insert(out->end(), static_cast<uint8_t*>(data), static_cast<uint8_t*>(data) + size);
+      },
+      &png, 4, 4, 4, pixels.data(), 16);
+  return png;
+}
+
+// KHR_texture_transform maps the stored UVs before sampling: uv' = T(offset) R(rotation) S(scale) uv
+// with R = [[cos, sin], [-sin, cos]] (the extension's specification). Each transform below maps the
+// unit square of stored UVs onto the blue half only, so the reflectance is the blue texel's decoded
+// colour; without the transform (or with the rotation's sign flipped) the red half would be sampled.
+TEST(TextureTransformFeature, BaseColourIsSampledWhereTheTransformMapsTheUvs) {
+  const std::vector<uint8_t> png = halves_png();
+  const json transforms[] = {
+      {{"offset", {0.5, 0.0}}, {"scale", {0.5, 1.0}}},                                  // u' = 0.5 + 0.5 u
+      {{"offset", {0.5, 0.0}}, {"scale", {1.0, 0.5}}, {"rotation", std::acos(-1.0) / 2}},  // u' = 0.5 + 0.5 v
+  };
+  for (const json& t : transforms) {
+    SCOPED_TRACE(t.dump());
+    Doc d;
+    const int view = d.view(png.data(), png.size());
+    d.gltf["images"] = json::array({json{{"bufferView", view}, {"mimeType", "image/png"}}});
+    d.gltf["textures"] = json::array({json{{"source", 0}}});
+    d.gltf["extensionsUsed"] = {"KHR_texture_transform"};
+    const int mat = d.material({{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}, {"extensions", {{"KHR_texture_transform", t}}}}}}}});
+    d.quad_node({V(0, 0, 0), V(1, 0, 0), V(1, 1, 0), V(0, 1, 0)}, mat, json::object(), {UV(0, 0), UV(1, 0), UV(1, 1), UV(0, 1)});
+    const LoadResult r = load_gltf_memory(d.glb_bytes(), ".");
+    ASSERT_TRUE(r.document) << r.error;
+    ASSERT_EQ(scene_of(*r.document).patches.size(), 1u);
+    const V rho = scene_of(*r.document).patches[0].reflectance;
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(rho[c], srgb_to_linear(kBlue[c] / 255.0), 1e-9) << "channel " << c;
+  }
+}
+
 }  // namespace
 }  // namespace hemibake::protocol

@@ -250,13 +250,42 @@ const std::vector<Case>& corpus() {
        },
        {"accessor 0", "POSITION", "VEC3"}},
       {"PositionScalar", [](Asset& a) { a.gltf["accessors"][0]["type"] = "SCALAR"; }, {"accessor 0", "VEC3"}},
-      {"PositionSparse",
+      // Sparse accessors (bufferView 1 holds the unsigned shorts 0 1 2 0 2 3).
+      {"SparseIndicesNotIncreasing",
        [](Asset& a) {
-         a.gltf["accessors"][0]["sparse"] = {{"count", 1},
+         a.gltf["accessors"][0]["sparse"] = {{"count", 4},
                                              {"indices", {{"bufferView", 1}, {"componentType", 5123}}},
                                              {"values", {{"bufferView", 0}}}};
        },
-       {"accessor 0", "sparse"}},
+       {"accessor 0", "sparse", "increase"}},
+      {"SparseIndexOutOfRange",  // read as unsigned int: 0 | 1 << 16
+       [](Asset& a) {
+         a.gltf["accessors"][0]["sparse"] = {{"count", 1},
+                                             {"indices", {{"bufferView", 1}, {"componentType", 5125}}},
+                                             {"values", {{"bufferView", 0}}}};
+       },
+       {"accessor 0", "sparse index 65536"}},
+      {"SparseValuesOutsideView",
+       [](Asset& a) {
+         a.gltf["accessors"][0]["sparse"] = {{"count", 3},
+                                             {"indices", {{"bufferView", 1}, {"componentType", 5123}}},
+                                             {"values", {{"bufferView", 1}}}};
+       },
+       {"accessor 0", "sparse values", "bufferView 1"}},
+      {"SparseIndicesBufferViewOutOfRange",
+       [](Asset& a) {
+         a.gltf["accessors"][0]["sparse"] = {{"count", 1},
+                                             {"indices", {{"bufferView", 9}, {"componentType", 5123}}},
+                                             {"values", {{"bufferView", 0}}}};
+       },
+       {"accessor 0", "bufferView 9"}},
+      {"SparseCountAboveCount",
+       [](Asset& a) {
+         a.gltf["accessors"][0]["sparse"] = {{"count", 5},
+                                             {"indices", {{"bufferView", 1}, {"componentType", 5123}}},
+                                             {"values", {{"bufferView", 0}}}};
+       },
+       {"accessor 0", "sparse.count"}},
       {"SparseWithoutIndices",
        [](Asset& a) { a.gltf["accessors"][0]["sparse"] = {{"count", 1}, {"values", {{"bufferView", 0}}}}; },
        {"sparse"}},
