@@ -743,8 +743,10 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
         for (size_t k = 0; k < used.size(); ++k) uvs[k] = glm::dvec2(read_component(uv, used[k], 0), read_component(uv, used[k], 1));
         return {};
       };
+      // The output has one UV set, TEXCOORD_0: the base colour texture's (the only texture an
+      // unlit material shows).
       std::vector<glm::dvec2> uv0, uv_base, uv_emit;
-      for (auto [set, dest] : {std::pair{0, &uv0}, std::pair{mat.base_texcoord, &uv_base},
+      for (auto [set, dest] : {std::pair{mat.base_texcoord, &uv0}, std::pair{mat.base_texcoord, &uv_base},
                                std::pair{mat.emissive_texcoord, &uv_emit}}) {
         if (std::string e = read_uv(set, *dest); !e.empty()) {
           result.error = e;

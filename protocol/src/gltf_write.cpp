@@ -139,22 +139,42 @@ WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, 
   out.samplers = in.samplers;
   out.textures = in.textures;
   out.nodes = in.nodes;
+  // Extensions of copied objects go (lights, instancing, ...): the output declares only its own, and
+  // every extension an object carries must be declared (glTF 2.0, section 3.12).
   for (auto& n : out.nodes) {
     n.mesh = -1;
     n.skin = -1;
     n.weights.clear();
-    n.extensions.erase("KHR_lights_punctual");
+    n.extensions.clear();
   }
+  for (auto& x : out.scenes) x.extensions.clear();
+  for (auto& x : out.cameras) x.extensions.clear();
+  for (auto& x : out.samplers) x.extensions.clear();
+  for (auto& x : out.textures) x.extensions.clear();
   // Materials: shown unlit, so that base colour x COLOR_0 is exactly the baked light. Both sides
   // of a double-sided material are baked as separate primitives, so none is double-sided.
   out.materials = in.materials;
-  // Unlit shading ignores emission, whose light is in COLOR_0 now: the emissive properties go.
+  // Unlit shading shows the base colour alone: emission (its light is in COLOR_0 now), normal,
+  // occlusion and metal-roughness textures and the PBR extensions (specular, IOR, ...) go. The
+  // base colour texture reads TEXCOORD_0, the only UV set written (its set in the input).
   for (auto& mat : out.materials) {
+    mat.extensions.clear();
     mat.extensions["KHR_materials_unlit"] = Value(Value::Object());
-    mat.extensions.erase("KHR_materials_emissive_strength");
     mat.emissiveFactor = {0.0, 0.0, 0.0};
     mat.emissiveTexture = tinygltf::TextureInfo();
+    mat.normalTexture = tinygltf::NormalTextureInfo();
+    mat.occlusionTexture = tinygltf::OcclusionTextureInfo();
+    mat.pbrMetallicRoughness.metallicRoughnessTexture = tinygltf::TextureInfo();
     mat.doubleSided = false;
+    tinygltf::TextureInfo& base = mat.pbrMetallicRoughness.baseColorTexture;
+    base.texCoord = 0;
+    tinygltf::ExtensionMap kept;
+    if (auto it = base.extensions.find("KHR_texture_transform"); it != base.extensions.end() && it->second.IsObject()) {
+      Value::Object t = it->second.Get<Value::Object>();
+      t.erase("texCoord");
+      kept["KHR_texture_transform"] = Value(t);
+    }
+    base.extensions = std::move(kept);
   }
   int default_material = -1;
   // Images keep their encoded bytes, now inside the GLB.

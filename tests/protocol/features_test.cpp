@@ -1178,5 +1178,79 @@ TEST(TextureTransformFeature, BaseColourIsSampledWhereTheTransformMapsTheUvs) {
   }
 }
 
+// Every extension named in an object's "extensions", anywhere in a glTF JSON document.
+void extensions_in(const json& j, std::vector<std::string>& out) {
+  if (j.is_object()) {
+    for (const auto& [key, v] : j.items()) {
+      if (key == "extensions" && v.is_object())
+        for (const auto& [name, ext] : v.items()) out.push_back(name);
+      extensions_in(v, out);
+    }
+  } else if (j.is_array()) {
+    for (const json& v : j) extensions_in(v, out);
+  }
+}
+
+// A Blender-style material (KHR_materials_specular and _ior, a normal and an occlusion texture, the
+// base colour texture on TEXCOORD_1 with a transform) bakes into a file that keeps the glTF rules
+// the validator checks: every extension an object carries is declared in extensionsUsed (glTF 2.0,
+// section 3.12), and every texture a material uses finds its TEXCOORD_n on the primitive (3.9.6).
+// The base colour texture's UVs are the output's TEXCOORD_0: the input's TEXCOORD_1, u = 0.25.
+TEST(ExporterMaterialFeature, OutputDeclaresItsExtensionsAndHasTheUvSetsItsTexturesUse) {
+  const std::vector<uint8_t> png = halves_png();
+  Doc d;
+  const int view = d.view(png.data(), png.size());
+  d.gltf["images"] = json::array({json{{"bufferView", view}, {"mimeType", "image/png"}}});
+  d.gltf["textures"] = json::array({json{{"source", 0}}});
+  d.gltf["extensionsUsed"] = {"KHR_materials_specular", "KHR_materials_ior", "KHR_texture_transform"};
+  json m = plain_material(V(1.0), "blender");
+  m["pbrMetallicRoughness"]["baseColorTexture"] = {
+      {"index", 0}, {"texCoord", 1}, {"extensions", {{"KHR_texture_transform", {{"scale", {1.0, 1.0}}}}}}};
+  m["normalTexture"] = {{"index", 0}, {"texCoord", 1}};
+  m["occlusionTexture"] = {{"index", 0}, {"texCoord", 2}};
+  m["extensions"] = {{"KHR_materials_specular", {{"specularFactor", 0.5}}}, {"KHR_materials_ior", {{"ior", 1.45}}}};
+  const int mat = d.material(m);
+  const int lamp = d.material(lamp_material(V(4.0)));
+  const std::vector<V> floor = rect(0, 2, 0, 2, 0, true);
+  json p = d.primitive(floor, {0, 1, 2, 0, 2, 3}, kTriangles, mat, {UV(0, 0), UV(0, 1), UV(1, 1), UV(1, 0)});
+  p["attributes"]["TEXCOORD_1"] = d.texcoords({UV(0.25, 0), UV(0.25, 1), UV(0.25, 1), UV(0.25, 0)});
+  p["attributes"]["TEXCOORD_2"] = d.texcoords({UV(0, 0), UV(0, 0), UV(0, 0), UV(0, 0)});
+  const int floor_node = d.node({{"mesh", d.mesh(json::array({p}))}});
+  d.quad_node(rect(0.5, 1.5, 0.5, 1.5, 1.0, false), lamp);
+  for (bool draco : {false, true}) {
+    SCOPED_TRACE(draco ? "draco" : "plain");
+    const Baked b = bake(d.glb_bytes(), draco);
+    const json& g = b.out.doc;
+    std::vector<std::string> present;
+    extensions_in(g, present);
+    const json used = g.value("extensionsUsed", json::array());
+    for (const std::string& e : present) EXPECT_NE(std::find(used.begin(), used.end(), e), used.end()) << e << " is not declared";
+    for (const json& mesh : g["meshes"])
+      for (const json& prim : mesh["primitives"]) {
+        const json& pm = g["materials"][prim["material"].get<int>()];
+        std::vector<json> infos;
+        if (pm.contains("pbrMetallicRoughness")) {
+          for (const char* k : {"baseColorTexture", "metallicRoughnessTexture"})
+            if (pm["pbrMetallicRoughness"].contains(k)) infos.push_back(pm["pbrMetallicRoughness"][k]);
+        }
+        for (const char* k : {"normalTexture", "occlusionTexture", "emissiveTexture"})
+          if (pm.contains(k)) infos.push_back(pm[k]);
+        for (const json& info : infos) {
+          int set = info.value("texCoord", 0);
+          if (info.contains("extensions") && info["extensions"].contains("KHR_texture_transform"))
+            set = info["extensions"]["KHR_texture_transform"].value("texCoord", set);
+          EXPECT_TRUE(prim["attributes"].contains("TEXCOORD_" + std::to_string(set))) << info.dump();
+        }
+      }
+    const json& node = g["nodes"][floor_node];
+    const Primitive out = read_primitive(b.out, g["meshes"][node["mesh"].get<int>()]["primitives"][0]);
+    ASSERT_EQ(out.uv.size(), out.positions.size());
+    for (size_t i = 0; i < out.uv.size(); ++i) {
+      EXPECT_NEAR(out.uv[i].x, 0.25, 1e-3) << "vertex " << i;
+      EXPECT_NEAR(out.uv[i].y, out.positions[i].z / 2.0, 1e-3) << "vertex " << i;  // TEXCOORD_1's v = z / 2
+    }
+  }
+}
+
 }  // namespace
 }  // namespace hemibake::protocol
