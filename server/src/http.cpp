@@ -116,7 +116,23 @@ class Session : public std::enable_shared_from_this<Session> {
         "HTTP/1.1 200 OK\r\nServer: hemibake\r\nContent-Type: text/event-stream\r\nCache-Control: no-cache\r\n"
         "Connection: close\r\nX-Accel-Buffering: no\r\n\r\n");
     idle_ = std::chrono::steady_clock::now();
+    watch_peer();
     write_events();
+  }
+
+  // The client says nothing during a stream, so a readable socket means it went away: end the
+  // stream now and free its slot, not at the next write (up to a heartbeat later for a queued job).
+  void watch_peer() {
+    stream_.socket().async_wait(tcp::socket::wait_read, [self = shared_from_this()](beast::error_code ec) {
+      if (ec == net::error::operation_aborted) return;
+      char sink[512];
+      if (!ec && self->stream_.socket().available(ec) > 0 && !ec) {
+        self->stream_.socket().read_some(net::buffer(sink), ec);  // bytes after the request: ignored
+        if (!ec) return self->watch_peer();
+      }
+      self->gone_ = true;
+      self->timer_.cancel();
+    });
   }
 
   void write_events() {
@@ -129,6 +145,7 @@ class Session : public std::enable_shared_from_this<Session> {
   }
 
   void poll_events() {
+    if (gone_) return close();
     auto out = std::make_shared<std::string>();
     const auto events = service_.store().events_after(job_id(), last_, 100);
     for (const auto& e : events) {
@@ -162,6 +179,7 @@ class Session : public std::enable_shared_from_this<Session> {
     }
     beast::error_code ec;
     stream_.socket().shutdown(tcp::socket::shutdown_send, ec);
+    stream_.socket().cancel(ec);  // the peer watch, so that the session ends
   }
 
   beast::tcp_stream stream_;
@@ -176,6 +194,7 @@ class Session : public std::enable_shared_from_this<Session> {
   std::string job_;
   uint64_t last_ = 0;
   bool done_ = false;
+  bool gone_ = false;  // the client closed its end
   bool counted_ = false;
   std::shared_ptr<std::string> out_;
   std::chrono::steady_clock::time_point idle_;

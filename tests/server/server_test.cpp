@@ -424,6 +424,36 @@ TEST(Client, BakesOnTheServerAndReportsErrors) {
   EXPECT_NE(std::system(unreachable.c_str()), 0);
 }
 
+// The status line of an event stream request, read from a fresh connection that is then closed.
+std::string stream_status(unsigned short port, const std::string& id) {
+  net::io_context io;
+  tcp::socket socket(io);
+  socket.connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
+  const std::string req = "GET /v1/jobs/" + id + "/events HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n";
+  net::write(socket, net::buffer(req));
+  char buf[64] = {0};
+  beast::error_code ec;
+  const size_t n = socket.read_some(net::buffer(buf, sizeof buf - 1), ec);
+  return std::string(buf, n).substr(0, std::string(buf, n).find('\r'));
+}
+
+// A client that leaves an event stream frees its slot at once, also while the job waits in the
+// queue and nothing is written to it.
+TEST(Server, EventStreamSlotIsFreedWhenTheClientLeaves) {
+  ServerProcess server(temp_dir("streams"), {"--workers", "1", "--max-streams", "1"});
+  const std::string busy = request(server.port(), http::verb::post, "/v1/jobs?method=hr&feps=0.00001&aeps=0.000001", cornell(), kGltf).js()["id"];
+  const std::string queued = request(server.port(), http::verb::post, "/v1/jobs?method=hr&feps=0.00001&aeps=0.000002", cornell(), kGltf).js()["id"];
+  ASSERT_EQ(request(server.port(), http::verb::get, "/v1/jobs/" + queued).js()["state"], "queued");
+  ASSERT_EQ(stream_status(server.port(), queued), "HTTP/1.1 200 OK");
+  std::string status;
+  const auto t0 = std::chrono::steady_clock::now();
+  for (int i = 0; i < 20 && (status = stream_status(server.port(), queued)) != "HTTP/1.1 200 OK"; ++i) std::this_thread::sleep_for(100ms);
+  EXPECT_EQ(status, "HTTP/1.1 200 OK");
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 3s);
+  request(server.port(), http::verb::delete_, "/v1/jobs/" + queued);
+  request(server.port(), http::verb::delete_, "/v1/jobs/" + busy);
+}
+
 // CPU time (user + system) a process has used, in clock ticks.
 long cpu_ticks(pid_t pid) {
   std::istringstream stat(read_file("/proc/" + std::to_string(pid) + "/stat"));
