@@ -429,27 +429,34 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
     for (uint32_t i = 0; i < fragments.size(); ++i) order[cursor[fragments[i].pixel]++] = i;
   }
 
+  // A fragment's surface: its occlusion group, with the back faces of a group apart (bit 32).
+  auto surface_of = [&](uint32_t element) -> uint64_t {
+    if (element & kBackFace) return (uint64_t{1} << 32) | group_of[element & ~kBackFace];
+    return group_of[element];
+  };
   pool.parallel_for(pixel_count, [&](size_t begin, size_t end, size_t) {
     struct GroupSum {
-      uint32_t group;
+      uint64_t group;
       uint32_t root;
       double area;
       float inv_depth;
       float trans;
     };
     // Neighbouring pixels mostly ask about the same two surfaces: the last answer is kept.
-    uint32_t asked_a = 0, asked_b = 0;
+    // Two back faces that share an edge tile like two front faces; a front and a back face do not.
+    uint64_t asked_a = 0, asked_b = 0;
     bool asked_answer = false, asked_any = false;
-    auto adjacent = [&](uint32_t a, uint32_t b) {
+    auto adjacent = [&](uint64_t a, uint64_t b) {
       if (!asked_any || a != asked_a || b != asked_b) {
         asked_a = a;
         asked_b = b;
-        asked_answer = adjacency.adjacent(a, b);
+        asked_answer = (a >> 32) == (b >> 32) &&
+                       adjacency.adjacent(static_cast<uint32_t>(a), static_cast<uint32_t>(b));
         asked_any = true;
       }
       return asked_answer;
     };
-    std::vector<std::pair<uint32_t, uint32_t>> by_group;  // (group, fragment)
+    std::vector<std::pair<uint64_t, uint32_t>> by_group;  // (surface, fragment)
     std::vector<GroupSum> groups;
     std::vector<uint32_t> layers;
     for (size_t p = begin; p < end; ++p) {
@@ -474,14 +481,14 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
       // meet, one in front of another): the general rule below, without lists or sorting.
       {
         // Scalars rather than arrays indexed by the fragment's surface: no store-to-load chain.
-        const uint32_t g0 = group_of[fragments[order[lo]].element];
-        uint32_t g1 = g0;
+        const uint64_t g0 = surface_of(fragments[order[lo]].element);
+        uint64_t g1 = g0;
         double sum0 = 0.0, sum1 = 0.0;
         float depth0 = std::numeric_limits<float>::lowest(), depth1 = depth0;
         bool few = true;
         for (uint32_t k = lo; k < hi; ++k) {
           const Fragment& f = fragments[order[k]];
-          const uint32_t g = group_of[f.element];
+          const uint64_t g = surface_of(f.element);
           if (g == g0) {
             sum0 += f.area;
             depth0 = std::max(depth0, f.inv_depth);
@@ -501,25 +508,30 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
             const double total = sum0 + sum1;
             trans0 = trans1 = static_cast<float>(total > 1.0 ? 1.0 / total : 1.0);
           } else {
-            // Nearest first; ties go to the lower group id.
+            // Nearest first; ties go to the lower id (a back face's is higher: front faces win).
             const bool first_near = depth0 != depth1 ? depth0 > depth1 : g0 < g1;
             const double near_sum = first_near ? sum0 : sum1, far_sum = first_near ? sum1 : sum0;
             const float near_trans = static_cast<float>(near_sum > 1.0 ? 1.0 / near_sum : 1.0);
-            const double t = 1.0 - std::min(near_sum, 1.0);
+            double t = 1.0 - std::min(near_sum, 1.0);
+            // A front and a back face with a common edge project to the same side of it, the far
+            // one folded behind the near one (a wall seen past the edge of the roof it meets): in a
+            // pixel on that edge the far one shows only where it reaches past the near one.
+            if ((g0 >> 32) != (g1 >> 32) && adjacent(g0 & 0xffffffffu, g1 & 0xffffffffu) && far_sum > 0.0)
+              t = std::min(t, std::max(0.0, far_sum - near_sum) / far_sum);
             const float far_trans = static_cast<float>(far_sum > 1.0 ? t / far_sum : t);
             trans0 = first_near ? near_trans : far_trans;
             trans1 = first_near ? far_trans : near_trans;
           }
           for (uint32_t k = lo; k < hi; ++k) {
             Fragment& f = fragments[order[k]];
-            f.trans = group_of[f.element] == g0 ? trans0 : trans1;
+            f.trans = surface_of(f.element) == g0 ? trans0 : trans1;
           }
           continue;
         }
       }
       // Sum the coverage of each occlusion group: pieces of one surface never hide each other.
       by_group.clear();
-      for (uint32_t k = lo; k < hi; ++k) by_group.emplace_back(group_of[fragments[order[k]].element], order[k]);
+      for (uint32_t k = lo; k < hi; ++k) by_group.emplace_back(surface_of(fragments[order[k]].element), order[k]);
       std::sort(by_group.begin(), by_group.end());
       groups.clear();
       for (const auto& [g, fi] : by_group) {
@@ -559,9 +571,16 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
         return groups[a].group < groups[b].group;
       });
       double f = 0.0;  // the paper's f_{k-1}: the pixel's fraction taken by nearer layers
-      for (uint32_t l : layers) {
-        GroupSum& g = groups[l];
-        const double t = 1.0 - f;
+      for (size_t li = 0; li < layers.size(); ++li) {
+        GroupSum& g = groups[layers[li]];
+        double t = 1.0 - f;
+        // Folded behind a nearer layer of the other facing that shares an edge with it (above).
+        for (size_t m = 0; m < li && g.area > 0.0; ++m) {
+          const GroupSum& nearer = groups[layers[m]];
+          if ((g.group >> 32) != (nearer.group >> 32) &&
+              adjacent(g.group & 0xffffffffu, nearer.group & 0xffffffffu))
+            t = std::min(t, std::max(0.0, g.area - nearer.area) / g.area);
+        }
         // Overlapping pieces of one layer (sum > 1) share the pixel in proportion.
         g.trans = static_cast<float>(g.area > 1.0 ? t / g.area : t);
         f += std::min(g.area, 1.0) * t;

@@ -31,6 +31,14 @@ struct Fragment {
 };
 static_assert(sizeof(Fragment) == 16);
 
+/// Set in Fragment::element for the back of a one-sided surface: an occluder that takes no light.
+/// Its fragments form layers of their own (never merged with front-facing neighbours, whose
+/// projections do not tile with it) and lose depth ties to front faces.
+inline constexpr uint32_t kBackFace = 0x80000000u;
+/// A back face's 1/depth is scaled by this, so that a front face at the same depth (a surface
+/// lying on another's back) stays in front of it.
+inline constexpr float kBackDepthScale = 1.0f - 1e-5f;
+
 /// Pairs of occlusion groups that share an edge. Two front-facing polygons that share an edge
 /// project to opposite sides of it, so within a pixel their coverages add rather than occlude.
 class GroupAdjacency {
@@ -120,7 +128,8 @@ class Hemicube {
 /// depth (nearest first) and gives group k the transmission 1 - f_{k-1}, where
 /// f_k = f_{k-1} + A_k (1 - f_{k-1}) (the paper's E_k = A_k (1 - f_{k-1})). Groups that share an
 /// edge are merged first (their areas add). `group_of[element]` is an element's occlusion group:
-/// fragments of one group never hide each other. `order` and `pixel_start` are scratch.
+/// fragments of one group never hide each other. Back-face fragments (kBackFace) are grouped by
+/// their surface too, apart from its front-facing fragments. `order` and `pixel_start` are scratch.
 void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
              std::span<const uint32_t> group_of, const GroupAdjacency& adjacency, ThreadPool& pool,
              std::vector<uint32_t>& order,

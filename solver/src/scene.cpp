@@ -284,6 +284,60 @@ PreparedScene prepare(const Scene& scene) {
   for (const auto& [a, b] : neighbours) out.adjacency.add(out.occlusion_group[a], out.occlusion_group[b]);
   out.adjacency.finish();
 
+  // Backs that need no projection (PreparedScene::back_hidden). Twins: the same points, facing
+  // the other way (sorted point ids, kNone-padded, are the key).
+  out.back_hidden.assign(n, 0);
+  {
+    struct KeyHash {
+      size_t operator()(const std::array<uint32_t, 4>& k) const {
+        uint64_t h = 0;
+        for (uint32_t v : k) h = (h ^ v) * 0x100000001b3ull;
+        return static_cast<size_t>(h);
+      }
+    };
+    std::unordered_map<std::array<uint32_t, 4>, std::vector<uint32_t>, KeyHash> by_points;
+    for (size_t i = 0; i < n; ++i) {
+      std::array<uint32_t, 4> key{kNone, kNone, kNone, kNone};
+      std::copy_n(point_of[i].begin(), scene.patches[i].corner_count, key.begin());
+      std::sort(key.begin(), key.end());
+      by_points[key].push_back(static_cast<uint32_t>(i));
+    }
+    for (const auto& [key, list] : by_points)
+      for (size_t x = 0; x < list.size(); ++x)
+        for (size_t y = x + 1; y < list.size(); ++y)
+          if (glm::dot(out.normal[list[x]], out.normal[list[y]]) < 0.0) out.back_hidden[list[x]] = out.back_hidden[list[y]] = 1;
+  }
+  // Outward-facing solids: the signed volume of an edge-connected set of patches (divergence
+  // theorem, sum of (c - o) . n A / 3, o the set's box centre) is positive when its normals point
+  // away from what it encloses; an open box (a block with no bottom) still comes out positive.
+  {
+    UnionFind part(n);
+    for (const auto& [key, list] : edge_patches)
+      for (size_t x = 1; x < list.size(); ++x) part.unite(list[0], list[x]);
+    std::vector<glm::dvec3> box_lo(n, glm::dvec3(std::numeric_limits<double>::max())),
+        box_hi(n, glm::dvec3(std::numeric_limits<double>::lowest()));
+    for (uint32_t i = 0; i < n; ++i) {
+      const Patch& p = scene.patches[i];
+      const uint32_t r = part.find(i);
+      for (uint32_t c = 0; c < p.corner_count; ++c) {
+        box_lo[r] = glm::min(box_lo[r], p.corners[c]);
+        box_hi[r] = glm::max(box_hi[r], p.corners[c]);
+      }
+    }
+    std::vector<double> volume(n, 0.0);
+    for (uint32_t i = 0; i < n; ++i) {
+      const Patch& p = scene.patches[i];
+      const uint32_t r = part.find(i);
+      glm::dvec3 c(0.0);
+      for (uint32_t k = 0; k < p.corner_count; ++k) c += p.corners[k];
+      c /= static_cast<double>(p.corner_count);
+      volume[r] += glm::dot(c - 0.5 * (box_lo[r] + box_hi[r]), out.normal[i]) * out.area[i] / 3.0;
+    }
+    const double tiny = 1e-9 * out.diagonal * out.diagonal * out.diagonal;
+    for (uint32_t i = 0; i < n; ++i)
+      if (volume[part.find(i)] > tiny) out.back_hidden[i] = 1;
+  }
+
   // Solver vertices: one per (point, smoothing group), so radiosity is averaged within a surface.
   std::unordered_map<uint64_t, uint32_t> vertex_id;
   out.corner_vertex.resize(n);

@@ -19,6 +19,12 @@ struct PreparedScene {
   GroupAdjacency adjacency;                   ///< occlusion groups that share an edge
   std::vector<glm::dvec3> vertex_position;    ///< corner vertices, shared within a smoothing group
   std::vector<std::array<uint32_t, 4>> corner_vertex;  ///< per patch
+  /// Per patch: its back needs no projection, since something else always hides what it would:
+  /// another patch with the same corners in reverse order (the other side of a double-sided
+  /// surface), or the front faces of the outward-facing solid it belongs to (edge-connected
+  /// patches enclosing a positive signed volume). Open sheets and inward-facing shells (a room's
+  /// walls seen from outside) need their backs projected as occluders.
+  std::vector<uint8_t> back_hidden;
   double total_area = 0.0;
   double diagonal = 0.0;                      ///< of the scene's bounding box
 };

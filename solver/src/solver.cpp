@@ -471,12 +471,28 @@ void Solver::Impl::project(uint32_t shooter_patch, std::span<const uint32_t> ele
       const uint32_t el = elements[i];
       const uint32_t p = e_patch[el];
       f_begin[el] = f_end[el] = static_cast<uint32_t>(out.size());
-      // Back-face culling of the parent patch, seen from the hemicube's centre (section 2.2).
-      if (p == shooter_patch || glm::dot(prep.normal[p], eye - patches[p].corners[0]) <= eps) continue;
+      const double facing = glm::dot(prep.normal[p], eye - patches[p].corners[0]);
+      if (p == shooter_patch || std::abs(facing) <= eps) continue;
+      // The paper culls the parent patch's back faces (section 2.2), which is exact where every
+      // back face lies behind a front face of the same solid. A one-sided wall seen from behind has
+      // none: culled, it would let light through (a room of inward-facing walls lit from outside
+      // came out lit inside). So such backs (PreparedScene::back_hidden) are projected as occluders
+      // that take no light: flagged, and outside the element's fragment range. The backs of solids
+      // stay culled: projected too, they would over-occlude at every silhouette pixel (front and
+      // back cover the same part of it, and E_k takes them as independent).
+      if (facing < 0.0 && prep.back_hidden[p]) continue;
       corners_of(el, poly);
-      cube->project(std::span(poly.data(), patches[p].corner_count), el, params.method, scratch[c], out,
-                   &prep.normal[p]);
-      f_end[el] = static_cast<uint32_t>(out.size());
+      const uint32_t cc = patches[p].corner_count;
+      if (facing > 0.0) {
+        cube->project(std::span(poly.data(), cc), el, params.method, scratch[c], out, &prep.normal[p]);
+        f_end[el] = static_cast<uint32_t>(out.size());
+        continue;
+      }
+      std::reverse(poly.begin(), poly.begin() + cc);  // its back, counter-clockwise as seen
+      const glm::dvec3 back = -prep.normal[p];
+      const size_t first = out.size();
+      cube->project(std::span(poly.data(), cc), el | detail::kBackFace, params.method, scratch[c], out, &back);
+      for (size_t k = first; k < out.size(); ++k) out[k].inv_depth *= detail::kBackDepthScale;
     }
   });
   frags.clear();
