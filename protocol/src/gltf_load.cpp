@@ -612,6 +612,7 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
 
   // Triangles of every mesh instance.
   uint64_t degenerate = 0, skipped_prims = 0;
+  std::vector<int> see_through;  // materials with alphaMode BLEND or MASK that are baked
   for (int n : order) {
     const tinygltf::Node& node = m.nodes[n];
     if (node.mesh < 0) continue;
@@ -724,6 +725,10 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
         points[k] = glm::dvec3(world * glm::dvec4(p, 1.0));
       }
       // Material and texture coordinates.
+      if (prim.material >= 0 && static_cast<size_t>(prim.material) < m.materials.size() &&
+          m.materials[prim.material].alphaMode != "OPAQUE" &&
+          std::find(see_through.begin(), see_through.end(), prim.material) == see_through.end())
+        see_through.push_back(prim.material);
       MaterialInfo mat;
       if (std::string e = material_info(m, prim.material, mat, result.warnings); !e.empty()) {
         result.error = e;
@@ -927,6 +932,13 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
         if (!merged) emit({tv[0], tv[1], tv[2], 0}, 3, tris[t].base, tris[t].reflect, tris[t].emission);
       }
     }
+  }
+  // The solver has no transmission: a glass pane (BLEND) or a cut-out leaf (MASK) blocks light
+  // like a wall. Say so, rather than leave the user to wonder at the shadow.
+  for (int i : see_through) {
+    const tinygltf::Material& mt = m.materials[i];
+    result.warnings.push_back("material " + std::to_string(i) + (mt.name.empty() ? "" : " ('" + mt.name + "')") +
+                              " has alphaMode " + mt.alphaMode + "; it is baked as opaque (transparency and cut-outs are not supported)");
   }
   if (skipped_prims > 0)
     result.warnings.push_back(std::to_string(skipped_prims) + " primitive(s) of points or lines were skipped");

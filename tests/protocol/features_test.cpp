@@ -1006,6 +1006,13 @@ std::vector<std::array<double, 3>> all_corners(const solver::Scene& scene) {
   return out;
 }
 
+// A material that also emits, so that a scene of it alone can be baked (the loader's checks only
+// need a scene that emits; emission changes neither corners nor reflectance).
+json glowing(json m) {
+  m["emissiveFactor"] = {1.0, 1.0, 1.0};
+  return m;
+}
+
 std::vector<std::array<double, 3>> sorted(const std::vector<V>& points) {
   std::vector<std::array<double, 3>> out;
   for (const V& p : points) out.push_back({p.x, p.y, p.z});
@@ -1031,7 +1038,7 @@ int sparse_vec3(Doc& d, size_t count, const std::vector<uint32_t>& at, const std
 // elements are zero; with one, the listed elements replace the stored ones.
 TEST(SparseAccessorFeature, PositionsAreTheBaseWithTheListedElementsReplaced) {
   Doc d;
-  const int mat = d.material(plain_material(V(0.5)));
+  const int mat = d.material(glowing(plain_material(V(0.5))));
   // Zeros, with vertices 1, 2, 3 given: the unit quad (0,0,0) (1,0,0) (1,1,0) (0,1,0).
   const int zeros = sparse_vec3(d, 4, {1, 2, 3}, {V(1, 0, 0), V(1, 1, 0), V(0, 1, 0)});
   d.node({{"mesh", d.mesh(json::array({{{"attributes", {{"POSITION", zeros}}}, {"indices", d.indices({0, 1, 2, 0, 2, 3})}, {"material", mat}}}))}});
@@ -1050,7 +1057,7 @@ TEST(SparseAccessorFeature, PositionsAreTheBaseWithTheListedElementsReplaced) {
 // displacements as sparse accessors, as one target is here.
 TEST(MorphTargetFeature, PositionsAreTheBasePlusTheWeightedDisplacements) {
   Doc d;
-  const int mat = d.material(plain_material(V(0.5)));
+  const int mat = d.material(glowing(plain_material(V(0.5))));
   const std::vector<V> base = {V(0, 0, 0), V(1, 0, 0), V(1, 1, 0), V(0, 1, 0)};
   const std::vector<V> up = {V(0, 0, 0), V(0, 0, 0), V(0, 2, 0), V(0, 2, 0)};  // target 0: the top edge up by 2
   const int t0 = d.positions(up);
@@ -1078,7 +1085,7 @@ TEST(MorphTargetFeature, PositionsAreTheBasePlusTheWeightedDisplacements) {
 TEST(VertexColorFeature, ReflectanceIsTheBaseColourTimesTheMeanVertexColour) {
   Doc d;
   const V factor(0.8, 0.6, 0.5);
-  const int mat = d.material(plain_material(factor));
+  const int mat = d.material(glowing(plain_material(factor)));
   // Two separate triangles (no quad is formed), each with its own colours.
   const std::vector<V> tri_a = {V(0, 0, 0), V(1, 0, 0), V(0, 1, 0)};
   const std::vector<V> tri_b = {V(3, 0, 0), V(4, 0, 0), V(3, 1, 0)};
@@ -1168,7 +1175,8 @@ TEST(TextureTransformFeature, BaseColourIsSampledWhereTheTransformMapsTheUvs) {
     d.gltf["images"] = json::array({json{{"bufferView", view}, {"mimeType", "image/png"}}});
     d.gltf["textures"] = json::array({json{{"source", 0}}});
     d.gltf["extensionsUsed"] = {"KHR_texture_transform"};
-    const int mat = d.material({{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}, {"extensions", {{"KHR_texture_transform", t}}}}}}}});
+    const int mat = d.material(glowing(
+        {{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}, {"extensions", {{"KHR_texture_transform", t}}}}}}}}));
     d.quad_node({V(0, 0, 0), V(1, 0, 0), V(1, 1, 0), V(0, 1, 0)}, mat, json::object(), {UV(0, 0), UV(1, 0), UV(1, 1), UV(0, 1)});
     const LoadResult r = load_gltf_memory(d.glb_bytes(), ".");
     ASSERT_TRUE(r.document) << r.error;
@@ -1250,6 +1258,25 @@ TEST(ExporterMaterialFeature, OutputDeclaresItsExtensionsAndHasTheUvSetsItsTextu
       EXPECT_NEAR(out.uv[i].y, out.positions[i].z / 2.0, 1e-3) << "vertex " << i;  // TEXCOORD_1's v = z / 2
     }
   }
+}
+
+// alphaMode BLEND (a glass pane) and MASK (a cut-out) cannot be baked as what they are, since the
+// solver has no transmission: the file loads, and a warning names each such material and says it is
+// baked opaque; an OPAQUE material gets none.
+TEST(AlphaModeFeature, BlendAndMaskMaterialsAreReportedAsBakedOpaque) {
+  Doc d;
+  json glass = plain_material(V(0.9), "glass"), leaf = plain_material(V(0.3), "leaf");
+  glass["alphaMode"] = "BLEND";
+  leaf["alphaMode"] = "MASK";
+  d.quad_node(rect(0, 1, 0, 1, 0, true), d.material(glowing(plain_material(V(0.5), "floor"))));
+  d.quad_node(rect(0, 1, 0, 1, 1, false), d.material(glass));
+  d.quad_node(rect(0, 1, 0, 1, 2, false), d.material(leaf));
+  const LoadResult r = load_gltf_memory(d.glb_bytes(), ".");
+  ASSERT_TRUE(r.document) << r.error;
+  EXPECT_TRUE(mentions(r.warnings, "material 1 ('glass') has alphaMode BLEND")) << joined(r.warnings);
+  EXPECT_TRUE(mentions(r.warnings, "material 2 ('leaf') has alphaMode MASK")) << joined(r.warnings);
+  EXPECT_TRUE(mentions(r.warnings, "opaque")) << joined(r.warnings);
+  EXPECT_FALSE(mentions(r.warnings, "floor")) << joined(r.warnings);
 }
 
 }  // namespace
