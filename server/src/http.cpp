@@ -32,6 +32,7 @@ class Session : public std::enable_shared_from_this<Session> {
 
  private:
   void read() {
+    head_ = false;
     parser_.emplace();
     parser_->body_limit(options_.max_body_bytes);
     stream_.expires_after(seconds(options_.read_timeout));
@@ -57,8 +58,10 @@ class Session : public std::enable_shared_from_this<Session> {
     }
     auto msg = parser_->release();
     keep_alive_ = msg.keep_alive();
+    // HEAD is GET without the body; a body after a HEAD response would be read as the next response.
+    head_ = msg.method() == http::verb::head;
     Request req;
-    req.method = std::string(msg.method_string());
+    req.method = head_ ? "GET" : std::string(msg.method_string());
     req.target = std::string(msg.target());
     for (const auto& f : msg) {
       std::string name(f.name_string());
@@ -66,7 +69,7 @@ class Session : public std::enable_shared_from_this<Session> {
       req.headers[name] = std::string(f.value());
     }
     req.body = std::move(msg.body());
-    const std::string job = Service::events_job(req);
+    const std::string job = head_ ? std::string() : Service::events_job(req);
     if (!job.empty()) return start_events(req, job);
     Response r;
     try {
@@ -87,6 +90,7 @@ class Session : public std::enable_shared_from_this<Session> {
     res->body() = r.body;
     res->keep_alive(keep_alive_);
     res->prepare_payload();
+    if (head_) res->body().clear();  // Content-Length stays the GET's
     stream_.expires_after(seconds(options_.read_timeout));
     http::async_write(stream_, *res, [self = shared_from_this(), res](beast::error_code ec, size_t) {
       if (ec || !self->keep_alive_) return self->close();
@@ -190,6 +194,7 @@ class Session : public std::enable_shared_from_this<Session> {
   std::atomic<size_t>& streams_;
   net::steady_timer timer_;
   bool keep_alive_ = false;
+  bool head_ = false;  // the request being answered is a HEAD
   // Event streams.
   std::string job_;
   uint64_t last_ = 0;

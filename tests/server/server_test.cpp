@@ -424,6 +424,35 @@ TEST(Client, BakesOnTheServerAndReportsErrors) {
   EXPECT_NE(std::system(unreachable.c_str()), 0);
 }
 
+// Everything the server sends on one connection for `raw` requests, until it closes.
+std::string exchange(unsigned short port, const std::string& raw) {
+  net::io_context io;
+  tcp::socket socket(io);
+  socket.connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
+  net::write(socket, net::buffer(raw));
+  std::string all;
+  char buf[4096];
+  beast::error_code ec;
+  while (!ec) all.append(buf, socket.read_some(net::buffer(buf), ec));
+  return all;
+}
+
+// A HEAD response has the GET's headers and no body, so a request pipelined after it is answered
+// in its own response.
+TEST(Server, HeadAnswersWithoutABody) {
+  ServerProcess server(temp_dir("head"), {"--workers", "1"});
+  const std::string all = exchange(server.port(),
+                                   "HEAD /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n"
+                                   "GET /readyz HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n");
+  const size_t second = all.find("HTTP/1.1", 1);
+  ASSERT_NE(second, std::string::npos) << all;
+  const std::string head = all.substr(0, second);
+  EXPECT_EQ(head.rfind("HTTP/1.1 200 OK\r\n", 0), 0u) << head;
+  EXPECT_NE(head.find("Content-Length: 15\r\n"), std::string::npos) << head;  // that of {"status":"ok"}
+  EXPECT_EQ(head.substr(head.size() - 4), "\r\n\r\n") << head;
+  EXPECT_EQ(all.substr(all.size() - 18), R"({"status":"ready"})") << all;
+}
+
 // The status line of an event stream request, read from a fresh connection that is then closed.
 std::string stream_status(unsigned short port, const std::string& id) {
   net::io_context io;
