@@ -69,8 +69,10 @@ bool same(const std::string& a, const std::string& b) {
   return diff == 0;
 }
 
-// The parts of a multipart/form-data body by field name: (content type, data).
-std::map<std::string, std::pair<std::string, std::string>> parse_multipart(const std::string& body, const std::string& boundary) {
+// The parts of a multipart/form-data body by field name: (content type, data). `repeated` is set to
+// the name of a field given twice.
+std::map<std::string, std::pair<std::string, std::string>> parse_multipart(const std::string& body, const std::string& boundary,
+                                                                           std::string& repeated) {
   std::map<std::string, std::pair<std::string, std::string>> parts;
   const std::string delim = "--" + boundary;
   size_t pos = body.find(delim);
@@ -98,6 +100,7 @@ std::map<std::string, std::pair<std::string, std::string>> parse_multipart(const
         type.erase(0, type.find_first_not_of(' '));
       }
     }
+    if (parts.count(name) && repeated.empty()) repeated = name;
     parts[name] = {type, body.substr(head_end + 4, next - (head_end + 4))};
     pos = next + 2;
   }
@@ -414,7 +417,11 @@ Response Service::submit(const Request& req, const std::string& query) {
     std::string boundary = ct.substr(b + 9);
     if (!boundary.empty() && boundary.front() == '"') boundary = boundary.substr(1, boundary.find('"', 1) - 1);
     boundary = boundary.substr(0, boundary.find(';'));
-    const auto parts = parse_multipart(req.body, boundary);
+    if (boundary.empty()) return error(400, "multipart/form-data needs a boundary");
+    std::string repeated;
+    const auto parts = parse_multipart(req.body, boundary, repeated);
+    // Which of two scenes (or parameter sets) was meant is not ours to guess.
+    if (!repeated.empty()) return error(400, "the form has more than one '" + repeated + "' part");
     const auto s = parts.find("scene");
     if (s == parts.end()) return error(400, "the form has no 'scene' file part");
     scene = s->second.second;
@@ -443,6 +450,7 @@ Response Service::submit(const Request& req, const std::string& query) {
   limits.max_triangles = options_.max_triangles;
   const auto loaded = protocol::load_gltf_memory(std::span(reinterpret_cast<const uint8_t*>(scene.data()), scene.size()), "", limits);
   if (!loaded.document) return error(422, loaded.error);
+  if (std::string e = protocol::bake_error(*loaded.document); !e.empty()) return error(422, e);
   const std::string params = protocol::params_json(spec);
   const std::string cache_key = sha256_hex(scene) + ":" + sha256_hex(params);
   // The same scene and parameters as a finished job: its answer at once.

@@ -86,6 +86,29 @@ TEST(Handler, TokensProtectEverythingButHealthChecks) {
   EXPECT_EQ(f.call("GET", "/metrics", "", {{"authorization", "Bearer t0ken"}}).status, 200);
 }
 
+// A form part for a multipart/form-data body with boundary "b".
+std::string form_part(const std::string& name, const std::string& data) {
+  return "--b\r\nContent-Disposition: form-data; name=\"" + name + "\"; filename=\"f\"\r\n\r\n" + data + "\r\n";
+}
+
+// Two scenes (or two parameter sets) in one form: refused, not one of them silently dropped.
+TEST(Handler, FormWithARepeatedPartIsRefused) {
+  Fixture f;
+  const std::map<std::string, std::string> form = {{"content-type", "multipart/form-data; boundary=b"}};
+  const Response one = f.call("POST", "/v1/jobs", form_part("scene", cornell()) + "--b--\r\n", form);
+  EXPECT_EQ(one.status, 202) << one.body;
+  const Response two = f.call("POST", "/v1/jobs", form_part("scene", cornell()) + form_part("scene", "{}") + "--b--\r\n", form);
+  EXPECT_EQ(two.status, 400) << two.body;
+  EXPECT_EQ(json::parse(two.body)["error"], "the form has more than one 'scene' part");
+  const Response params = f.call("POST", "/v1/jobs",
+                                 form_part("scene", cornell()) + form_part("params", R"({"resolution":200})") +
+                                     form_part("params", R"({"resolution":50})") + "--b--\r\n",
+                                 form);
+  EXPECT_EQ(params.status, 400) << params.body;
+  const Response empty = f.call("POST", "/v1/jobs", "----\r\n", {{"content-type", "multipart/form-data; boundary="}});
+  EXPECT_EQ(empty.status, 400) << empty.body;
+}
+
 // A second server on the same data directory would re-queue the first one's running jobs at its
 // start and bake them twice: it is refused, and the directory is free again once the first stops.
 TEST(Handler, SecondServiceOnTheSameDataDirectoryIsRefused) {
