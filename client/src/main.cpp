@@ -349,6 +349,10 @@ int bake(const Options& o) {
     std::fprintf(stderr, "hemibake: %s: %s\n", o.input.c_str(), loaded.error.c_str());
     return 1;
   }
+  if (std::string e = hemibake::protocol::bake_error(*loaded.document); !e.empty()) {
+    std::fprintf(stderr, "hemibake: %s: %s\n", o.input.c_str(), e.c_str());
+    return 1;
+  }
   const auto& scene = hemibake::protocol::scene_of(*loaded.document);
   std::printf("%s: %llu triangles, %zu patches\n", o.input.c_str(),
               static_cast<unsigned long long>(hemibake::protocol::triangle_count(*loaded.document)), scene.patches.size());

@@ -485,6 +485,17 @@ std::string material_info(const tinygltf::Model& m, int index, MaterialInfo& out
 const solver::Scene& scene_of(const SceneDocument& document) { return document.scene; }
 uint64_t triangle_count(const SceneDocument& document) { return document.triangles; }
 
+std::string bake_error(const SceneDocument& document) {
+  // Radiosity is the light of emitting surfaces: without one, every bake is black.
+  const auto& patches = document.scene.patches;
+  if (std::any_of(patches.begin(), patches.end(), [](const solver::Patch& p) { return p.emission != glm::dvec3(0.0); }))
+    return {};
+  std::string e = "the scene emits no light: give the light sources' materials an emissiveFactor (with "
+                  "KHR_materials_emissive_strength above 1), or set extras.hemibake.emission";
+  if (!document.model.lights.empty()) e += "; KHR_lights_punctual lights are not supported";
+  return e;
+}
+
 LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& base_dir, const LoadLimits& limits) {
   LoadResult result;
   auto doc = std::make_shared<SceneDocument>();

@@ -74,6 +74,20 @@ TEST(Handler, AnswersWithoutANetwork) {
   EXPECT_EQ(f.call("POST", "/v1/jobs?resolut%69on=7", cornell(), {{"content-type", "model/gltf+json"}}).status, 400);
 }
 
+// A scene in which nothing emits would bake black: it is refused before it is queued, saying why.
+TEST(Handler, SceneWithoutLightIsRefused) {
+  Fixture f;
+  json gltf = json::parse(cornell());
+  for (auto& m : gltf["materials"]) {
+    m.erase("emissiveFactor");
+    m.erase("extensions");
+  }
+  const Response r = f.call("POST", "/v1/jobs", gltf.dump(), {{"content-type", "model/gltf+json"}});
+  EXPECT_EQ(r.status, 422) << r.body;
+  EXPECT_NE(json::parse(r.body)["error"].get<std::string>().find("emits no light"), std::string::npos) << r.body;
+  EXPECT_TRUE(json::parse(f.call("GET", "/v1/jobs").body)["jobs"].empty());
+}
+
 TEST(Handler, TokensProtectEverythingButHealthChecks) {
   ServiceOptions o;
   o.tokens = {"t0ken"};

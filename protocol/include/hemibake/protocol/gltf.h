@@ -43,6 +43,10 @@ const solver::Scene& scene_of(const SceneDocument& document);
 /// Number of triangles in the input scene (instances counted).
 uint64_t triangle_count(const SceneDocument& document);
 
+/// Empty when the scene can be baked; otherwise why not, for the user (no surface emits light, so
+/// the bake would be black). A loaded scene may still be read without light (tests, inspection).
+std::string bake_error(const SceneDocument& document);
+
 /// Output settings.
 struct WriteOptions {
   bool draco = true;        ///< KHR_draco_mesh_compression; false writes plain accessors
