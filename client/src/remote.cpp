@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -64,15 +65,46 @@ Reply call(const Remote& r, http::verb verb, const std::string& target, const st
 }
 
 // Prints the server's error for a failed call; returns the exit status 1.
-int report(const Reply& reply) {
+int report(const Remote& r, const Reply& reply) {
   if (!reply.error.empty()) {
     std::fprintf(stderr, "hemibake: %s\n", reply.error.c_str());
     return 1;
   }
   const json j = json::parse(reply.body, nullptr, false);
-  const std::string msg = j.is_object() && j.contains("error") ? j["error"].get<std::string>() : reply.body;
-  std::fprintf(stderr, "hemibake: the server answered %d: %s\n", reply.status, msg.c_str());
+  if (!j.is_object() || !j.contains("error") || !j["error"].is_string()) {
+    // Not one of ours (a proxy, another web server): its page would only bury the point.
+    std::fprintf(stderr, "hemibake: the server at %s:%s answered %d without a hemibake error; is it a hemibake-server?\n",
+                 r.host.c_str(), r.port.c_str(), reply.status);
+    return 1;
+  }
+  std::fprintf(stderr, "hemibake: the server answered %d: %s%s\n", reply.status, j["error"].get<std::string>().c_str(),
+               reply.status == 401 ? " (set HEMIBAKE_TOKEN)" : "");
   return 1;
+}
+
+// A 200 answer's JSON object, or null after saying that the server is not a hemibake-server.
+json answer_json(const Remote& r, const Reply& reply) {
+  json j = json::parse(reply.body, nullptr, false);
+  if (j.is_object()) return j;
+  std::fprintf(stderr, "hemibake: the server at %s:%s did not answer with JSON; is it a hemibake-server?\n", r.host.c_str(),
+               r.port.c_str());
+  return nullptr;
+}
+
+// A job id as a path segment: whatever the user typed stays one segment of a valid request line.
+std::string job_path(const std::string& id) {
+  static const char* hex = "0123456789ABCDEF";
+  std::string out = "/v1/jobs/";
+  for (const unsigned char c : id) {
+    if (std::isalnum(c) || c == '-' || c == '_' || c == '.' || c == '~') {
+      out += static_cast<char>(c);
+    } else {
+      out += '%';
+      out += hex[c >> 4];
+      out += hex[c & 15];
+    }
+  }
+  return out;
 }
 
 std::string query_of(const protocol::JobSpec& spec) {
@@ -130,8 +162,9 @@ int remote_submit(const Remote& r, const std::string& path, const protocol::JobS
   const std::string bytes = data.str();
   const bool glb = bytes.size() >= 4 && bytes.compare(0, 4, "glTF") == 0;
   const Reply reply = call(r, http::verb::post, "/v1/jobs" + query_of(spec), bytes, glb ? "model/gltf-binary" : "model/gltf+json");
-  if (reply.status != 202 && reply.status != 200) return report(reply);
-  const json j = json::parse(reply.body, nullptr, false);
+  if (reply.status != 202 && reply.status != 200) return report(r, reply);
+  const json j = answer_json(r, reply);
+  if (j.is_null()) return 1;
   const std::string id = j.value("id", "");
   if (id_out) *id_out = id;
   else std::printf("%s\n", id.c_str());
@@ -140,9 +173,11 @@ int remote_submit(const Remote& r, const std::string& path, const protocol::JobS
 }
 
 int remote_status(const Remote& r, const std::string& id) {
-  const Reply reply = call(r, http::verb::get, "/v1/jobs/" + id);
-  if (reply.status != 200) return report(reply);
-  std::printf("%s\n", json::parse(reply.body).dump(2).c_str());
+  const Reply reply = call(r, http::verb::get, job_path(id));
+  if (reply.status != 200) return report(r, reply);
+  const json j = answer_json(r, reply);
+  if (j.is_null()) return 1;
+  std::printf("%s\n", j.dump(2).c_str());
   return 0;
 }
 
@@ -154,7 +189,7 @@ int remote_watch(const Remote& r, const std::string& id) {
     tcp::resolver resolver(io);
     beast::tcp_stream stream(io);
     stream.connect(resolver.resolve(r.host, r.port));
-    std::string req = "GET /v1/jobs/" + id + "/events HTTP/1.1\r\nHost: " + r.host + "\r\nAccept: text/event-stream\r\n";
+    std::string req = "GET " + job_path(id) + "/events HTTP/1.1\r\nHost: " + r.host + "\r\nAccept: text/event-stream\r\n";
     if (!r.token.empty()) req += "Authorization: Bearer " + r.token + "\r\n";
     req += "\r\n";
     net::write(stream, net::buffer(req));
@@ -174,7 +209,7 @@ int remote_watch(const Remote& r, const std::string& id) {
             Reply reply;
             reply.status = std::atoi(pending.c_str() + 9);
             reply.body = pending.substr(body);
-            return report(reply);
+            return report(r, reply);
           }
           pending = pending.substr(end + 4);
           header_done = true;
@@ -201,23 +236,33 @@ int remote_watch(const Remote& r, const std::string& id) {
       }
       if (ec) break;
     }
+  } catch (const boost::system::system_error& e) {
+    std::fprintf(stderr, "hemibake: cannot reach the server at %s:%s: %s\n", r.host.c_str(), r.port.c_str(),
+                 e.code().message().c_str());
+    return 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "hemibake: cannot follow job %s: %s\n", id.c_str(), e.what());
     return 1;
   }
   if (tty) std::fputs("\n", stderr);
   // The stream ends after the final state; read it back to be sure of it.
-  const Reply reply = call(r, http::verb::get, "/v1/jobs/" + id);
-  if (reply.status != 200) return report(reply);
-  const json j = json::parse(reply.body);
+  const Reply reply = call(r, http::verb::get, job_path(id));
+  if (reply.status != 200) return report(r, reply);
+  const json j = answer_json(r, reply);
+  if (j.is_null()) return 1;
   state = j.value("state", "");
   std::fprintf(stderr, "hemibake: job %s %s\n", id.c_str(), state.c_str());
   return state == "succeeded" ? 0 : 1;
 }
 
 int remote_fetch(const Remote& r, const std::string& id, const std::string& out_path) {
-  const Reply reply = call(r, http::verb::get, "/v1/jobs/" + id + "/result");
-  if (reply.status != 200) return report(reply);
+  const Reply reply = call(r, http::verb::get, job_path(id) + "/result");
+  if (reply.status != 200) return report(r, reply);
+  if (reply.body.compare(0, 4, "glTF") != 0) {
+    std::fprintf(stderr, "hemibake: the server at %s:%s did not answer with a GLB; is it a hemibake-server?\n", r.host.c_str(),
+                 r.port.c_str());
+    return 1;
+  }
   std::ofstream out(out_path, std::ios::binary);
   if (!out.write(reply.body.data(), static_cast<std::streamsize>(reply.body.size())) || !out.flush()) {
     std::fprintf(stderr, "hemibake: cannot write %s\n", out_path.c_str());
@@ -228,8 +273,9 @@ int remote_fetch(const Remote& r, const std::string& id, const std::string& out_
 }
 
 int remote_cancel(const Remote& r, const std::string& id) {
-  const Reply reply = call(r, http::verb::delete_, "/v1/jobs/" + id);
-  if (reply.status != 200) return report(reply);
+  const Reply reply = call(r, http::verb::delete_, job_path(id));
+  if (reply.status != 200) return report(r, reply);
+  if (answer_json(r, reply).is_null()) return 1;
   std::printf("job %s cancelled\n", id.c_str());
   return 0;
 }
@@ -237,8 +283,10 @@ int remote_cancel(const Remote& r, const std::string& id) {
 int remote_list(const Remote& r, const std::string& state) {
   std::string target = "/v1/jobs?limit=100" + (state.empty() ? std::string() : "&state=" + state);
   const Reply reply = call(r, http::verb::get, target);
-  if (reply.status != 200) return report(reply);
-  const json j = json::parse(reply.body);
+  if (reply.status != 200) return report(r, reply);
+  const json j = answer_json(r, reply);
+  if (j.is_null()) return 1;
+  if (!j.contains("jobs") || !j["jobs"].is_array()) return report(r, reply);
   for (const auto& job : j["jobs"]) {
     const double u = job.contains("progress") ? job["progress"].value("unshot_fraction", 1.0) : 1.0;
     std::printf("%s  %-9s  unshot %.5f  %s\n", job["id"].get<std::string>().c_str(), job["state"].get<std::string>().c_str(),

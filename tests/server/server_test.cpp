@@ -1,6 +1,7 @@
 // The real server binary on loopback, spoken to over real HTTP (a Beast client written here).
 #include <boost/asio/connect.hpp>
 #include <boost/asio/ip/tcp.hpp>
+#include <boost/asio/read_until.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 #include <gtest/gtest.h>
@@ -511,6 +512,68 @@ TEST(Server, RunningOutOfFileDescriptorsDoesNotSpin) {
   EXPECT_LT(used, sysconf(_SC_CLK_TCK) / 4) << "clock ticks in 2 s with descriptors exhausted";
   idle.clear();
   EXPECT_EQ(request(server.port(), http::verb::get, "/healthz").status, 200);
+}
+
+// A web server that is not hemibake-server: every request gets 200 and an HTML page.
+class NotHemibake {
+ public:
+  NotHemibake() : acceptor_(io_, tcp::endpoint(net::ip::make_address("127.0.0.1"), 0)) {
+    accept();
+    thread_ = std::thread([this] { io_.run_for(60s); });
+  }
+  ~NotHemibake() {
+    io_.stop();
+    thread_.join();
+  }
+  std::string url() const { return "http://127.0.0.1:" + std::to_string(acceptor_.local_endpoint().port()); }
+
+ private:
+  void accept() {
+    acceptor_.async_accept([this](beast::error_code ec, tcp::socket socket) {
+      if (ec) return;
+      auto s = std::make_shared<tcp::socket>(std::move(socket));
+      auto buf = std::make_shared<std::string>();
+      net::async_read_until(*s, net::dynamic_buffer(*buf), "\r\n\r\n", [s, buf](beast::error_code, size_t) {
+        static const std::string page = "<html>hello</html>";
+        auto res = std::make_shared<std::string>("HTTP/1.1 200 OK\r\nContent-Type: text/html\r\nContent-Length: " +
+                                                 std::to_string(page.size()) + "\r\nConnection: close\r\n\r\n" + page);
+        net::async_write(*s, net::buffer(*res), [s, res](beast::error_code, size_t) {});
+      });
+      accept();
+    });
+  }
+  net::io_context io_;
+  tcp::acceptor acceptor_;
+  std::thread thread_;
+};
+
+// Runs a command; returns its exit status (-1 if it did not exit normally, as on an abort) and
+// what it wrote to stdout and stderr.
+std::pair<int, std::string> run(const std::string& command) {
+  FILE* p = popen((command + " 2>&1").c_str(), "r");
+  std::string out;
+  char buf[512];
+  while (size_t n = fread(buf, 1, sizeof buf, p)) out.append(buf, n);
+  const int status = pclose(p);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+
+// --server pointing at some other web server: a clear message and exit status 1, not a crash.
+TEST(Client, ServerThatIsNotHemibakeIsReportedClearly) {
+  NotHemibake other;
+  const std::string glb = temp_dir("not-hemibake") + ".glb";
+  for (const std::string& command : std::vector<std::string>{"status abc", "list", "watch abc", "cancel abc", "fetch abc -o " + glb}) {
+    const auto [status, out] = run(std::string(HEMIBAKE_CLIENT) + " " + command + " --server " + other.url());
+    EXPECT_EQ(status, 1) << command << ": " << out;
+    EXPECT_NE(out.find("is it a hemibake-server?"), std::string::npos) << command << ": " << out;
+    EXPECT_EQ(out.find("<html>"), std::string::npos) << command << ": " << out;
+  }
+  EXPECT_FALSE(std::filesystem::exists(glb));
+  // A job id the user mistyped with a space stays one path segment: the server says it has no such job.
+  ServerProcess server(temp_dir("client-id"), {"--workers", "1"});
+  const auto [status, out] = run(std::string(HEMIBAKE_CLIENT) + " status 'a b' --server http://127.0.0.1:" + std::to_string(server.port()));
+  EXPECT_EQ(status, 1);
+  EXPECT_NE(out.find("404: no job"), std::string::npos) << out;
 }
 
 // Many clients at once, bounded in number and time: every request answered, no error.
