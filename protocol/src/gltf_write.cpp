@@ -87,6 +87,32 @@ glm::dvec3 light_of(const glm::dvec3& b, const glm::dvec3& base) {
   return out;
 }
 
+// The matrix that takes world points of a node's triangles into the node's frame: the inverse of
+// its world matrix A (with translation t), or, when A flattens space (a zero scale on one axis,
+// which glTF allows), an inverse on the plane it flattens onto. There B = A + s n m^T, with m
+// spanning A's kernel and n normal to its image, is invertible, and A B^-1 x = x for every x in the
+// image, where the node's triangles lie. (A flattened further has no triangles that are not
+// degenerate, so nothing of it is written.)
+glm::dmat4 world_to_node(const glm::dmat4& world) {
+  const glm::dmat3 a(world);
+  const double s = std::max({glm::length(a[0]), glm::length(a[1]), glm::length(a[2])});
+  if (std::abs(glm::determinant(a)) > 1e-12 * s * s * s) return glm::inverse(world);
+  // The longest cross product of two of three vectors: a normal to the plane they span.
+  auto normal = [](const glm::dvec3& u, const glm::dvec3& v, const glm::dvec3& w) {
+    glm::dvec3 best = glm::cross(u, v);
+    for (const glm::dvec3& c : {glm::cross(v, w), glm::cross(w, u)})
+      if (glm::length(c) > glm::length(best)) best = c;
+    return glm::length(best) > 0.0 ? glm::normalize(best) : glm::dvec3(0.0);
+  };
+  const glm::dmat3 rows = glm::transpose(a);
+  const glm::dvec3 m = normal(rows[0], rows[1], rows[2]);  // orthogonal to every row: A m = 0
+  const glm::dvec3 n = normal(a[0], a[1], a[2]);           // orthogonal to every column
+  const glm::dmat3 inv = glm::inverse(a + s * glm::outerProduct(n, m));
+  glm::dmat4 out(inv);
+  out[3] = glm::dvec4(-(inv * glm::dvec3(world[3])), 1.0);
+  return out;
+}
+
 }  // namespace
 
 WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, const solver::Params& params,
@@ -200,7 +226,7 @@ WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, 
     const auto [node_index, prim_index, back] = key;
     const tinygltf::Node& node = in.nodes[node_index];
     const tinygltf::Primitive& in_prim = in.meshes[node.mesh].primitives[prim_index];
-    const glm::dmat4 to_local = glm::inverse(doc.node_world[node_index]);
+    const glm::dmat4 to_local = world_to_node(doc.node_world[node_index]);
 
     // Vertices: one per (solver vertex, texture coordinate), so UV seams stay seams.
     PrimitiveData data;

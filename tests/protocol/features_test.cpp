@@ -1279,5 +1279,41 @@ TEST(AlphaModeFeature, BlendAndMaskMaterialsAreReportedAsBakedOpaque) {
   EXPECT_FALSE(mentions(r.warnings, "floor")) << joined(r.warnings);
 }
 
+// glTF allows a zero scale; exporters flatten objects with it (a rug made of a box). A node scaled
+// by (1, 0, 1) at height 0.2 puts its horizontal quad at y = 0.2 and its vertical one nowhere (all
+// degenerate). The baked output keeps the node's transform, so its vertices, taken through that
+// transform, must land on the flattened quad: finite, at y = 0.2, covering 2 x 2 facing up; before,
+// the writer divided by the transform (NaN positions, and Draco refused to encode them).
+TEST(ZeroScaleFeature, FlattenedNodeBakesOntoThePlaneItFlattensTo) {
+  Doc d;
+  const int rug_mat = d.material(plain_material(V(0.5)));
+  const int lamp = d.material(lamp_material(V(4.0)));
+  const std::vector<V> top = rect(0, 2, 0, 2, 0.5, true);
+  const std::vector<V> side = {V(0, 0, 0), V(2, 0, 0), V(2, 1, 0), V(0, 1, 0)};  // faces +z; flattened away
+  std::vector<V> points = top;
+  points.insert(points.end(), side.begin(), side.end());
+  const int rug = d.node({{"mesh", d.mesh(json::array({d.primitive(points, {0, 1, 2, 0, 2, 3, 4, 5, 6, 4, 6, 7}, kTriangles, rug_mat)}))},
+                          {"translation", {0.0, 0.2, 0.0}},
+                          {"scale", {1.0, 0.0, 1.0}}});
+  d.quad_node(rect(0.5, 1.5, 0.5, 1.5, 1.0, false), lamp);
+  for (bool draco : {false, true}) {
+    SCOPED_TRACE(draco ? "draco" : "plain");
+    const Baked b = bake(d.glb_bytes(), draco);
+    ASSERT_TRUE(b.loaded.document);
+    const std::vector<Tri> tris = all_of(baked_node(b.out, rug));
+    ASSERT_FALSE(tris.empty());
+    for (const Tri& t : tris)
+      for (const V& p : t.p) {
+        ASSERT_TRUE(std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z));
+        EXPECT_NEAR(p.y, 0.2, 1e-6);
+        EXPECT_GE(p.x, -1e-3);
+        EXPECT_LE(p.x, 2.0 + 1e-3);
+      }
+    EXPECT_NEAR(area_facing(tris, V(0, 1, 0)), 4.0, 1e-3);
+    EXPECT_NEAR(total_area(tris), 4.0, 1e-3);
+    EXPECT_GT(mean_radiosity(tris).x, 0.0);
+  }
+}
+
 }  // namespace
 }  // namespace hemibake::protocol
