@@ -333,8 +333,19 @@ bool finite(const glm::dmat4& m) {
 
 double srgb_to_linear(double c) { return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4); }
 
-// Mean linear colour of a texture over a triangle of UVs (samples inside the triangle, repeat
-// wrapping). Null when the texture is absent or could not be decoded.
+// A texture coordinate brought into [0, 1] by a sampler's wrap mode (glTF 2.0, section 3.8.4;
+// REPEAT without a sampler).
+double wrap(double t, int mode) {
+  if (mode == TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE) return std::clamp(t, 0.0, 1.0);
+  if (mode == TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT) {
+    const double f = t - 2.0 * std::floor(t / 2.0);
+    return f <= 1.0 ? f : 2.0 - f;
+  }
+  return t - std::floor(t);
+}
+
+// Mean linear colour of a texture over a triangle of UVs (samples inside the triangle, wrapped by
+// the texture's sampler). Null when the texture is absent or could not be decoded.
 std::optional<glm::dvec3> texture_mean(const tinygltf::Model& m, int texture, const std::array<glm::dvec2, 3>& uv) {
   if (texture < 0 || static_cast<size_t>(texture) >= m.textures.size()) return std::nullopt;
   const int source = m.textures[texture].source;
@@ -343,6 +354,10 @@ std::optional<glm::dvec3> texture_mean(const tinygltf::Model& m, int texture, co
   if (img.width <= 0 || img.height <= 0 || img.component != 4 ||
       img.image.size() < static_cast<size_t>(img.width) * img.height * 4)
     return std::nullopt;
+  const int si = m.textures[texture].sampler;
+  const bool has_sampler = si >= 0 && static_cast<size_t>(si) < m.samplers.size();
+  const int wrap_s = has_sampler ? m.samplers[si].wrapS : TINYGLTF_TEXTURE_WRAP_REPEAT;
+  const int wrap_t = has_sampler ? m.samplers[si].wrapT : TINYGLTF_TEXTURE_WRAP_REPEAT;
   // Barycentric sample points: the centroid and points towards each corner and each edge.
   static constexpr std::array<std::array<double, 3>, 7> kSamples{{{1 / 3.0, 1 / 3.0, 1 / 3.0},
                                                                   {2 / 3.0, 1 / 6.0, 1 / 6.0},
@@ -355,7 +370,7 @@ std::optional<glm::dvec3> texture_mean(const tinygltf::Model& m, int texture, co
   for (const auto& b : kSamples) {
     const glm::dvec2 t = b[0] * uv[0] + b[1] * uv[1] + b[2] * uv[2];
     if (!std::isfinite(t.x) || !std::isfinite(t.y)) return std::nullopt;
-    const double fx = t.x - std::floor(t.x), fy = t.y - std::floor(t.y);
+    const double fx = wrap(t.x, wrap_s), fy = wrap(t.y, wrap_t);
     const int x = std::clamp(static_cast<int>(fx * img.width), 0, img.width - 1);
     const int y = std::clamp(static_cast<int>(fy * img.height), 0, img.height - 1);
     const uint8_t* px = &img.image[(static_cast<size_t>(y) * img.width + x) * 4];

@@ -1315,5 +1315,35 @@ TEST(ZeroScaleFeature, FlattenedNodeBakesOntoThePlaneItFlattensTo) {
   }
 }
 
+// A sampler's wrap mode decides which texels UVs outside [0, 1] read (glTF 2.0, section 3.8.4):
+// on the red-left, blue-right texture, u in [1.1, 1.4] reads the blue right edge under
+// CLAMP_TO_EDGE and the blue 2 - u in [0.6, 0.9] under MIRRORED_REPEAT, where REPEAT would read the
+// red u - 1 in [0.1, 0.4]; REPEAT (no sampler) reads blue for u in [1.6, 1.9].
+TEST(TextureWrapFeature, SamplerWrapModesDecideWhichTexelsAreAveraged) {
+  const std::vector<uint8_t> png = halves_png();
+  constexpr int kClamp = 33071, kMirror = 33648;
+  const std::pair<int, double> cases[] = {{kClamp, 1.1}, {kMirror, 1.1}, {0, 1.6}};
+  for (const auto& [mode, u0] : cases) {
+    SCOPED_TRACE("wrap " + std::to_string(mode));
+    Doc d;
+    const int view = d.view(png.data(), png.size());
+    d.gltf["images"] = json::array({json{{"bufferView", view}, {"mimeType", "image/png"}}});
+    d.gltf["textures"] = json::array({json{{"source", 0}}});
+    if (mode != 0) {
+      d.gltf["samplers"] = json::array({json{{"wrapS", mode}, {"wrapT", mode}}});
+      d.gltf["textures"][0]["sampler"] = 0;
+    }
+    const int mat = d.material(glowing({{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}));
+    const double u1 = u0 + 0.3;
+    d.quad_node({V(0, 0, 0), V(1, 0, 0), V(1, 1, 0), V(0, 1, 0)}, mat, json::object(),
+                {UV(u0, 0.1), UV(u1, 0.1), UV(u1, 0.9), UV(u0, 0.9)});
+    const LoadResult r = load_gltf_memory(d.glb_bytes(), ".");
+    ASSERT_TRUE(r.document) << r.error;
+    ASSERT_EQ(scene_of(*r.document).patches.size(), 1u);
+    const V rho = scene_of(*r.document).patches[0].reflectance;
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(rho[c], srgb_to_linear(kBlue[c] / 255.0), 1e-9) << "channel " << c;
+  }
+}
+
 }  // namespace
 }  // namespace hemibake::protocol
