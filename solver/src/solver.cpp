@@ -41,6 +41,7 @@
 #include <limits>
 #include <map>
 #include <numbers>
+#include <numeric>
 #include <thread>
 #include <unordered_map>
 #include <unordered_set>
@@ -74,6 +75,10 @@ constexpr size_t kMaxShaftBoxes = 32;
 // radiosity tolerance (shoot_piece).
 constexpr double kNearError = 0.25;
 constexpr uint32_t kMinResolution = 20;
+// A cluster of a curved surface shoots along its patches' mean normal, as if flat: its patches'
+// normals stay within this cosine (20 degrees) of it, so a receiver's cosine at the cluster errs by
+// under 6 % where it faces the cluster (build_clusters).
+constexpr double kClusterCone = 0.9397;
 // Coarser hemicubes may shoot at most this share of all the power shot (see coarser_levels).
 constexpr double kCoarseShare = 0.25;
 // Cluster pieces carrying at least this share of the emitted power take a finer hemicube
@@ -170,9 +175,10 @@ struct Solver::Impl {
     int depth;
     uint32_t source;   // `element`, or for a geometric piece the leaf it was cut from
   };
-  // What one hemicube shoots from: a piece of a patch, or a cluster of coplanar patches.
+  // What one hemicube shoots from: a piece of a patch, or a cluster of patches of one surface.
   struct Piece {
     uint32_t patch;                   // a patch of the piece: its plane and occlusion group
+    glm::dvec3 normal;                // the hemicube's axis: the patch's normal, a cluster's mean
     glm::dvec3 centre, up;            // the hemicube's centre and rotation hint
     double area, diameter;
     glm::dvec3 dB;                    // unshot radiosity shot (uniform over the piece)
@@ -213,6 +219,8 @@ struct Solver::Impl {
     uint32_t begin = 0, end = 0;  // its patches: cluster_patch[begin, end)
     uint32_t child = kNone;       // children at child and child + 1
     glm::dvec3 centre{0.0};       // area centroid
+    glm::dvec3 normal{0.0};       // area-weighted mean of its patches' normals, unit
+    double min_cos = 1.0;         // least cosine between a patch's normal and `normal`
     double area = 0.0, diameter = 0.0;
     std::array<glm::dvec3, 8> box{};  // corners of the bounding box of its patches' corners
   };
@@ -227,7 +235,9 @@ struct Solver::Impl {
   void grow_scratch();
   int coarser_levels(double power) const;
   bool finer_level(const Piece& piece, double power) const;
-  void project(uint32_t shooter_patch, std::span<const uint32_t> elements);
+  // Projects `elements` onto the placed hemicube, but for the patches of the shooting piece
+  // (p_shooting == shooting_stamp).
+  void project(std::span<const uint32_t> elements);
   void project_children(const std::vector<uint32_t>& parents);
   void sum_form_factors(std::span<const uint32_t> elements);
   void update_unshot_total();
@@ -279,6 +289,8 @@ struct Solver::Impl {
   std::vector<uint32_t> tree_patch;
   std::vector<glm::dvec3> p_lo, p_hi;  // per patch: bounding box
   std::vector<uint64_t> p_mark;        // per patch: listed for hemicube `mark`
+  std::vector<uint64_t> p_shooting;    // per patch: part of the piece shooting hemicube `shooting_stamp`
+  uint64_t shooting_stamp = 0;
 
   // Per-hemicube scratch.
   // Hemicubes of halving resolution (at least kMinResolution): a quarter-size shooting area serves
@@ -340,6 +352,7 @@ Solver::Impl::Impl(const Scene& scene, const Params& p)
   p_hi.resize(patches.size());
   tree_patch.resize(patches.size());
   p_mark.assign(patches.size(), 0);
+  p_shooting.assign(patches.size(), 0);
   for (uint32_t q = 0; q < patches.size(); ++q) {
     tree_patch[q] = q;
     p_lo[q] = p_hi[q] = patches[q].corners[0];
@@ -455,7 +468,7 @@ void Solver::Impl::sum_form_factors(std::span<const uint32_t> elements) {
   });
 }
 
-void Solver::Impl::project(uint32_t shooter_patch, std::span<const uint32_t> elements) {
+void Solver::Impl::project(std::span<const uint32_t> elements) {
   const auto t0 = Clock::now();
   ++stats.projections;
   stats.elements_projected += elements.size();
@@ -472,7 +485,7 @@ void Solver::Impl::project(uint32_t shooter_patch, std::span<const uint32_t> ele
       const uint32_t p = e_patch[el];
       f_begin[el] = f_end[el] = static_cast<uint32_t>(out.size());
       const double facing = glm::dot(prep.normal[p], eye - patches[p].corners[0]);
-      if (p == shooter_patch || std::abs(facing) <= eps) continue;
+      if (p_shooting[p] == shooting_stamp || std::abs(facing) <= eps) continue;
       // The paper culls the parent patch's back faces (section 2.2), which is exact where every
       // back face lies behind a front face of the same solid. A one-sided wall seen from behind has
       // none: culled, it would let light through (a room of inward-facing walls lit from outside
@@ -595,7 +608,7 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   // (the caller's recursion), each with a hemicube of its own.
   std::vector<uint32_t> accepted, near;
   const double eps = 1e-6 * prep.diagonal;
-  const glm::dvec3& normal = prep.normal[p];
+  const glm::dvec3& normal = piece.normal;
   // Near: within kNearFactor diameters of the piece, or (a piece of a patch carrying at least
   // kStraddlePower of the emitted power) on a plane that cuts through the piece: its centre may lie
   // behind the receiver while part of it is in front (a face of a block that sees part of the light
@@ -784,7 +797,10 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
     cube = finer_cube.get();
   }
   cube->place(centre, normal, piece.up);
-  project(p, seen);
+  // The piece's own patches stay out of its hemicube: a curved cluster's may stand in front of it.
+  ++shooting_stamp;
+  for (uint32_t e : piece.src) p_shooting[e_patch[e]] = shooting_stamp;
+  project(seen);
   sum_form_factors(accepted);  // the occluders' own form factors are not needed
 
   // This piece's share of the emitted power: how much the interaction matters (criterion a).
@@ -957,7 +973,7 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
       project_children(to_split);
     } else {
       gather_seen();
-      project(p, seen);
+      project(seen);
       sum_form_factors(accepted);
     }
   }
@@ -1018,6 +1034,7 @@ void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<u
   const uint32_t n = patches[p].corner_count;
   Piece piece;
   piece.patch = p;
+  piece.normal = prep.normal[p];
   piece.area = polygon_area(node.c, n);
   piece.dB = node.unshot;
   if (node.element != kNone && e_child[node.element] != kNone) {
@@ -1069,6 +1086,7 @@ void Solver::Impl::shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bo
   }
   Piece piece;
   piece.patch = cluster_patch[node.begin];
+  piece.normal = node.normal;
   glm::dvec3 power(0.0);
   for (uint32_t i = node.begin; i < node.end; ++i)
     for_leaves(p_root[cluster_patch[i]], [&](uint32_t e) { power += e_unshot[e] * e_area[e]; });
@@ -1082,7 +1100,7 @@ void Solver::Impl::shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bo
   piece.dB = power / node.area;
   piece.centre = node.centre;
   piece.up = node.box[1] - node.box[0];
-  if (glm::length(glm::cross(piece.up, prep.normal[piece.patch])) < 1e-9 * prep.diagonal) piece.up = node.box[2] - node.box[0];
+  if (glm::length(glm::cross(piece.up, piece.normal)) < 1e-9 * prep.diagonal) piece.up = node.box[2] - node.box[0];
   piece.diameter = node.diameter;
   piece.points.assign(node.box.begin(), node.box.end());
   piece.depth = depth / 2;  // each level halves the area, every second one the width
@@ -1117,11 +1135,16 @@ void Solver::Impl::build_cluster(uint32_t id, uint32_t begin, uint32_t end) {
     }
     const glm::dvec3 pc = polygon_centre(patch.corners, patch.corner_count);
     node.centre += pc * prep.area[q];
+    node.normal += prep.normal[q] * prep.area[q];
     node.area += prep.area[q];
     clo = glm::min(clo, pc);
     chi = glm::max(chi, pc);
   }
   node.centre /= node.area;
+  const double nl = glm::length(node.normal);
+  node.normal = nl > 0.0 ? node.normal / nl : prep.normal[cluster_patch[begin]];
+  node.min_cos = nl > 0.0 ? 1.0 : -1.0;
+  for (uint32_t i = begin; i < end; ++i) node.min_cos = std::min(node.min_cos, glm::dot(node.normal, prep.normal[cluster_patch[i]]));
   for (int k = 0; k < 8; ++k) node.box[k] = glm::dvec3(k & 1 ? hi.x : lo.x, k & 2 ? hi.y : lo.y, k & 4 ? hi.z : lo.z);
   for (uint32_t i = begin; i < end; ++i) {
     const Patch& patch = patches[cluster_patch[i]];
@@ -1146,6 +1169,19 @@ void Solver::Impl::build_clusters() {
   // emission shoot together: each surface's tree is cut into clusters no wider than cluster_size
   // of the scene's diagonal. Larger patches shoot alone.
   const double limit = params.cluster_size * prep.diagonal;
+  // A surface: coplanar edge-connected patches (an occlusion group) joined with smoothly curved
+  // ones (a smoothing group: same material, creases under 30 degrees). Group ids are patch ids.
+  std::vector<uint32_t> surface(patches.size());
+  std::iota(surface.begin(), surface.end(), 0u);
+  auto find = [&](uint32_t i) {
+    while (surface[i] != i) i = surface[i] = surface[surface[i]];
+    return i;
+  };
+  for (uint32_t p = 0; p < patches.size(); ++p)
+    for (uint32_t g : {prep.occlusion_group[p], prep.smoothing_group[p]}) {
+      const uint32_t a = find(p), b = find(g);
+      if (a != b) surface[std::max(a, b)] = std::min(a, b);
+    }
   std::map<std::pair<uint32_t, std::array<double, 3>>, std::vector<uint32_t>> groups;
   p_unit.assign(patches.size(), kNone);
   for (uint32_t p = 0; p < patches.size(); ++p) {
@@ -1153,7 +1189,7 @@ void Solver::Impl::build_clusters() {
     corners_of(p_root[p], c);
     if (limit <= 0.0 || polygon_diameter(c, patches[p].corner_count) > 0.5 * limit) continue;
     const glm::dvec3& e = patches[p].emission;
-    groups[{prep.occlusion_group[p], {e.x, e.y, e.z}}].push_back(p);
+    groups[{find(p), {e.x, e.y, e.z}}].push_back(p);
   }
   std::vector<std::vector<uint32_t>> by_group;
   for (auto& [key, members] : groups) by_group.push_back(std::move(members));
@@ -1169,7 +1205,7 @@ void Solver::Impl::build_clusters() {
     while (!stack.empty()) {
       const uint32_t c = stack.back();
       stack.pop_back();
-      if (c_nodes[c].diameter > limit && c_nodes[c].child != kNone) {
+      if ((c_nodes[c].diameter > limit || c_nodes[c].min_cos < kClusterCone) && c_nodes[c].child != kNone) {
         stack.push_back(c_nodes[c].child);
         stack.push_back(c_nodes[c].child + 1);
         continue;

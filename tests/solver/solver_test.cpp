@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <numbers>
 #include <optional>
 
 namespace hemibake::solver {
@@ -117,6 +118,73 @@ TEST(Solver, ClustersOfSmallPatchesKeepTheClosedForm) {
     EXPECT_NEAR(total_ba / total_a / mean3(expected), 1.0, 0.01) << (block ? "with block" : "empty");
     EXPECT_LT(std::sqrt(sum2 / mesh.elements.size()), 0.025) << (block ? "with block" : "empty");
     EXPECT_LT(worst, 0.08) << (block ? "with block" : "empty");
+  }
+}
+
+// A UV sphere of triangles (`rings` x `segments`), normals outward or inward.
+void add_sphere(Scene& scene, const glm::dvec3& centre, double radius, int rings, int segments, bool inward,
+                const glm::dvec3& rho, const glm::dvec3& e) {
+  auto at = [&](int i, int j) {
+    const double th = std::numbers::pi * i / rings, ph = 2.0 * std::numbers::pi * j / segments;
+    return centre + radius * glm::dvec3(std::sin(th) * std::cos(ph), std::cos(th), std::sin(th) * std::sin(ph));
+  };
+  auto tri = [&](glm::dvec3 a, glm::dvec3 b, glm::dvec3 c) {
+    if (!inward) std::swap(b, c);  // (a, b, c) as listed face inward
+    Patch p;
+    p.corners = {a, b, c, glm::dvec3(0.0)};
+    p.corner_count = 3;
+    p.reflectance = rho;
+    p.emission = e;
+    scene.patches.push_back(p);
+  };
+  for (int i = 0; i < rings; ++i)
+    for (int j = 0; j < segments; ++j) {
+      if (i > 0) tri(at(i, j), at(i + 1, j + 1), at(i, j + 1));
+      if (i < rings - 1) tri(at(i, j), at(i + 1, j), at(i + 1, j + 1));
+    }
+}
+
+// Small patches of a smoothly curved surface shoot together too, in clusters whose normals stay
+// within 20 degrees of their mean (a tessellated sphere is no occlusion group: no two of its
+// triangles are coplanar). Closed environments with uniform E and rho give B = E / (1 - rho)
+// everywhere: the inside of a sphere (concave: its patches light each other, also within a
+// cluster) and a sphere inside a closed box (convex).
+TEST(Solver, CurvedSurfacesShootInClustersAndKeepTheClosedForm) {
+  const glm::dvec3 rho(0.5, 0.3, 0.7), e(1.0, 2.0, 0.5);
+  const glm::dvec3 expected = e / (glm::dvec3(1.0) - rho);
+  for (const bool inside : {true, false}) {
+    Scene scene;
+    if (inside) {
+      add_sphere(scene, glm::dvec3(0.0), 1.0, 16, 32, true, rho, e);
+    } else {
+      scene = make_closed_box(4.0, 4, rho, e, false);
+      add_sphere(scene, glm::dvec3(2.0), 0.8, 16, 32, false, rho, e);
+    }
+    ASSERT_EQ(validate(scene), "");
+    const char* what = inside ? "inside a sphere" : "sphere in a box";
+    Params params;
+    Solver clustered(scene, params);
+    const Stats& st = clustered.run();
+    ASSERT_TRUE(st.converged) << what;
+    params.cluster_size = 0.0;
+    Solver alone(scene, params);
+    // At least a third fewer shots than patches alone (inside the sphere, with clusters of
+    // coplanar patches only, there were 3906 against 5306; with curved ones 2728; in the box 868
+    // against 3291: a concave cluster hands its own patches, which see it, down to its halves).
+    EXPECT_LT(st.shots * 3, alone.run().shots * 2) << what;
+    const Mesh mesh = clustered.mesh();
+    double worst = 0.0, sum2 = 0.0, total_ba = 0.0, total_a = 0.0;
+    for (const auto& el : mesh.elements) {
+      double w = 0.0;
+      for (int c = 0; c < 3; ++c) w = std::max(w, std::abs(el.radiosity[c] / expected[c] - 1.0));
+      worst = std::max(worst, w);
+      sum2 += w * w;
+      total_ba += mean3(el.radiosity) * el.area;
+      total_a += el.area;
+    }
+    EXPECT_NEAR(total_ba / total_a / mean3(expected), 1.0, 0.01) << what;
+    EXPECT_LT(std::sqrt(sum2 / mesh.elements.size()), 0.025) << what;
+    EXPECT_LT(worst, 0.08) << what;
   }
 }
 
