@@ -495,6 +495,46 @@ std::string material_info(const tinygltf::Model& m, int index, MaterialInfo& out
   return {};
 }
 
+// KHR_materials_pbrSpecularGlossiness (archived, written by older exporters): a client that
+// supports it uses its diffuse in place of the base colour. Its diffuseFactor and diffuseTexture
+// are moved into pbrMetallicRoughness, where the loader reads the base colour and the writer shows it.
+std::string adopt_specular_glossiness(tinygltf::Model& m) {
+  for (size_t i = 0; i < m.materials.size(); ++i) {
+    tinygltf::Material& mat = m.materials[i];
+    const auto it = mat.extensions.find("KHR_materials_pbrSpecularGlossiness");
+    if (it == mat.extensions.end() || !it->second.IsObject()) continue;
+    const std::string name = "material " + std::to_string(i) + (mat.name.empty() ? "" : " ('" + mat.name + "')");
+    const tinygltf::Value& sg = it->second;
+    std::vector<double> factor = {1.0, 1.0, 1.0, 1.0};
+    if (sg.Has("diffuseFactor")) {
+      const tinygltf::Value& f = sg.Get("diffuseFactor");
+      if (!f.IsArray() || f.ArrayLen() != 4) return name + ": KHR_materials_pbrSpecularGlossiness diffuseFactor must be [r, g, b, a]";
+      for (int c = 0; c < 4; ++c) {
+        if (!f.Get(c).IsNumber() && !f.Get(c).IsInt()) return name + ": KHR_materials_pbrSpecularGlossiness diffuseFactor must be numbers";
+        factor[c] = f.Get(c).GetNumberAsDouble();
+      }
+    }
+    tinygltf::TextureInfo diffuse;
+    if (sg.Has("diffuseTexture")) {
+      const tinygltf::Value& t = sg.Get("diffuseTexture");
+      const tinygltf::Value& index = t.Get("index");
+      if (!t.IsObject() || !index.IsInt() || index.Get<int>() < 0 || static_cast<size_t>(index.Get<int>()) >= m.textures.size())
+        return name + ": KHR_materials_pbrSpecularGlossiness diffuseTexture must refer to an existing texture";
+      diffuse.index = index.Get<int>();
+      if (t.Has("texCoord")) {
+        if (!t.Get("texCoord").IsInt() || t.Get("texCoord").Get<int>() < 0)
+          return name + ": KHR_materials_pbrSpecularGlossiness diffuseTexture.texCoord must be a non-negative integer";
+        diffuse.texCoord = t.Get("texCoord").Get<int>();
+      }
+      if (t.Has("extensions") && t.Get("extensions").Has("KHR_texture_transform"))
+        diffuse.extensions["KHR_texture_transform"] = t.Get("extensions").Get("KHR_texture_transform");
+    }
+    mat.pbrMetallicRoughness.baseColorFactor = factor;
+    mat.pbrMetallicRoughness.baseColorTexture = diffuse;
+  }
+  return {};
+}
+
 }  // namespace
 
 const solver::Scene& scene_of(const SceneDocument& document) { return document.scene; }
@@ -563,10 +603,15 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
   tinygltf::Model& m = doc->model;
   for (const std::string& ext : m.extensionsRequired) {
     if (ext != "KHR_draco_mesh_compression" && ext != "KHR_materials_emissive_strength" &&
-        ext != "KHR_materials_unlit" && ext != "KHR_texture_transform" && ext != "KHR_mesh_quantization") {
+        ext != "KHR_materials_unlit" && ext != "KHR_texture_transform" && ext != "KHR_mesh_quantization" &&
+        ext != "KHR_materials_pbrSpecularGlossiness") {
       result.error = "the file requires extension " + ext + ", which hemibake does not support";
       return result;
     }
+  }
+  if (std::string e = adopt_specular_glossiness(m); !e.empty()) {
+    result.error = e;
+    return result;
   }
   if (m.extensionsUsed.end() != std::find(m.extensionsUsed.begin(), m.extensionsUsed.end(), "KHR_lights_punctual") &&
       !m.lights.empty())

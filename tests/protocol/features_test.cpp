@@ -1345,5 +1345,46 @@ TEST(TextureWrapFeature, SamplerWrapModesDecideWhichTexelsAreAveraged) {
   }
 }
 
+// KHR_materials_pbrSpecularGlossiness (older exporters) gives the diffuse colour in place of the
+// base colour (the extension's specification: diffuse = diffuseFactor x diffuseTexture). Without a
+// metallic-roughness fallback the base colour would be the default white. The reflectance is the
+// diffuse, and the output material shows it as its base colour (unlit, without the extension).
+TEST(SpecularGlossinessFeature, DiffuseIsTheBaseColour) {
+  const std::vector<uint8_t> png = halves_png();
+  for (bool textured : {false, true}) {
+    SCOPED_TRACE(textured ? "diffuseTexture" : "diffuseFactor");
+    Doc d;
+    json sg = {{"diffuseFactor", {0.7, 0.5, 0.4, 1.0}}, {"specularFactor", {0.1, 0.1, 0.1}}, {"glossinessFactor", 0.2}};
+    if (textured) {
+      const int view = d.view(png.data(), png.size());
+      d.gltf["images"] = json::array({json{{"bufferView", view}, {"mimeType", "image/png"}}});
+      d.gltf["textures"] = json::array({json{{"source", 0}}});
+      sg["diffuseTexture"] = {{"index", 0}};
+    }
+    d.gltf["extensionsUsed"] = {"KHR_materials_pbrSpecularGlossiness"};
+    d.gltf["extensionsRequired"] = {"KHR_materials_pbrSpecularGlossiness"};
+    const int mat = d.material({{"name", "old"}, {"extensions", {{"KHR_materials_pbrSpecularGlossiness", sg}}}});
+    const int lamp = d.material(lamp_material(V(4.0)));
+    // The floor's UVs lie in the blue half (u in [0.6, 0.9]).
+    const int floor = d.quad_node(rect(0, 2, 0, 2, 0, true), mat, json::object(), {UV(0.6, 0.1), UV(0.6, 0.9), UV(0.9, 0.9), UV(0.9, 0.1)});
+    d.quad_node(rect(0.5, 1.5, 0.5, 1.5, 1.0, false), lamp);
+    const Baked b = bake(d.glb_bytes());
+    ASSERT_TRUE(b.loaded.document);
+    V expected(0.7, 0.5, 0.4);
+    if (textured)
+      for (int c = 0; c < 3; ++c) expected[c] *= srgb_to_linear(kBlue[c] / 255.0);
+    for (const auto& p : scene_of(*b.loaded.document).patches) {
+      if (p.material != static_cast<uint32_t>(mat + 1)) continue;
+      for (int c = 0; c < 3; ++c) EXPECT_NEAR(p.reflectance[c], expected[c], 1e-9) << "channel " << c;
+    }
+    const json& g = b.out.doc;
+    const json& prim = g["meshes"][g["nodes"][floor]["mesh"].get<int>()]["primitives"][0];
+    const json& out_mat = g["materials"][prim["material"].get<int>()];
+    EXPECT_EQ(out_mat["pbrMetallicRoughness"]["baseColorFactor"], json({0.7, 0.5, 0.4, 1.0}));
+    EXPECT_EQ(out_mat["pbrMetallicRoughness"].contains("baseColorTexture"), textured);
+    EXPECT_FALSE(out_mat["extensions"].contains("KHR_materials_pbrSpecularGlossiness"));
+  }
+}
+
 }  // namespace
 }  // namespace hemibake::protocol
