@@ -683,7 +683,7 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
 
   // Triangles of every mesh instance.
   uint64_t degenerate = 0, skipped_prims = 0;
-  std::vector<int> see_through;  // materials with alphaMode BLEND or MASK that are baked
+  std::vector<int> see_through;  // baked materials with alphaMode BLEND or MASK, or transmission
   for (int n : order) {
     const tinygltf::Node& node = m.nodes[n];
     if (node.mesh < 0) continue;
@@ -797,7 +797,8 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
       }
       // Material and texture coordinates.
       if (prim.material >= 0 && static_cast<size_t>(prim.material) < m.materials.size() &&
-          m.materials[prim.material].alphaMode != "OPAQUE" &&
+          (m.materials[prim.material].alphaMode != "OPAQUE" ||
+           m.materials[prim.material].extensions.count("KHR_materials_transmission") > 0) &&
           std::find(see_through.begin(), see_through.end(), prim.material) == see_through.end())
         see_through.push_back(prim.material);
       MaterialInfo mat;
@@ -1004,12 +1005,14 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
       }
     }
   }
-  // The solver has no transmission: a glass pane (BLEND) or a cut-out leaf (MASK) blocks light
-  // like a wall. Say so, rather than leave the user to wonder at the shadow.
+  // The solver has no transmission: a glass pane (BLEND, or Blender's KHR_materials_transmission)
+  // or a cut-out leaf (MASK) blocks light like a wall. Say so, rather than leave the user to wonder
+  // at the shadow.
   for (int i : see_through) {
     const tinygltf::Material& mt = m.materials[i];
-    result.warnings.push_back("material " + std::to_string(i) + (mt.name.empty() ? "" : " ('" + mt.name + "')") +
-                              " has alphaMode " + mt.alphaMode + "; it is baked as opaque (transparency and cut-outs are not supported)");
+    const std::string what = mt.alphaMode != "OPAQUE" ? "alphaMode " + mt.alphaMode : std::string("KHR_materials_transmission");
+    result.warnings.push_back("material " + std::to_string(i) + (mt.name.empty() ? "" : " ('" + mt.name + "')") + " has " +
+                              what + "; it is baked as opaque (transparency and cut-outs are not supported)");
   }
   if (skipped_prims > 0)
     result.warnings.push_back(std::to_string(skipped_prims) + " primitive(s) of points or lines were skipped");

@@ -1260,10 +1260,10 @@ TEST(ExporterMaterialFeature, OutputDeclaresItsExtensionsAndHasTheUvSetsItsTextu
   }
 }
 
-// alphaMode BLEND (a glass pane) and MASK (a cut-out) cannot be baked as what they are, since the
-// solver has no transmission: the file loads, and a warning names each such material and says it is
-// baked opaque; an OPAQUE material gets none.
-TEST(AlphaModeFeature, BlendAndMaskMaterialsAreReportedAsBakedOpaque) {
+// alphaMode BLEND (a glass pane), MASK (a cut-out) and KHR_materials_transmission (Blender's glass)
+// cannot be baked as what they are, since the solver has no transmission: the file loads, and a
+// warning names each such material and says it is baked opaque; an OPAQUE material gets none.
+TEST(AlphaModeFeature, BlendMaskAndTransmissionMaterialsAreReportedAsBakedOpaque) {
   Doc d;
   json glass = plain_material(V(0.9), "glass"), leaf = plain_material(V(0.3), "leaf");
   glass["alphaMode"] = "BLEND";
@@ -1271,10 +1271,15 @@ TEST(AlphaModeFeature, BlendAndMaskMaterialsAreReportedAsBakedOpaque) {
   d.quad_node(rect(0, 1, 0, 1, 0, true), d.material(glowing(plain_material(V(0.5), "floor"))));
   d.quad_node(rect(0, 1, 0, 1, 1, false), d.material(glass));
   d.quad_node(rect(0, 1, 0, 1, 2, false), d.material(leaf));
+  json blender_glass = plain_material(V(0.9), "window");
+  blender_glass["extensions"]["KHR_materials_transmission"] = {{"transmissionFactor", 1.0}};
+  d.gltf["extensionsUsed"] = {"KHR_materials_transmission"};
+  d.quad_node(rect(0, 1, 0, 1, 3, false), d.material(blender_glass));
   const LoadResult r = load_gltf_memory(d.glb_bytes(), ".");
   ASSERT_TRUE(r.document) << r.error;
   EXPECT_TRUE(mentions(r.warnings, "material 1 ('glass') has alphaMode BLEND")) << joined(r.warnings);
   EXPECT_TRUE(mentions(r.warnings, "material 2 ('leaf') has alphaMode MASK")) << joined(r.warnings);
+  EXPECT_TRUE(mentions(r.warnings, "material 3 ('window') has KHR_materials_transmission")) << joined(r.warnings);
   EXPECT_TRUE(mentions(r.warnings, "opaque")) << joined(r.warnings);
   EXPECT_FALSE(mentions(r.warnings, "floor")) << joined(r.warnings);
 }
