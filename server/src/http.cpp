@@ -44,7 +44,15 @@ class Session : public std::enable_shared_from_this<Session> {
     if (ec == http::error::body_limit) {
       Response r;
       r.status = 413;
-      r.body = R"({"error":"the request body is larger than the limit"})";
+      r.body = "{\"error\":\"the request body is larger than the server's limit of " + std::to_string(options_.max_body_bytes) +
+               " bytes (hemibake-server --max-body)\"}";
+      keep_alive_ = false;
+      return send(r);
+    }
+    if (ec == http::error::header_limit) {
+      Response r;
+      r.status = 431;
+      r.body = R"({"error":"the request line and headers are larger than 8 KB; shorten the URL or the headers"})";
       keep_alive_ = false;
       return send(r);
     }
@@ -124,15 +132,18 @@ class Session : public std::enable_shared_from_this<Session> {
     write_events();
   }
 
-  // The client says nothing during a stream, so a readable socket means it went away: end the
+  // The client says nothing during a stream, so the end of its input means it went away: end the
   // stream now and free its slot, not at the next write (up to a heartbeat later for a queued job).
   void watch_peer() {
     stream_.socket().async_wait(tcp::socket::wait_read, [self = shared_from_this()](beast::error_code ec) {
       if (ec == net::error::operation_aborted) return;
-      char sink[512];
-      if (!ec && self->stream_.socket().available(ec) > 0 && !ec) {
-        self->stream_.socket().read_some(net::buffer(sink), ec);  // bytes after the request: ignored
-        if (!ec) return self->watch_peer();
+      if (!ec) {
+        // Readiness may be stale (another thread saw the request's bytes arrive), so look without
+        // blocking: nothing there, or bytes after the request, and the client is still with us.
+        char sink[512];
+        self->stream_.socket().non_blocking(true, ec);
+        if (!ec) self->stream_.socket().read_some(net::buffer(sink), ec);
+        if (!ec || ec == net::error::would_block) return self->watch_peer();
       }
       self->gone_ = true;
       self->timer_.cancel();

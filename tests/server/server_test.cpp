@@ -237,7 +237,12 @@ TEST(Server, RefusesBadRequestsWithJsonErrors) {
   EXPECT_EQ(post("{\"asset\":", "model/gltf+json").status, 422);
   EXPECT_EQ(post(cornell(), "model/gltf+json", "?resolution=7").status, 400);
   EXPECT_EQ(post(cornell(), "model/gltf+json", "?bogus=1").status, 400);
-  EXPECT_EQ(post(std::string(200000, 'x'), "model/gltf-binary").status, 413);
+  const Reply large = post(std::string(200000, 'x'), "model/gltf-binary");
+  EXPECT_EQ(large.status, 413);
+  EXPECT_NE(large.js().value("error", "").find("limit of 100000 bytes"), std::string::npos) << large.body;
+  const Reply long_url = request(server.port(), http::verb::get, "/v1/jobs/" + std::string(9000, 'a'));
+  EXPECT_EQ(long_url.status, 431);
+  EXPECT_TRUE(long_url.js().contains("error")) << long_url.body;
   const Reply bad = post("{\"asset\":{\"version\":\"2.0\"},\"scenes\":[{\"nodes\":[5]}]}", "model/gltf+json");
   EXPECT_EQ(bad.status, 422);
   EXPECT_NE(bad.js()["error"].get<std::string>().find("node 5"), std::string::npos) << bad.body;
