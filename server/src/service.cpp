@@ -575,7 +575,11 @@ Response Service::handle(const Request& req) {
   }
   if (path == "/v1/jobs") {
     if (req.method == "POST") return submit(req, query);
-    if (req.method != "GET") return error(405, "use GET or POST on /v1/jobs");
+    if (req.method != "GET") {
+      Response r = error(405, "use GET or POST on /v1/jobs");
+      r.headers.emplace_back("Allow", "GET, HEAD, POST");
+      return r;
+    }
     const auto args = parse_query(query);
     std::optional<JobState> state;
     if (auto it = args.find("state"); it != args.end()) {
@@ -611,7 +615,8 @@ Response Service::handle(const Request& req) {
     if (sub.empty()) {
       if (req.method == "GET") return job_json(*rec, 200);
       if (req.method == "DELETE") {
-        if (finished(rec->state)) return error(409, std::string("the job has already ") + (rec->state == JobState::kSucceeded ? "succeeded" : to_string(rec->state)));
+        if (finished(rec->state))
+          return error(409, std::string("the job ") + (rec->state == JobState::kCancelled ? "is already cancelled" : std::string("has already ") + to_string(rec->state)));
         store_->cancel(id);
         {
           std::lock_guard lock(mutex_);
@@ -620,7 +625,9 @@ Response Service::handle(const Request& req) {
         if (rec->state == JobState::kQueued) store_->add_event(id, "state", json{{"state", "cancelled"}}.dump());
         return job_json(*store_->get(id), 200);
       }
-      return error(405, "use GET or DELETE on a job");
+      Response r = error(405, "use GET or DELETE on a job");
+      r.headers.emplace_back("Allow", "GET, HEAD, DELETE");
+      return r;
     }
     if (sub == "result" && req.method == "GET") {
       if (rec->state != JobState::kSucceeded) {

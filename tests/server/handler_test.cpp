@@ -54,7 +54,10 @@ TEST(Handler, AnswersWithoutANetwork) {
   EXPECT_EQ(f.call("GET", "/healthz").status, 200);
   EXPECT_EQ(f.call("GET", "/readyz").status, 200);
   EXPECT_EQ(f.call("GET", "/nowhere").status, 404);
-  EXPECT_EQ(f.call("PUT", "/v1/jobs").status, 405);
+  const Response put = f.call("PUT", "/v1/jobs");
+  EXPECT_EQ(put.status, 405);
+  ASSERT_EQ(put.headers.size(), 1u);
+  EXPECT_EQ(put.headers[0], std::make_pair(std::string("Allow"), std::string("GET, HEAD, POST")));
   EXPECT_EQ(f.call("GET", "/v1/jobs?state=bogus").status, 400);
   EXPECT_EQ(f.call("GET", "/v1/jobs?limit=0").status, 400);
   const Response posted = f.call("POST", "/v1/jobs?convergence=0.2", cornell(), {{"content-type", "model/gltf+json"}});
