@@ -33,8 +33,9 @@ namespace fs = std::filesystem;
 constexpr double kMaxReflectance = 0.95;
 // Accessors with more elements than this are refused before any arithmetic on their size.
 constexpr uint64_t kMaxAccessorCount = 1ull << 28;
-// A sparse accessor is made dense in memory; without a bufferView nothing in the file bounds its size.
-constexpr uint64_t kMaxSparseBytes = 1ull << 28;
+// Sparse accessors and accessors without a bufferView are made dense in memory; without a
+// bufferView nothing in the file bounds their size.
+constexpr uint64_t kMaxDenseBytes = 1ull << 28;
 
 struct LoaderContext {
   std::string base_dir;
@@ -229,9 +230,10 @@ std::string view_bytes(const tinygltf::Model& m, int view, uint64_t offset, uint
   return {};
 }
 
-// Checks accessor `index` for use as `what` and returns a view of it, or an error message. A
-// sparse accessor (glTF 2.0, section 3.6.2.3: its bufferView's elements, or zeros without one,
-// with the elements at `sparse.indices` replaced by `sparse.values`) is made dense in a copy.
+// Checks accessor `index` for use as `what` and returns a view of it, or an error message. An
+// accessor without a bufferView is zeros (glTF 2.0, section 3.6.2); a sparse accessor (3.6.2.3)
+// is those or its bufferView's elements, with the elements at `sparse.indices` replaced by
+// `sparse.values`. Either is made dense in a copy.
 std::string view_accessor(const tinygltf::Model& m, int index, const std::string& what, View& out) {
   const std::string name = "accessor " + std::to_string(index) + " (" + what + ")";
   if (index < 0 || static_cast<size_t>(index) >= m.accessors.size())
@@ -248,9 +250,8 @@ std::string view_accessor(const tinygltf::Model& m, int index, const std::string
   out.component_type = a.componentType;
   out.components = ncomp;
   out.normalized = a.normalized;
-  if (a.bufferView >= 0 || !a.sparse.isSparse) {
-    if (a.bufferView < 0 || static_cast<size_t>(a.bufferView) >= m.bufferViews.size())
-      return name + " has no valid bufferView";
+  if (a.bufferView >= 0) {
+    if (static_cast<size_t>(a.bufferView) >= m.bufferViews.size()) return name + " has no valid bufferView";
     const tinygltf::BufferView& bv = m.bufferViews[a.bufferView];
     const size_t stride = bv.byteStride != 0 ? bv.byteStride : element;
     if (stride < element || stride % static_cast<size_t>(csize) != 0 || stride > 252)
@@ -260,46 +261,49 @@ std::string view_accessor(const tinygltf::Model& m, int index, const std::string
     if (std::string e = view_bytes(m, a.bufferView, a.byteOffset, a.count, element, stride, name, out.data); !e.empty())
       return e;
     out.stride = stride;
+    if (!a.sparse.isSparse) return {};
   }
-  if (!a.sparse.isSparse) return {};
 
-  const auto& sp = a.sparse;
-  if (a.count * element > kMaxSparseBytes) return name + " is sparse and too large to expand (" + std::to_string(a.count) + " elements)";
-  if (sp.count <= 0 || static_cast<size_t>(sp.count) > a.count)
-    return name + " has sparse.count " + std::to_string(sp.count) + "; it must be 1 to count (" + std::to_string(a.count) + ")";
-  View indices;
-  indices.count = static_cast<size_t>(sp.count);
-  indices.component_type = sp.indices.componentType;
-  indices.components = 1;
-  indices.stride = static_cast<size_t>(component_size(sp.indices.componentType));
-  if (sp.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
-      sp.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
-      sp.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
-    return name + " has sparse indices that are not unsigned byte, short or int";
-  if (sp.indices.byteOffset < 0 || sp.values.byteOffset < 0 ||
-      static_cast<size_t>(sp.indices.byteOffset) % indices.stride != 0 || sp.values.byteOffset % csize != 0)
-    return name + " has a negative or misaligned sparse byteOffset";
-  const uint8_t* values = nullptr;
-  if (std::string e = view_bytes(m, sp.indices.bufferView, static_cast<uint64_t>(sp.indices.byteOffset), indices.count,
-                                 indices.stride, indices.stride, name + " sparse indices", indices.data);
-      !e.empty())
-    return e;
-  if (std::string e = view_bytes(m, sp.values.bufferView, static_cast<uint64_t>(sp.values.byteOffset), indices.count,
-                                 element, element, name + " sparse values", values);
-      !e.empty())
-    return e;
+  // Without a bufferView the elements are zeros (exporters write an unused morph target so).
+  if (a.count * element > kMaxDenseBytes) return name + " is too large to expand (" + std::to_string(a.count) + " elements)";
   auto dense = std::make_shared<std::vector<uint8_t>>(a.count * element, uint8_t{0});
   if (out.data)
     for (size_t i = 0; i < a.count; ++i) std::memcpy(dense->data() + i * element, out.data + i * out.stride, element);
-  double previous = -1.0;
-  for (size_t k = 0; k < indices.count; ++k) {
-    const double i = read_component(indices, k, 0);
-    // The specification requires strictly increasing indices; that also makes each one unique.
-    if (i >= static_cast<double>(a.count) || i <= previous)
-      return name + " has sparse index " + std::to_string(static_cast<uint64_t>(i)) + " at " + std::to_string(k) +
-             ": the indices must increase and be below count (" + std::to_string(a.count) + ")";
-    previous = i;
-    std::memcpy(dense->data() + static_cast<size_t>(i) * element, values + k * element, element);
+  if (a.sparse.isSparse) {
+    const auto& sp = a.sparse;
+    if (sp.count <= 0 || static_cast<size_t>(sp.count) > a.count)
+      return name + " has sparse.count " + std::to_string(sp.count) + "; it must be 1 to count (" + std::to_string(a.count) + ")";
+    View indices;
+    indices.count = static_cast<size_t>(sp.count);
+    indices.component_type = sp.indices.componentType;
+    indices.components = 1;
+    indices.stride = static_cast<size_t>(component_size(sp.indices.componentType));
+    if (sp.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
+        sp.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+        sp.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+      return name + " has sparse indices that are not unsigned byte, short or int";
+    if (sp.indices.byteOffset < 0 || sp.values.byteOffset < 0 ||
+        static_cast<size_t>(sp.indices.byteOffset) % indices.stride != 0 || sp.values.byteOffset % csize != 0)
+      return name + " has a negative or misaligned sparse byteOffset";
+    const uint8_t* values = nullptr;
+    if (std::string e = view_bytes(m, sp.indices.bufferView, static_cast<uint64_t>(sp.indices.byteOffset), indices.count,
+                                   indices.stride, indices.stride, name + " sparse indices", indices.data);
+        !e.empty())
+      return e;
+    if (std::string e = view_bytes(m, sp.values.bufferView, static_cast<uint64_t>(sp.values.byteOffset), indices.count,
+                                   element, element, name + " sparse values", values);
+        !e.empty())
+      return e;
+    double previous = -1.0;
+    for (size_t k = 0; k < indices.count; ++k) {
+      const double i = read_component(indices, k, 0);
+      // The specification requires strictly increasing indices; that also makes each one unique.
+      if (i >= static_cast<double>(a.count) || i <= previous)
+        return name + " has sparse index " + std::to_string(static_cast<uint64_t>(i)) + " at " + std::to_string(k) +
+               ": the indices must increase and be below count (" + std::to_string(a.count) + ")";
+      previous = i;
+      std::memcpy(dense->data() + static_cast<size_t>(i) * element, values + k * element, element);
+    }
   }
   out.data = dense->data();
   out.stride = element;

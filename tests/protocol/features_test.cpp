@@ -1054,7 +1054,8 @@ TEST(SparseAccessorFeature, PositionsAreTheBaseWithTheListedElementsReplaced) {
 
 // Morph targets are baked at the instance's weights (glTF 2.0, section 3.7.2.2): position = base +
 // sum of weight x displacement, with the node's weights overriding the mesh's. Exporters store the
-// displacements as sparse accessors, as one target is here.
+// displacements as sparse accessors, as one target is here, and an unused one as an accessor
+// without a bufferView, whose elements are zeros (section 3.6.2), as the third is here.
 TEST(MorphTargetFeature, PositionsAreTheBasePlusTheWeightedDisplacements) {
   Doc d;
   const int mat = d.material(glowing(plain_material(V(0.5))));
@@ -1062,12 +1063,14 @@ TEST(MorphTargetFeature, PositionsAreTheBasePlusTheWeightedDisplacements) {
   const std::vector<V> up = {V(0, 0, 0), V(0, 0, 0), V(0, 2, 0), V(0, 2, 0)};  // target 0: the top edge up by 2
   const int t0 = d.positions(up);
   const int t1 = sparse_vec3(d, 4, {1, 2}, {V(4, 0, 0), V(4, 0, 0)});        // target 1: the right edge out by 4
+  // Target 2: no bufferView, so zeros (gltf-transform writes an unused shape key so).
+  const int t2 = d.accessor({{"componentType", kFloat}, {"count", 4}, {"type", "VEC3"}});
   json prim = {{"attributes", {{"POSITION", d.positions(base)}}}, {"indices", d.indices({0, 1, 2, 0, 2, 3})}, {"material", mat},
-               {"targets", json::array({json{{"POSITION", t0}}, json{{"POSITION", t1}}})}};
+               {"targets", json::array({json{{"POSITION", t0}}, json{{"POSITION", t1}}, json{{"POSITION", t2}}})}};
   const int mesh = d.mesh(json::array({prim}));
-  d.gltf["meshes"][mesh]["weights"] = {0.5, 0.25};
+  d.gltf["meshes"][mesh]["weights"] = {0.5, 0.25, 1.0};
   d.node({{"mesh", mesh}});                                                     // the mesh's weights
-  d.node({{"mesh", mesh}, {"weights", {1.0, 0.0}}, {"translation", {0.0, 0.0, 3.0}}});  // its own
+  d.node({{"mesh", mesh}, {"weights", {1.0, 0.0, 0.7}}, {"translation", {0.0, 0.0, 3.0}}});  // its own
   const LoadResult r = load_gltf_memory(d.glb_bytes(), ".");
   ASSERT_TRUE(r.document) << r.error;
   std::vector<V> expected;
