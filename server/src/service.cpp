@@ -14,6 +14,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <set>
 #include <sstream>
 
 namespace hemibake::server {
@@ -41,6 +42,12 @@ Response error(int status, const std::string& message) {
   return r;
 }
 
+Response not_allowed(const std::string& allow) {
+  Response r = error(405, "use " + allow + " here");
+  r.headers.emplace_back("Allow", allow);
+  return r;
+}
+
 std::string percent_decode(const std::string& s) {
   std::string out;
   for (size_t i = 0; i < s.size(); ++i) {
@@ -55,6 +62,21 @@ std::string percent_decode(const std::string& s) {
     }
   }
   return out;
+}
+
+// The first parameter named twice in a query string, or empty.
+std::string repeated_name(const std::string& query) {
+  std::set<std::string> seen;
+  size_t start = 0;
+  while (start < query.size()) {
+    size_t end = query.find('&', start);
+    if (end == std::string::npos) end = query.size();
+    const std::string pair = query.substr(start, end - start);
+    const std::string name = percent_decode(pair.substr(0, pair.find('=')));
+    if (!pair.empty() && !seen.insert(name).second) return name;
+    start = end + 1;
+  }
+  return {};
 }
 
 // Constant-time comparison, so that response timing does not reveal how much of a token matched.
@@ -404,6 +426,8 @@ Response Service::job_json(const JobRecord& r, int status) {
 
 Response Service::submit(const Request& req, const std::string& query) {
   protocol::JobSpec spec;
+  // Which of two values was meant is not ours to guess.
+  if (const std::string twice = repeated_name(query); !twice.empty()) return error(400, "parameter " + twice + " is given twice");
   std::map<std::string, std::string> values = parse_query(query);
   std::string scene, content_type;
   const auto ct_it = req.headers.find("content-type");
@@ -561,25 +585,23 @@ Response Service::handle(const Request& req) {
   const size_t q = req.target.find('?');
   const std::string path = req.target.substr(0, q);
   const std::string query = q == std::string::npos ? "" : req.target.substr(q + 1);
+  const bool get = req.method == "GET";
+  if ((path == "/healthz" || path == "/readyz" || path == "/metrics" || path == "/openapi.json") && !get) return not_allowed("GET, HEAD");
   if (path == "/healthz") {
     Response r;
     r.body = R"({"status":"ok"})";
     return r;
   }
   if (path == "/readyz") return running_ ? Response{200, {}, R"({"status":"ready"})"} : error(503, "not ready");
-  if (path == "/metrics" && req.method == "GET") return metrics();
-  if (path == "/openapi.json" && req.method == "GET") {
+  if (path == "/metrics") return metrics();
+  if (path == "/openapi.json") {
     Response r;
     r.body = kOpenApi;
     return r;
   }
   if (path == "/v1/jobs") {
     if (req.method == "POST") return submit(req, query);
-    if (req.method != "GET") {
-      Response r = error(405, "use GET or POST on /v1/jobs");
-      r.headers.emplace_back("Allow", "GET, HEAD, POST");
-      return r;
-    }
+    if (req.method != "GET") return not_allowed("GET, HEAD, POST");
     const auto args = parse_query(query);
     std::optional<JobState> state;
     if (auto it = args.find("state"); it != args.end()) {
@@ -594,6 +616,8 @@ Response Service::handle(const Request& req) {
       limit = static_cast<size_t>(v);
     }
     const std::string after = args.count("after") ? args.at("after") : "";
+    // An unknown cursor would read as an empty last page.
+    if (!after.empty() && !store_->get(after)) return error(400, "no job " + after + " to page after (it may have expired); list again without 'after'");
     const auto jobs = store_->list(state, limit, after);
     json list = json::array();
     for (const auto& r : jobs) list.push_back(json::parse(job_json(r, 200).body));
@@ -625,9 +649,7 @@ Response Service::handle(const Request& req) {
         if (rec->state == JobState::kQueued) store_->add_event(id, "state", json{{"state", "cancelled"}}.dump());
         return job_json(*store_->get(id), 200);
       }
-      Response r = error(405, "use GET or DELETE on a job");
-      r.headers.emplace_back("Allow", "GET, HEAD, DELETE");
-      return r;
+      return not_allowed("GET, HEAD, DELETE");
     }
     if (sub == "result" && req.method == "GET") {
       if (rec->state != JobState::kSucceeded) {
@@ -653,6 +675,7 @@ Response Service::handle(const Request& req) {
       return r;
     }
     if (sub == "preview" && req.method == "GET") return preview(id);
+    if (sub == "result" || sub == "preview" || sub == "events") return not_allowed("GET");  // events: GET is the session's
     return error(404, "no such resource: " + path);
   }
   return error(404, "no such resource: " + path);

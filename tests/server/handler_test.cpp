@@ -58,6 +58,8 @@ TEST(Handler, AnswersWithoutANetwork) {
   EXPECT_EQ(put.status, 405);
   ASSERT_EQ(put.headers.size(), 1u);
   EXPECT_EQ(put.headers[0], std::make_pair(std::string("Allow"), std::string("GET, HEAD, POST")));
+  EXPECT_EQ(f.call("FROB", "/healthz").status, 405);
+  EXPECT_EQ(f.call("POST", "/metrics").status, 405);
   EXPECT_EQ(f.call("GET", "/v1/jobs?state=bogus").status, 400);
   EXPECT_EQ(f.call("GET", "/v1/jobs?limit=0").status, 400);
   const Response posted = f.call("POST", "/v1/jobs?convergence=0.2", cornell(), {{"content-type", "model/gltf+json"}});
@@ -75,6 +77,15 @@ TEST(Handler, AnswersWithoutANetwork) {
   EXPECT_EQ(result.content_type, "model/gltf-binary");
   // Query strings are decoded: a percent-encoded parameter name is still checked (7 is odd: refused).
   EXPECT_EQ(f.call("POST", "/v1/jobs?resolut%69on=7", cornell(), {{"content-type", "model/gltf+json"}}).status, 400);
+  // A parameter given twice is refused, not decided by its last value.
+  const Response twice = f.call("POST", "/v1/jobs?resolution=abc&resolut%69on=200", cornell(), {{"content-type", "model/gltf+json"}});
+  EXPECT_EQ(twice.status, 400);
+  EXPECT_EQ(json::parse(twice.body)["error"], "parameter resolution is given twice");
+  // A paging cursor naming no job is an error, not an empty last page.
+  EXPECT_EQ(f.call("GET", "/v1/jobs?after=" + id).status, 200);
+  EXPECT_EQ(f.call("GET", "/v1/jobs?after=nosuchjob").status, 400);
+  EXPECT_EQ(f.call("POST", "/v1/jobs/" + id + "/events").status, 405);
+  EXPECT_EQ(f.call("DELETE", "/v1/jobs/" + id + "/result").status, 405);
 }
 
 // A scene in which nothing emits would bake black: it is refused before it is queued, saying why.
