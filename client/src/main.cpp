@@ -401,6 +401,9 @@ int bake(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Lines as they happen, also into a pipe or a log file (a long bake's first lines would
+  // otherwise wait in the buffer until it ends).
+  std::setvbuf(stdout, nullptr, _IOLBF, 0);
   if (argc < 2 || std::strcmp(argv[1], "--help") == 0 || std::strcmp(argv[1], "-h") == 0) {
     usage(argc < 2 ? stderr : stdout);
     return argc < 2 ? 2 : 0;
