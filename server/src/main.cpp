@@ -5,6 +5,8 @@
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/signal_set.hpp>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -49,6 +51,13 @@ int main(int argc, char** argv) {
       usage(stdout);
       return 0;
     }
+    static const char* const kOptions[] = {"--listen", "--data", "--workers", "--solver-threads", "--tokens", "--max-body",
+                                           "--max-queue", "--max-streams", "--job-seconds", "--max-elements",
+                                           "--max-shot-cache-mb", "--max-triangles", "--max-attempts", "--expire-hours"};
+    if (std::find(std::begin(kOptions), std::end(kOptions), opt) == std::end(kOptions)) {
+      std::fprintf(stderr, "hemibake-server: unknown option '%s' (try --help)\n", opt.c_str());
+      return 2;
+    }
     if (i + 1 >= argc) {
       std::fprintf(stderr, "hemibake-server: %s needs a value\n", opt.c_str());
       return 2;
@@ -60,6 +69,14 @@ int main(int argc, char** argv) {
     auto need_num = [&]() {
       if (!is_num) {
         std::fprintf(stderr, "hemibake-server: %s needs a non-negative number (got '%s')\n", opt.c_str(), val.c_str());
+        std::exit(2);
+      }
+      return num;
+    };
+    // A count: a whole number up to `max` (a thread count of 1e12 would try to start them all).
+    auto need_count = [&](double max) {
+      if (!is_num || num != std::floor(num) || num > max) {
+        std::fprintf(stderr, "hemibake-server: %s needs a whole number from 0 to %.0f (got '%s')\n", opt.c_str(), max, val.c_str());
         std::exit(2);
       }
       return num;
@@ -78,17 +95,17 @@ int main(int argc, char** argv) {
       }
       ho.port = static_cast<unsigned short>(port);
     } else if (opt == "--data") so.data_dir = val;
-    else if (opt == "--workers") so.workers = static_cast<unsigned>(need_num());
-    else if (opt == "--solver-threads") so.solver_threads = static_cast<unsigned>(need_num());
+    else if (opt == "--workers") so.workers = static_cast<unsigned>(need_count(1024));
+    else if (opt == "--solver-threads") so.solver_threads = static_cast<unsigned>(need_count(1024));
     else if (opt == "--tokens") tokens_file = val;
-    else if (opt == "--max-body") so.max_body_bytes = ho.max_body_bytes = static_cast<uint64_t>(need_num());
-    else if (opt == "--max-queue") so.max_queue = static_cast<size_t>(need_num());
-    else if (opt == "--max-streams") ho.max_streams = static_cast<size_t>(need_num());
+    else if (opt == "--max-body") so.max_body_bytes = ho.max_body_bytes = static_cast<uint64_t>(need_count(1e15));
+    else if (opt == "--max-queue") so.max_queue = static_cast<size_t>(need_count(1e9));
+    else if (opt == "--max-streams") ho.max_streams = static_cast<size_t>(need_count(1e6));
     else if (opt == "--job-seconds") so.job_seconds = need_num();
-    else if (opt == "--max-elements") so.max_elements = static_cast<uint64_t>(need_num());
+    else if (opt == "--max-elements") so.max_elements = static_cast<uint64_t>(need_count(1e12));
     else if (opt == "--max-shot-cache-mb") so.max_shot_cache_mb = static_cast<uint32_t>(std::min(need_num(), 1048576.0));
-    else if (opt == "--max-triangles") so.max_triangles = static_cast<uint64_t>(need_num());
-    else if (opt == "--max-attempts") so.max_attempts = static_cast<int>(need_num());
+    else if (opt == "--max-triangles") so.max_triangles = static_cast<uint64_t>(need_count(1e12));
+    else if (opt == "--max-attempts") so.max_attempts = static_cast<int>(need_count(1e6));
     else if (opt == "--expire-hours") so.expire_seconds = need_num() * 3600.0;
     else {
       std::fprintf(stderr, "hemibake-server: unknown option '%s' (try --help)\n", opt.c_str());

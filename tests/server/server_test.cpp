@@ -581,6 +581,22 @@ TEST(Client, ServerThatIsNotHemibakeIsReportedClearly) {
   EXPECT_NE(out.find("404: no job"), std::string::npos) << out;
 }
 
+// Bad options: exit status 2 and one line naming the problem, before anything starts.
+TEST(Server, BadOptionsAreRefusedClearly) {
+  const std::string dir = temp_dir("options");
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"--bogus", "unknown option '--bogus'"},
+      {"--workers", "--workers needs a value"},
+      {"--workers 1e12", "--workers needs a whole number"},
+      {"--workers 0.5", "--workers needs a whole number"},
+      {"--max-streams -1", "--max-streams needs a whole number"}};
+  for (const auto& [options, message] : cases) {
+    const auto [status, out] = run("timeout 10 " + std::string(HEMIBAKE_SERVER) + " --listen 127.0.0.1:0 --data " + dir + " " + options);
+    EXPECT_EQ(status, 2) << options << ": " << out;
+    EXPECT_NE(out.find(message), std::string::npos) << options << ": " << out;
+  }
+}
+
 // Many clients at once, bounded in number and time: every request answered, no error.
 TEST(Server, ManyConcurrentClientsAndStreams) {
   ServerProcess server(temp_dir("load"), {"--workers", "2"});
