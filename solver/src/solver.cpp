@@ -228,6 +228,7 @@ struct Solver::Impl {
   void shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers, bool whole_scene);
   void shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bool whole_scene, int depth);
   std::vector<uint32_t> shoot_piece(const Piece& piece, std::vector<uint32_t> receivers, bool whole_scene);
+  bool absorber_close(const Piece& piece) const;
   void build_cluster(uint32_t id, uint32_t begin, uint32_t end);
   void build_clusters();
   void build_patch_tree(uint32_t node, uint32_t begin, uint32_t end);
@@ -663,6 +664,15 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
     });
   for (size_t i = 0; i < current.size(); ++i) (goes_near[i] ? near : accepted).push_back(current[i]);
   if (accepted.empty()) return near;
+  // A large absorbing back face close in front of the piece (a light panel's back, hung 1 cm under
+  // a ceiling piece) fills most of the hemicube at the piece's centre, while the piece's other
+  // points see past it: the centre's view would sink their light into it. Everything goes to the
+  // sub-pieces, whose own centres decide (on the furnished room, whose ceiling panels are such
+  // backs: energy 0.984 to 0.995 of the path tracer's, RMS error 4.3 % to 3.95 %).
+  if (piece.may_refine && absorber_close(piece)) {
+    near.insert(near.end(), accepted.begin(), accepted.end());
+    return near;
+  }
 
   // What the hemicube must see: every accepted receiver, and whatever may stand between one and
   // the piece. What may hide a receiver lies between the piece's centre and the receiver, so within the
@@ -1027,6 +1037,39 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   for (uint32_t e : accepted)
     if (f_recv[e] > 0.0) receive(e, dB, f_recv[e]);
   return near;
+}
+
+// Whether a patch whose back the piece's centre sees (one that absorbs: not back_hidden), in front
+// of the piece and within one of its diameters, takes at least about 0.1 sr of the centre's view.
+bool Solver::Impl::absorber_close(const Piece& piece) const {
+  const glm::dvec3& c = piece.centre;
+  const double r = piece.diameter;
+  const double eps = 1e-9 * prep.diagonal;
+  std::vector<uint32_t> nodes{0};
+  while (!nodes.empty()) {
+    const BoxNode& node = tree[nodes.back()];
+    nodes.pop_back();
+    const glm::dvec3 gap = glm::max(node.lo - c, glm::max(c - node.hi, glm::dvec3(0.0)));
+    if (glm::dot(gap, gap) > r * r) continue;
+    if (node.child != kNone) {
+      nodes.push_back(node.child);
+      nodes.push_back(node.child + 1);
+      continue;
+    }
+    for (uint32_t i = node.begin; i < node.end; ++i) {
+      const uint32_t q = tree_patch[i];
+      if (prep.back_hidden[q] || p_shooting[q] == shooting_stamp) continue;
+      if (glm::dot(prep.normal[q], c - patches[q].corners[0]) >= -eps) continue;  // not its back
+      const glm::dvec3 d = glm::max(p_lo[q] - c, glm::max(c - p_hi[q], glm::dvec3(0.0)));
+      const double d2 = glm::dot(d, d);
+      if (d2 > r * r) continue;
+      bool in_front = false;
+      for (uint32_t k = 0; k < patches[q].corner_count && !in_front; ++k)
+        in_front = glm::dot(piece.normal, patches[q].corners[k] - c) > eps;
+      if (in_front && prep.area[q] >= 0.1 * std::max(d2, eps * eps)) return true;
+    }
+  }
+  return false;
 }
 
 void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers,
