@@ -83,8 +83,8 @@ glm::dvec3 newell_normal(std::span<const glm::dvec3> p) {
 
 void GroupAdjacency::add(uint32_t a, uint32_t b) {
   if (a == b) return;
-  if (a > b) std::swap(a, b);
   keys_.push_back((static_cast<uint64_t>(a) << 32) | b);
+  keys_.push_back((static_cast<uint64_t>(b) << 32) | a);
 }
 
 void GroupAdjacency::finish() {
@@ -93,8 +93,14 @@ void GroupAdjacency::finish() {
 }
 
 bool GroupAdjacency::adjacent(uint32_t a, uint32_t b) const {
-  if (a > b) std::swap(a, b);
   return std::binary_search(keys_.begin(), keys_.end(), (static_cast<uint64_t>(a) << 32) | b);
+}
+
+std::span<const uint64_t> GroupAdjacency::neighbours(uint32_t a) const {
+  const uint64_t lo = static_cast<uint64_t>(a) << 32;
+  const auto b = std::lower_bound(keys_.begin(), keys_.end(), lo);
+  const auto e = std::lower_bound(b, keys_.end(), lo + (uint64_t{1} << 32));
+  return {keys_.data() + (b - keys_.begin()), static_cast<size_t>(e - b)};
 }
 
 Hemicube::Hemicube(uint32_t resolution) : n_(resolution) {
@@ -459,6 +465,7 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
     std::vector<std::pair<uint64_t, uint32_t>> by_group;  // (surface, fragment)
     std::vector<GroupSum> groups;
     std::vector<uint32_t> layers;
+    std::vector<uint32_t> rank;  // per group root: its place in `layers`
     for (size_t p = begin; p < end; ++p) {
       const uint32_t lo = pixel_start[p], hi = pixel_start[p + 1];
       if (lo == hi) continue;
@@ -547,13 +554,26 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
         while (groups[i].root != i) i = groups[i].root = groups[groups[i].root].root;
         return i;
       };
+      // A surface's neighbours are looked up among the pixel's (sorted) surfaces: linear in the
+      // surfaces, where testing every pair was quadratic (a pixel of a coarse near-field hemicube
+      // can hold hundreds of a finely tessellated sphere's facets).
+      auto index_of = [&](uint64_t id) -> int64_t {
+        const auto it = std::lower_bound(groups.begin(), groups.end(), id,
+                                         [](const GroupSum& g, uint64_t v) { return g.group < v; });
+        return it != groups.end() && it->group == id ? it - groups.begin() : -1;
+      };
+      bool any_back = false;
       if (!adjacency.empty() && groups.size() > 1) {
-        for (uint32_t i = 0; i < groups.size(); ++i)
-          for (uint32_t j = i + 1; j < groups.size(); ++j)
-            if (adjacent(groups[i].group, groups[j].group)) {
-              const uint32_t ri = find(i), rj = find(j);
-              if (ri != rj) groups[std::max(ri, rj)].root = std::min(ri, rj);
-            }
+        for (uint32_t i = 0; i < groups.size(); ++i) {
+          const uint64_t side = groups[i].group & ~uint64_t{0xffffffffu};
+          any_back = any_back || side != 0;
+          for (uint64_t key : adjacency.neighbours(static_cast<uint32_t>(groups[i].group))) {
+            const int64_t j = index_of(side | (key & 0xffffffffu));
+            if (j < 0) continue;
+            const uint32_t ri = find(i), rj = find(static_cast<uint32_t>(j));
+            if (ri != rj) groups[std::max(ri, rj)].root = std::min(ri, rj);
+          }
+        }
       }
       layers.clear();
       for (uint32_t i = 0; i < groups.size(); ++i) {
@@ -570,16 +590,23 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
         if (groups[a].inv_depth != groups[b].inv_depth) return groups[a].inv_depth > groups[b].inv_depth;
         return groups[a].group < groups[b].group;
       });
+      if (any_back) {
+        rank.assign(groups.size(), 0);
+        for (uint32_t li = 0; li < layers.size(); ++li) rank[layers[li]] = li;
+      }
       double f = 0.0;  // the paper's f_{k-1}: the pixel's fraction taken by nearer layers
       for (size_t li = 0; li < layers.size(); ++li) {
         GroupSum& g = groups[layers[li]];
         double t = 1.0 - f;
         // Folded behind a nearer layer of the other facing that shares an edge with it (above).
-        for (size_t m = 0; m < li && g.area > 0.0; ++m) {
-          const GroupSum& nearer = groups[layers[m]];
-          if ((g.group >> 32) != (nearer.group >> 32) &&
-              adjacent(g.group & 0xffffffffu, nearer.group & 0xffffffffu))
-            t = std::min(t, std::max(0.0, g.area - nearer.area) / g.area);
+        if (any_back && g.area > 0.0) {
+          const uint64_t other = (g.group & ~uint64_t{0xffffffffu}) ^ (uint64_t{1} << 32);
+          for (uint64_t key : adjacency.neighbours(static_cast<uint32_t>(g.group))) {
+            const int64_t j = index_of(other | (key & 0xffffffffu));
+            if (j < 0) continue;
+            const uint32_t r = find(static_cast<uint32_t>(j));
+            if (rank[r] < li) t = std::min(t, std::max(0.0, g.area - groups[r].area) / g.area);
+          }
         }
         // Overlapping pieces of one layer (sum > 1) share the pixel in proportion.
         g.trans = static_cast<float>(g.area > 1.0 ? t / g.area : t);

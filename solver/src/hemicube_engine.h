@@ -46,6 +46,8 @@ class GroupAdjacency {
   void add(uint32_t a, uint32_t b);
   void finish();  ///< call once after the last add()
   bool adjacent(uint32_t a, uint32_t b) const;
+  /// The groups adjacent to `a`, as keys (a << 32 | b) in increasing b.
+  std::span<const uint64_t> neighbours(uint32_t a) const;
   bool empty() const { return keys_.empty(); }
 
  private:

@@ -290,6 +290,7 @@ struct Solver::Impl {
   std::vector<uint32_t> tree_patch;
   std::vector<glm::dvec3> p_lo, p_hi;  // per patch: bounding box
   std::vector<uint64_t> p_mark;        // per patch: listed for hemicube `mark`
+  std::vector<uint32_t> p_surface;     // per patch: its surface for clustering (build_clusters)
   std::vector<uint64_t> p_shooting;    // per patch: part of the piece shooting hemicube `shooting_stamp`
   uint64_t shooting_stamp = 0;
 
@@ -621,6 +622,10 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
     if (prep.occlusion_group[q] == prep.occlusion_group[p]) return false;
     const glm::dvec3& nq = prep.normal[q];
     const glm::dvec3& oq = patches[q].corners[0];
+    // On a cluster's own curved surface, a receiver with the cluster's centroid behind its plane
+    // (a convex surface: a sphere's facets) sees none of the cluster. Without this every cluster
+    // of a 159k-facet sphere went down to single patches (526 659 hemicubes for 1303 shots).
+    if (piece.points.size() > 4 && p_surface[q] == p_surface[p] && glm::dot(nq, centre - oq) <= 0.0) return false;
     const bool within = glm::distance(centre, e_centre[e]) - e_radius[e] < kNearFactor * piece.diameter;
     if (!within) {
       // The piece's centre behind the receiver's plane, or just in front of it: the centre's
@@ -1225,6 +1230,8 @@ void Solver::Impl::build_clusters() {
       const uint32_t a = find(p), b = find(g);
       if (a != b) surface[std::max(a, b)] = std::min(a, b);
     }
+  p_surface.resize(patches.size());
+  for (uint32_t p = 0; p < patches.size(); ++p) p_surface[p] = find(p);
   std::map<std::pair<uint32_t, std::array<double, 3>>, std::vector<uint32_t>> groups;
   p_unit.assign(patches.size(), kNone);
   for (uint32_t p = 0; p < patches.size(); ++p) {
