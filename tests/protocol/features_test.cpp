@@ -694,9 +694,8 @@ TEST(DoubleSidedFeature, BothSidesAreLitLikeSingleSidedQuadsFacingEachLamp) {
 
 constexpr uint8_t kTexel[3] = {200, 120, 60};  // sRGB bytes
 
-std::vector<uint8_t> uniform_png() {
-  std::vector<uint8_t> pixels;
-  for (int i = 0; i < 4 * 4; ++i) pixels.insert(pixels.end(), {kTexel[0], kTexel[1], kTexel[2], 255});
+// A 4 x 4 RGBA image (row-major, 64 bytes) as PNG bytes.
+std::vector<uint8_t> png_4x4(const std::vector<uint8_t>& pixels) {
   std::vector<uint8_t> png;
   stbi_write_png_to_func(
       [](void* ctx, void* data, int size) {
@@ -705,6 +704,12 @@ std::vector<uint8_t> uniform_png() {
       },
       &png, 4, 4, 4, pixels.data(), 16);
   return png;
+}
+
+std::vector<uint8_t> uniform_png() {
+  std::vector<uint8_t> pixels;
+  for (int i = 0; i < 4 * 4; ++i) pixels.insert(pixels.end(), {kTexel[0], kTexel[1], kTexel[2], 255});
+  return png_4x4(pixels);
 }
 
 struct TexturedScene {
@@ -1151,14 +1156,7 @@ std::vector<uint8_t> halves_png() {
       const uint8_t* c = x < 2 ? kRed : kBlue;
       pixels.insert(pixels.end(), {c[0], c[1], c[2], 255});
     }
-  std::vector<uint8_t> png;
-  stbi_write_png_to_func(
-      [](void* ctx, void* data, int size) {
-        auto* out = static_cast<std::vector<uint8_t>*>(ctx);
-        out->insert(out->end(), static_cast<uint8_t*>(data), static_cast<uint8_t*>(data) + size);
-      },
-      &png, 4, 4, 4, pixels.data(), 16);
-  return png;
+  return png_4x4(pixels);
 }
 
 // KHR_texture_transform maps the stored UVs before sampling: uv' = T(offset) R(rotation) S(scale) uv
