@@ -602,6 +602,11 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   const double power = channel_sum(dB) * area;
   const glm::dvec3& centre = piece.centre;
 
+  // The piece's own patches: they stay out of its hemicube (a curved cluster's may stand in front
+  // of it) and are no absorbers in front of it (absorber_close).
+  ++shooting_stamp;
+  for (uint32_t e : piece.src) p_shooting[e_patch[e]] = shooting_stamp;
+
   // Receivers split by earlier pieces are replaced by their leaves.
   std::vector<uint32_t> current;
   current.reserve(receivers.size());
@@ -815,9 +820,6 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
     cube = finer_cube.get();
   }
   cube->place(centre, normal, piece.up);
-  // The piece's own patches stay out of its hemicube: a curved cluster's may stand in front of it.
-  ++shooting_stamp;
-  for (uint32_t e : piece.src) p_shooting[e_patch[e]] = shooting_stamp;
   project(seen);
   sum_form_factors(accepted);  // the occluders' own form factors are not needed
 
