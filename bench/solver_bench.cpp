@@ -2,8 +2,8 @@
 // cost of re-projecting against reusing the parent's pixels, and how the cost of one hemicube grows
 // with the number of elements. Each configuration runs in a child process so that its peak memory
 // is its own. Prints markdown tables (see bench/README.md).
-#include "hemibake/baselines/hierarchical.h"
 #include "hemibake/baselines/reference.h"
+#include "hemibake/protocol/bake.h"
 #include "hemibake/solver/scenes.h"
 #include "hemibake/solver/solver.h"
 
@@ -24,6 +24,7 @@
 namespace {
 
 using namespace hemibake::solver;
+using hemibake::protocol::JobSpec;
 
 struct Result {
   Stats stats;
@@ -139,41 +140,35 @@ struct Run {
   long peak_kib = 0;
 };
 
-// Runs `method` ("aa", "classical" or "hr") with `threads` on `scene` in a child process; the
-// error against the reference (`samples` paths per element) is measured after the clock stops.
-// With `repeats` > 1 the solve runs that many times and the fastest counts (this machine is shared).
+// Runs `method` ("aa", "classical" or "hr") with `threads` on `scene` in a child process, through
+// the bake pipeline with the settings of `base`; the error against the reference (`samples` paths
+// per element) is measured after the clock stops. With `repeats` > 1 the solve runs that many times
+// and the fastest counts (this machine is shared).
 Run run_method(const Scene& scene, const std::string& method, uint32_t threads, uint32_t samples,
-               const Params& base = {}, const hemibake::baselines::HierarchicalParams& hr_base = {},
-               uint32_t repeats = 1) {
+               const hemibake::protocol::JobSpec& base = {}, uint32_t repeats = 1) {
   long peak = 0;
   Run r = isolated_value<Run>(
       [&] {
         Run out;
         std::snprintf(out.method, sizeof out.method, "%s", method.c_str());
         out.threads = threads;
+        hemibake::protocol::JobSpec spec = base;
+        spec.method = *hemibake::protocol::method_from(method);
+        spec.params.threads = threads;
         Mesh mesh;
         out.seconds = 1e300;
         for (uint32_t rep = 0; rep < std::max(1u, repeats); ++rep) {
-          if (method == "hr") {
-            auto hp = hr_base;
-            hp.threads = threads;
-            hemibake::baselines::HierarchicalStats hs;
-            mesh = hemibake::baselines::solve_hierarchical(scene, hp, hs);
-            out.seconds = std::min(out.seconds, hs.seconds);
-            out.shots = hs.iterations;
-            out.links = hs.links;
+          auto s = hemibake::protocol::solve(scene, spec);
+          out.seconds = std::min(out.seconds, s.stats.seconds);
+          if (spec.method == hemibake::protocol::Method::kHierarchical) {
+            out.shots = s.hierarchical.iterations;
+            out.links = s.hierarchical.links;
           } else {
-            Params p = base;
-            p.method = method == "aa" ? Method::kAntiAliased : Method::kClassical;
-            p.threads = threads;
-            Solver solver(scene, p);
-            const Stats& st = solver.run();
-            out.seconds = std::min(out.seconds, st.seconds);
-            out.shots = st.shots;
-            out.hemicubes = st.hemicubes;
-            out.replayed = st.replayed_shots;
-            mesh = solver.mesh();
+            out.shots = s.stats.shots;
+            out.hemicubes = s.stats.hemicubes;
+            out.replayed = s.stats.replayed_shots;
           }
+          mesh = std::move(s.mesh);
         }
         out.elements = mesh.elements.size();
         if (samples > 0) out.error = error_of(scene, mesh, samples);
@@ -200,30 +195,26 @@ void print_run(const Run& r) {
   std::fflush(stdout);
 }
 
-Stats solve(const Scene& scene, const Params& params) {
-  Solver solver(scene, params);
-  return solver.run();
-}
+Stats solve_stats(const Scene& scene, const JobSpec& spec) { return hemibake::protocol::solve(scene, spec).stats; }
 
 // Equal quality: each method at several tolerances, error against the reference, time; prints the
 // time each needs to reach the best error both reach, and their ratio. A setting within 1 % of that
 // error counts as reaching it: errors closer than that are within the reference's own noise (two
 // hr settings on the room differed in the fourth decimal and picked a time twice as long).
-void sweep(const Scene& scene, const char* title, uint32_t samples, const std::vector<Params>& aa,
-           const std::vector<hemibake::baselines::HierarchicalParams>& hr, const std::vector<std::string>& labels,
-           uint32_t repeats) {
+void sweep(const Scene& scene, const char* title, uint32_t samples, const std::vector<JobSpec>& aa,
+           const std::vector<JobSpec>& hr, const std::vector<std::string>& labels, uint32_t repeats) {
   std::printf("## Equal quality (%s; all threads; error = RMS against the reference, its noise removed)\n\n", title);
   std::printf("| method | setting | time (s) | elements | links | error |\n|---|---|---|---|---|---|\n");
   std::vector<Run> runs;
   size_t label = 0;
-  for (const Params& p : aa) {
-    runs.push_back(run_method(scene, "aa", 0, samples, p, {}, repeats));
+  for (const JobSpec& spec : aa) {
+    runs.push_back(run_method(scene, "aa", 0, samples, spec, repeats));
     std::printf("| aa | %s | %.3f | %llu | | %.4f |\n", labels[label++].c_str(), runs.back().seconds,
                 static_cast<unsigned long long>(runs.back().elements), runs.back().error.rms_clean);
     std::fflush(stdout);
   }
-  for (const auto& hp : hr) {
-    runs.push_back(run_method(scene, "hr", 0, samples, {}, hp, repeats));
+  for (const JobSpec& spec : hr) {
+    runs.push_back(run_method(scene, "hr", 0, samples, spec, repeats));
     std::printf("| hr | %s | %.3f | %llu | %llu | %.4f |\n", labels[label++].c_str(), runs.back().seconds,
                 static_cast<unsigned long long>(runs.back().elements), static_cast<unsigned long long>(runs.back().links),
                 runs.back().error.rms_clean);
@@ -255,8 +246,7 @@ int main(int argc, char** argv) {
     // AEPS neither method subdivides (its patches are below 4 x AEPS), so what sets their accuracy
     // is aa's hemicube resolution and hr's visibility rays per link.
     const bool room = mode == "--sweep-room";
-    std::vector<Params> aa;
-    std::vector<hemibake::baselines::HierarchicalParams> hr;
+    std::vector<JobSpec> aa, hr;
     std::vector<std::string> labels;
     auto label = [&](const char* format, double v) {
       char text[64];
@@ -265,14 +255,14 @@ int main(int argc, char** argv) {
     };
     for (const double v : room ? std::vector<double>{50, 100, 140, 200} : std::vector<double>{0.1, 0.03, 0.01}) {
       aa.emplace_back();
-      if (room) aa.back().resolution = static_cast<uint32_t>(v);
-      else aa.back().beps = v;
+      if (room) aa.back().params.resolution = static_cast<uint32_t>(v);
+      else aa.back().params.beps = v;
       label(room ? "resolution %g" : "beps %g", v);
     }
     for (const double v : room ? std::vector<double>{1, 4, 8, 16} : std::vector<double>{0.01, 0.003, 0.001}) {
       hr.emplace_back();
       if (room) hr.back().rays = static_cast<uint32_t>(v);
-      else hr.back().feps = v;
+      else hr.back().params.feps = v;
       label(room ? "%g rays per link" : "FEPS %g", v);
     }
     if (room) sweep(make_furnished_room(), "furnished room, 6758 patches", 256, aa, hr, labels, 2);
@@ -287,13 +277,13 @@ int main(int argc, char** argv) {
                 room.patches.size());
     print_runs_header();
     for (const char* m : {"aa", "classical", "hr"}) print_run(run_method(room, m, 0, 256));
-    Params fresh;
-    fresh.shot_cache_mb = 0;
+    JobSpec fresh;
+    fresh.params.shot_cache_mb = 0;
     Run r = run_method(room, "aa", 0, 256, fresh);
     std::snprintf(r.method, sizeof r.method, "aa, no replays");
     print_run(r);
-    Params alone;
-    alone.cluster_size = 0.0;
+    JobSpec alone;
+    alone.params.cluster_size = 0.0;
     r = run_method(room, "aa", 0, 256, alone);
     std::snprintf(r.method, sizeof r.method, "aa, no clusters");
     print_run(r);
@@ -328,22 +318,23 @@ int main(int argc, char** argv) {
               "peak memory (MB) |\n");
   std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   struct Config {
-    Method method;
+    hemibake::protocol::Method method;
     bool reuse;
     uint32_t threads;
   };
+  using hemibake::protocol::Method;
   const std::vector<Config> configs{{Method::kAntiAliased, true, 0},  {Method::kAntiAliased, true, 1},
                                     {Method::kAntiAliased, false, 0}, {Method::kClassical, true, 0},
                                     {Method::kClassical, false, 0}};
   for (const Config& c : configs) {
-    Params p;
-    p.method = c.method;
-    p.reuse_visibility = c.reuse;
-    p.threads = c.threads;
-    const Result r = isolated([&] { return solve(cornell, p); });
+    JobSpec spec;
+    spec.method = c.method;
+    spec.params.reuse_visibility = c.reuse;
+    spec.params.threads = c.threads;
+    const Result r = isolated([&] { return solve_stats(cornell, spec); });
     const Stats& s = r.stats;
     std::printf("| %s | %s | %s | %.3f | %llu | %llu | %llu | %llu | %llu | %llu | %llu | %.3f | %.3f | %.1f |\n",
-                c.method == Method::kAntiAliased ? "aa" : "classical",
+                to_string(c.method),
                 c.reuse ? "reused from parent" : "re-projected", c.threads == 0 ? "all" : "1", s.seconds,
                 static_cast<unsigned long long>(s.shots), static_cast<unsigned long long>(s.replayed_shots),
                 static_cast<unsigned long long>(s.hemicubes),
@@ -360,11 +351,11 @@ int main(int argc, char** argv) {
               samples);
   print_runs_header();
   const uint32_t repeats = quick ? 1 : 3;
-  print_run(run_method(cornell, "aa", 0, samples, {}, {}, repeats));
-  print_run(run_method(cornell, "aa", 1, samples, {}, {}, repeats));
-  print_run(run_method(cornell, "classical", 0, samples, {}, {}, repeats));
-  print_run(run_method(cornell, "hr", 0, samples, {}, {}, repeats));
-  print_run(run_method(cornell, "hr", 1, samples, {}, {}, repeats));
+  print_run(run_method(cornell, "aa", 0, samples, {}, repeats));
+  print_run(run_method(cornell, "aa", 1, samples, {}, repeats));
+  print_run(run_method(cornell, "classical", 0, samples, {}, repeats));
+  print_run(run_method(cornell, "hr", 0, samples, {}, repeats));
+  print_run(run_method(cornell, "hr", 1, samples, {}, repeats));
 
   std::printf("\n## Cost of one hemicube against elements (closed box, no subdivision, aa, all threads)\n\n");
   std::printf("| elements | hemicubes | time per hemicube (ms) | time per hemicube per 1000 elements (ms) |\n");
@@ -372,13 +363,13 @@ int main(int argc, char** argv) {
   for (uint32_t cells : {4u, 8u, 16u, 32u, 64u}) {
     if (quick && cells > 16) break;
     const Scene box = make_closed_box(1.0, cells, glm::dvec3(0.5), glm::dvec3(1.0), false);
-    Params p;
-    p.aeps = 0.5;  // nothing splits: the element count stays fixed
-    p.cluster_size = 0.0;  // every patch shoots alone: one whole-scene hemicube per shot
-    p.max_shots = 40;
-    p.shooter_size = 10.0;
-    p.shot_cache_mb = 0;  // every shot projects
-    const Result r = isolated([&] { return solve(box, p); });
+    JobSpec spec;
+    spec.params.aeps = 0.5;  // nothing splits: the element count stays fixed
+    spec.params.cluster_size = 0.0;  // every patch shoots alone: one whole-scene hemicube per shot
+    spec.params.max_shots = 40;
+    spec.params.shooter_size = 10.0;
+    spec.params.shot_cache_mb = 0;  // every shot projects
+    const Result r = isolated([&] { return solve_stats(box, spec); });
     const double per = r.stats.seconds / static_cast<double>(r.stats.hemicubes) * 1e3;
     std::printf("| %llu | %llu | %.3f | %.4f |\n", static_cast<unsigned long long>(r.stats.elements),
                 static_cast<unsigned long long>(r.stats.hemicubes), per,

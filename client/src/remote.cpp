@@ -1,4 +1,4 @@
-#include "remote.h"
+#include "hemibake/client/remote.h"
 
 #include <boost/asio/connect.hpp>
 #include <boost/asio/ip/tcp.hpp>
@@ -65,28 +65,28 @@ Reply call(const Remote& r, http::verb verb, const std::string& target, const st
 }
 
 // Prints the server's error for a failed call; returns the exit status 1.
-int report(const Remote& r, const Reply& reply) {
+int report(const Remote& r, const Reply& reply, const Console& c) {
   if (!reply.error.empty()) {
-    std::fprintf(stderr, "hemibake: %s\n", reply.error.c_str());
+    std::fprintf(c.err, "hemibake: %s\n", reply.error.c_str());
     return 1;
   }
   const json j = json::parse(reply.body, nullptr, false);
   if (!j.is_object() || !j.contains("error") || !j["error"].is_string()) {
     // Not one of ours (a proxy, another web server): its page would only bury the point.
-    std::fprintf(stderr, "hemibake: the server at %s:%s answered %d without a hemibake error; is it a hemibake-server?\n",
+    std::fprintf(c.err, "hemibake: the server at %s:%s answered %d without a hemibake error; is it a hemibake-server?\n",
                  r.host.c_str(), r.port.c_str(), reply.status);
     return 1;
   }
-  std::fprintf(stderr, "hemibake: the server answered %d: %s%s\n", reply.status, j["error"].get<std::string>().c_str(),
+  std::fprintf(c.err, "hemibake: the server answered %d: %s%s\n", reply.status, j["error"].get<std::string>().c_str(),
                reply.status == 401 ? " (set HEMIBAKE_TOKEN)" : "");
   return 1;
 }
 
 // A 200 answer's JSON object, or null after saying that the server is not a hemibake-server.
-json answer_json(const Remote& r, const Reply& reply) {
+json answer_json(const Remote& r, const Reply& reply, const Console& c) {
   json j = json::parse(reply.body, nullptr, false);
   if (j.is_object()) return j;
-  std::fprintf(stderr, "hemibake: the server at %s:%s did not answer with JSON; is it a hemibake-server?\n", r.host.c_str(),
+  std::fprintf(c.err, "hemibake: the server at %s:%s did not answer with JSON; is it a hemibake-server?\n", r.host.c_str(),
                r.port.c_str());
   return nullptr;
 }
@@ -117,24 +117,6 @@ std::string query_of(const protocol::JobSpec& spec) {
   return q;
 }
 
-void progress_line(const json& p, bool tty) {
-  if (!tty) return;
-  const std::string phase = p.value("phase", "shooting");
-  const double u = p.value("unshot_fraction", 1.0);
-  const double done = std::clamp(p.value("fraction", u > 0.0 ? std::log10(1.0 / u) / 3.0 : 1.0), 0.0, 1.0);
-  const int width = 24, filled = static_cast<int>(done * width);
-  const double eta = p.value("eta_seconds", -1.0);
-  if (phase != "shooting" && phase != "done") {
-    std::fprintf(stderr, "\r  [%.*s%*s] %-9s %5.1f %%  %6.1f s%40s", filled, "########################", width - filled, "",
-                 phase.c_str(), 100.0 * done, p.value("elapsed_seconds", 0.0), "");
-    return;
-  }
-  std::fprintf(stderr, "\r  [%.*s%*s] shots %6llu  unshot %8.5f  elements %7llu  %6.1f s%s", filled,
-               "########################", width - filled, "", static_cast<unsigned long long>(p.value("shots", 0)),
-               u, static_cast<unsigned long long>(p.value("elements", 0)), p.value("elapsed_seconds", 0.0),
-               eta >= 0 ? ("  ~" + std::to_string(static_cast<int>(eta)) + " s left ").c_str() : "          ");
-}
-
 }  // namespace
 
 std::string parse_server(const std::string& url, Remote& out) {
@@ -151,10 +133,11 @@ std::string parse_server(const std::string& url, Remote& out) {
   return {};
 }
 
-int remote_submit(const Remote& r, const std::string& path, const protocol::JobSpec& spec, std::string* id_out) {
+int remote_submit(const Remote& r, const std::string& path, const protocol::JobSpec& spec, const Console& c,
+                  std::string* id_out) {
   std::ifstream in(path, std::ios::binary);
   if (!in) {
-    std::fprintf(stderr, "hemibake: cannot read %s\n", path.c_str());
+    std::fprintf(c.err, "hemibake: cannot read %s\n", path.c_str());
     return 1;
   }
   std::ostringstream data;
@@ -162,27 +145,27 @@ int remote_submit(const Remote& r, const std::string& path, const protocol::JobS
   const std::string bytes = data.str();
   const bool glb = bytes.size() >= 4 && bytes.compare(0, 4, "glTF") == 0;
   const Reply reply = call(r, http::verb::post, "/v1/jobs" + query_of(spec), bytes, glb ? "model/gltf-binary" : "model/gltf+json");
-  if (reply.status != 202 && reply.status != 200) return report(r, reply);
-  const json j = answer_json(r, reply);
+  if (reply.status != 202 && reply.status != 200) return report(r, reply, c);
+  const json j = answer_json(r, reply, c);
   if (j.is_null()) return 1;
   const std::string id = j.value("id", "");
   if (id_out) *id_out = id;
-  else std::printf("%s\n", id.c_str());
-  if (reply.headers.count("X-Hemibake-Cache")) std::fprintf(stderr, "hemibake: answered from the server's cache\n");
+  else std::fprintf(c.out, "%s\n", id.c_str());
+  if (reply.headers.count("X-Hemibake-Cache")) std::fprintf(c.err, "hemibake: answered from the server's cache\n");
   return 0;
 }
 
-int remote_status(const Remote& r, const std::string& id) {
+int remote_status(const Remote& r, const std::string& id, const Console& c) {
   const Reply reply = call(r, http::verb::get, job_path(id));
-  if (reply.status != 200) return report(r, reply);
-  const json j = answer_json(r, reply);
+  if (reply.status != 200) return report(r, reply, c);
+  const json j = answer_json(r, reply, c);
   if (j.is_null()) return 1;
-  std::printf("%s\n", j.dump(2).c_str());
+  std::fprintf(c.out, "%s\n", j.dump(2).c_str());
   return 0;
 }
 
-int remote_watch(const Remote& r, const std::string& id) {
-  const bool tty = isatty(STDERR_FILENO);
+int remote_watch(const Remote& r, const std::string& id, const Console& c) {
+  ProgressPrinter printer(c);
   std::string state;
   try {
     net::io_context io;
@@ -209,7 +192,7 @@ int remote_watch(const Remote& r, const std::string& id) {
             Reply reply;
             reply.status = std::atoi(pending.c_str() + 9);
             reply.body = pending.substr(body);
-            return report(r, reply);
+            return report(r, reply, c);
           }
           pending = pending.substr(end + 4);
           header_done = true;
@@ -225,82 +208,85 @@ int remote_watch(const Remote& r, const std::string& id) {
           else if (line.rfind("data: ", 0) == 0) data = line.substr(6);
         }
         const json j = json::parse(data, nullptr, false);
-        if (type == "progress") progress_line(j, tty);
+        if (type == "progress") {
+          if (const auto p = protocol::parse_progress_json(data)) printer.update(*p);
+        }
         if (type == "state" && j.is_object()) {
           state = j.value("state", "");
           if (state == "failed") {
-            if (tty) std::fputs("\n", stderr);
-            std::fprintf(stderr, "hemibake: the bake failed: %s\n", j.value("error", "").c_str());
+            printer.finish();
+            std::fprintf(c.err, "hemibake: the bake failed: %s\n", j.value("error", "").c_str());
           }
         }
       }
       if (ec) break;
     }
   } catch (const boost::system::system_error& e) {
-    std::fprintf(stderr, "hemibake: cannot reach the server at %s:%s: %s\n", r.host.c_str(), r.port.c_str(),
+    std::fprintf(c.err, "hemibake: cannot reach the server at %s:%s: %s\n", r.host.c_str(), r.port.c_str(),
                  e.code().message().c_str());
     return 1;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "hemibake: cannot follow job %s: %s\n", id.c_str(), e.what());
+    std::fprintf(c.err, "hemibake: cannot follow job %s: %s\n", id.c_str(), e.what());
     return 1;
   }
-  if (tty) std::fputs("\n", stderr);
+  printer.finish();
   // The stream ends after the final state; read it back to be sure of it.
   const Reply reply = call(r, http::verb::get, job_path(id));
-  if (reply.status != 200) return report(r, reply);
-  const json j = answer_json(r, reply);
+  if (reply.status != 200) return report(r, reply, c);
+  const json j = answer_json(r, reply, c);
   if (j.is_null()) return 1;
   state = j.value("state", "");
-  std::fprintf(stderr, "hemibake: job %s %s\n", id.c_str(), state.c_str());
+  std::fprintf(c.err, "hemibake: job %s %s\n", id.c_str(), state.c_str());
   return state == "succeeded" ? 0 : 1;
 }
 
-int remote_fetch(const Remote& r, const std::string& id, const std::string& out_path) {
+int remote_fetch(const Remote& r, const std::string& id, const std::string& out_path, const Console& c) {
   const Reply reply = call(r, http::verb::get, job_path(id) + "/result");
-  if (reply.status != 200) return report(r, reply);
+  if (reply.status != 200) return report(r, reply, c);
   if (reply.body.compare(0, 4, "glTF") != 0) {
-    std::fprintf(stderr, "hemibake: the server at %s:%s did not answer with a GLB; is it a hemibake-server?\n", r.host.c_str(),
+    std::fprintf(c.err, "hemibake: the server at %s:%s did not answer with a GLB; is it a hemibake-server?\n", r.host.c_str(),
                  r.port.c_str());
     return 1;
   }
   std::ofstream out(out_path, std::ios::binary);
   if (!out.write(reply.body.data(), static_cast<std::streamsize>(reply.body.size())) || !out.flush()) {
-    std::fprintf(stderr, "hemibake: cannot write %s\n", out_path.c_str());
+    std::fprintf(c.err, "hemibake: cannot write %s\n", out_path.c_str());
     return 1;
   }
-  std::printf("wrote %s (%zu bytes)\n", out_path.c_str(), reply.body.size());
+  std::fprintf(c.out, "wrote %s (%zu bytes)\n", out_path.c_str(), reply.body.size());
   return 0;
 }
 
-int remote_cancel(const Remote& r, const std::string& id) {
+int remote_cancel(const Remote& r, const std::string& id, const Console& c) {
   const Reply reply = call(r, http::verb::delete_, job_path(id));
-  if (reply.status != 200) return report(r, reply);
-  if (answer_json(r, reply).is_null()) return 1;
-  std::printf("job %s cancelled\n", id.c_str());
+  if (reply.status != 200) return report(r, reply, c);
+  if (answer_json(r, reply, c).is_null()) return 1;
+  std::fprintf(c.out, "job %s cancelled\n", id.c_str());
   return 0;
 }
 
-int remote_list(const Remote& r, const std::string& state) {
+int remote_list(const Remote& r, const std::string& state, const Console& c) {
   std::string target = "/v1/jobs?limit=100" + (state.empty() ? std::string() : "&state=" + state);
   const Reply reply = call(r, http::verb::get, target);
-  if (reply.status != 200) return report(r, reply);
-  const json j = answer_json(r, reply);
+  if (reply.status != 200) return report(r, reply, c);
+  const json j = answer_json(r, reply, c);
   if (j.is_null()) return 1;
-  if (!j.contains("jobs") || !j["jobs"].is_array()) return report(r, reply);
+  if (!j.contains("jobs") || !j["jobs"].is_array()) return report(r, reply, c);
   for (const auto& job : j["jobs"]) {
     const double u = job.contains("progress") ? job["progress"].value("unshot_fraction", 1.0) : 1.0;
-    std::printf("%s  %-9s  unshot %.5f  %s\n", job["id"].get<std::string>().c_str(), job["state"].get<std::string>().c_str(),
+    std::fprintf(c.out, "%s  %-9s  unshot %.5f  %s\n", job["id"].get<std::string>().c_str(), job["state"].get<std::string>().c_str(),
                 u, job.value("error", "").c_str());
   }
   return 0;
 }
 
-int remote_bake(const Remote& r, const std::string& in, const std::string& out, const protocol::JobSpec& spec) {
+int remote_bake(const Remote& r, const std::string& in, const std::string& out, const protocol::JobSpec& spec,
+                const Console& c) {
   std::string id;
-  if (int rc = remote_submit(r, in, spec, &id); rc != 0) return rc;
-  std::fprintf(stderr, "hemibake: job %s\n", id.c_str());
-  if (int rc = remote_watch(r, id); rc != 0) return rc;
-  return remote_fetch(r, id, out);
+  if (int rc = remote_submit(r, in, spec, c, &id); rc != 0) return rc;
+  std::fprintf(c.err, "hemibake: job %s\n", id.c_str());
+  if (int rc = remote_watch(r, id, c); rc != 0) return rc;
+  return remote_fetch(r, id, out, c);
 }
 
 }  // namespace hemibake::client

@@ -1,4 +1,4 @@
-#include "render.h"
+#include "hemibake/client/render.h"
 
 #include <glm/geometric.hpp>
 #include <zlib.h>

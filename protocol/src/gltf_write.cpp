@@ -115,8 +115,8 @@ glm::dmat4 world_to_node(const glm::dmat4& world) {
 
 }  // namespace
 
-WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, const solver::Params& params,
-                            const solver::Stats& stats, const WriteOptions& options) {
+WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, Method method,
+                            const solver::Params& params, const solver::Stats& stats, const WriteOptions& options) {
   WriteResult result;
   const tinygltf::Model& in = doc.model;
   const solver::Scene& scene = doc.scene;
@@ -406,8 +406,7 @@ WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, 
 
   // How it was made.
   Value::Object p;
-  p["method"] = Value(!options.method.empty() ? options.method
-                                               : std::string(params.method == solver::Method::kAntiAliased ? "aa" : "classical"));
+  p["method"] = Value(std::string(to_string(method)));
   p["resolution"] = Value(static_cast<int>(params.resolution));
   p["feps"] = Value(params.feps);
   p["aeps"] = Value(params.aeps);

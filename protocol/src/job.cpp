@@ -3,10 +3,77 @@
 #include <nlohmann/json.hpp>
 
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 
 namespace hemibake::protocol {
 namespace {
+
+using Kind = ParamInfo::Kind;
+
+// The table. Limits are the wire's and the command line's alike; what one number cannot bound
+// (an even resolution, feps > 0) the solver's validate() checks after.
+constexpr double kNoLimit = 1e300;
+const ParamInfo kParams[] = {
+    {"method", "method", Kind::kMethod, 0, 3,
+     "aa (anti-aliased hemicube), classical, hr (hierarchical radiosity) or reference (path-traced)",
+     [](const JobSpec& s) { return static_cast<double>(s.method); },
+     [](JobSpec& s, double v) { s.method = static_cast<Method>(v); }},
+    {"resolution", "resolution", Kind::kWhole, 4, 4096, "hemicube top face in pixels (even)",
+     [](const JobSpec& s) { return static_cast<double>(s.params.resolution); },
+     [](JobSpec& s, double v) { s.params.resolution = static_cast<uint32_t>(v); }},
+    {"feps", "feps", Kind::kNumber, 0, kNoLimit, "form-factor tolerance (splits by form factor)",
+     [](const JobSpec& s) { return s.params.feps; }, [](JobSpec& s, double v) { s.params.feps = v; }},
+    {"aeps", "aeps", Kind::kNumber, 0, 1, "smallest element area, as a fraction of the scene's area",
+     [](const JobSpec& s) { return s.params.aeps; }, [](JobSpec& s, double v) { s.params.aeps = v; }},
+    {"beps", "beps", Kind::kNumber, 0, kNoLimit, "radiosity tolerance (splits at jumps across an element)",
+     [](const JobSpec& s) { return s.params.beps; }, [](JobSpec& s, double v) { s.params.beps = v; }},
+    {"convergence", "convergence", Kind::kNumber, 0, 1, "stop when unshot power is below this fraction of the emitted",
+     [](const JobSpec& s) { return s.params.convergence; }, [](JobSpec& s, double v) { s.params.convergence = v; }},
+    {"max_shots", "max-shots", Kind::kWhole, 0, static_cast<double>(1ull << 40), "stop after this many shots",
+     [](const JobSpec& s) { return static_cast<double>(s.params.max_shots); },
+     [](JobSpec& s, double v) { s.params.max_shots = static_cast<uint64_t>(v); }},
+    {"max_elements", "max-elements", Kind::kWhole, 1, static_cast<double>(1ull << 32), "no splits past this many elements",
+     [](const JobSpec& s) { return static_cast<double>(s.params.max_elements); },
+     [](JobSpec& s, double v) { s.params.max_elements = static_cast<uint64_t>(v); }},
+    {"threads", "threads", Kind::kWhole, 0, 1024, "threads (0: all cores; a server sets its own)",
+     [](const JobSpec& s) { return static_cast<double>(s.params.threads); },
+     [](JobSpec& s, double v) { s.params.threads = static_cast<uint32_t>(v); }},
+    {"reuse", "reuse", Kind::kFlag, 0, 1, "children take visibility from their parent's pixels (off: re-project the scene)",
+     [](const JobSpec& s) { return s.params.reuse_visibility ? 1.0 : 0.0; },
+     [](JobSpec& s, double v) { s.params.reuse_visibility = v != 0.0; }},
+    {"cluster_size", "cluster-size", Kind::kNumber, 0, kNoLimit,
+     "small patches shoot together in clusters up to this times the scene's diagonal wide (0: alone)",
+     [](const JobSpec& s) { return s.params.cluster_size; }, [](JobSpec& s, double v) { s.params.cluster_size = v; }},
+    {"shot_cache_mb", "shot-cache-mb", Kind::kWhole, 0, 1 << 20, "memory for replaying a shooter's earlier form factors (0: off)",
+     [](const JobSpec& s) { return static_cast<double>(s.params.shot_cache_mb); },
+     [](JobSpec& s, double v) { s.params.shot_cache_mb = static_cast<uint32_t>(v); }},
+    {"rays", "rays", Kind::kWhole, 1, 1024, "hr: visibility rays per link",
+     [](const JobSpec& s) { return static_cast<double>(s.rays); },
+     [](JobSpec& s, double v) { s.rays = static_cast<uint32_t>(v); }},
+    {"samples", "samples", Kind::kWhole, 1, 1 << 20, "reference: paths per vertex",
+     [](const JobSpec& s) { return static_cast<double>(s.samples); },
+     [](JobSpec& s, double v) { s.samples = static_cast<uint32_t>(v); }},
+    {"draco", "draco", Kind::kFlag, 0, 1, "KHR_draco_mesh_compression (off: plain accessors)",
+     [](const JobSpec& s) { return s.write.draco ? 1.0 : 0.0; }, [](JobSpec& s, double v) { s.write.draco = v != 0.0; }},
+    {"position_bits", "position-bits", Kind::kWhole, 0, 30, "Draco position quantization (0: lossless)",
+     [](const JobSpec& s) { return static_cast<double>(s.write.position_bits); },
+     [](JobSpec& s, double v) { s.write.position_bits = static_cast<int>(v); }},
+    {"texcoord_bits", "texcoord-bits", Kind::kWhole, 0, 30, "Draco texture coordinate quantization (0: lossless)",
+     [](const JobSpec& s) { return static_cast<double>(s.write.texcoord_bits); },
+     [](JobSpec& s, double v) { s.write.texcoord_bits = static_cast<int>(v); }},
+    {"draco_speed", "draco-speed", Kind::kWhole, 0, 10, "Draco encode and decode speed (0: smallest file, 10: fastest)",
+     [](const JobSpec& s) { return static_cast<double>(s.write.encode_speed); },
+     [](JobSpec& s, double v) { s.write.encode_speed = s.write.decode_speed = static_cast<int>(v); }},
+    {"exposure", "exposure", Kind::kNumber, 0, kNoLimit, "radiosity scale for COLOR_0 (0: chosen from the scene)",
+     [](const JobSpec& s) { return s.write.exposure; }, [](JobSpec& s, double v) { s.write.exposure = v; }},
+    {"shooter_size", "shooter-size", Kind::kNumber, 0, kNoLimit,
+     "a patch shoots from sub-areas no wider than this times the scene's diagonal",
+     [](const JobSpec& s) { return s.params.shooter_size; }, [](JobSpec& s, double v) { s.params.shooter_size = v; }},
+    {"color_bits", "color-bits", Kind::kWhole, 0, 30, "Draco colour quantization (0: lossless)",
+     [](const JobSpec& s) { return static_cast<double>(s.write.color_bits); },
+     [](JobSpec& s, double v) { s.write.color_bits = static_cast<int>(v); }},
+};
 
 bool number(const std::string& text, double& out) {
   char* end = nullptr;
@@ -14,120 +81,101 @@ bool number(const std::string& text, double& out) {
   return !text.empty() && end == text.c_str() + text.size() && std::isfinite(out);
 }
 
-bool whole(const std::string& text, uint64_t max, uint64_t& out) {
-  double x;
-  if (!number(text, x) || x < 0 || x > static_cast<double>(max) || x != std::floor(x)) return false;
-  out = static_cast<uint64_t>(x);
-  return true;
+bool flag(const std::string& text, double& out) {
+  if (text == "true" || text == "1" || text == "yes") return out = 1.0, true;
+  if (text == "false" || text == "0" || text == "no") return out = 0.0, true;
+  return false;
 }
 
-bool flag(const std::string& text, bool& out) {
-  if (text == "true" || text == "1" || text == "yes") return out = true, true;
-  if (text == "false" || text == "0" || text == "no") return out = false, true;
-  return false;
+std::string shortest(double x) {
+  char buf[64];
+  if (x == std::floor(x) && std::abs(x) < 1e15) {
+    std::snprintf(buf, sizeof buf, "%.0f", x);
+    return buf;
+  }
+  std::snprintf(buf, sizeof buf, "%.17g", x);
+  for (int digits = 1; digits < 17; ++digits) {
+    char shorter[64];
+    std::snprintf(shorter, sizeof shorter, "%.*g", digits, x);
+    if (std::strtod(shorter, nullptr) == x) return shorter;
+  }
+  return buf;
 }
 
 }  // namespace
 
-std::string apply_params(const std::map<std::string, std::string>& values, JobSpec& spec) {
-  solver::Params& p = spec.params;
-  WriteOptions& w = spec.write;
-  for (const auto& [key, value] : values) {
-    double x = 0.0;
-    uint64_t n = 0;
-    bool b = false;
-    bool ok = true;
-    if (key == "method") {
-      // hr and reference keep params.method: reference bakes the aa (or classical) mesh first.
-      if (value == "aa" || value == "classical") {
-        p.method = value == "aa" ? solver::Method::kAntiAliased : solver::Method::kClassical;
-        w.method.clear();
-      } else if (value == "hr" || value == "reference") {
-        p.method = solver::Method::kAntiAliased;
-        w.method = value;
-      } else {
-        return "method must be aa, classical, hr or reference (got '" + value + "')";
-      }
-    } else if (key == "resolution") {
-      ok = whole(value, 4096, n);
-      p.resolution = static_cast<uint32_t>(n);
-    } else if (key == "feps") {
-      ok = number(value, p.feps);
-    } else if (key == "aeps") {
-      ok = number(value, p.aeps);
-    } else if (key == "beps") {
-      ok = number(value, p.beps);
-    } else if (key == "convergence") {
-      ok = number(value, p.convergence);
-    } else if (key == "max_shots") {
-      ok = whole(value, 1ull << 40, n);
-      p.max_shots = n;
-    } else if (key == "max_elements") {
-      ok = whole(value, 1ull << 32, n);
-      p.max_elements = n;
-    } else if (key == "threads") {
-      ok = whole(value, 1024, n);
-      p.threads = static_cast<uint32_t>(n);
-    } else if (key == "reuse") {
-      ok = flag(value, b);
-      p.reuse_visibility = b;
-    } else if (key == "cluster_size") {
-      ok = number(value, p.cluster_size);
-    } else if (key == "shot_cache_mb") {
-      ok = whole(value, 1u << 20, n);
-      p.shot_cache_mb = static_cast<uint32_t>(n);
-    } else if (key == "rays") {
-      ok = whole(value, 1024, n) && n >= 1;
-      spec.rays = static_cast<uint32_t>(n);
-    } else if (key == "samples") {
-      ok = whole(value, 1u << 20, n) && n >= 1;
-      spec.samples = static_cast<uint32_t>(n);
-    } else if (key == "draco") {
-      ok = flag(value, b);
-      w.draco = b;
-    } else if (key == "position_bits") {
-      ok = whole(value, 30, n);
-      w.position_bits = static_cast<int>(n);
-    } else if (key == "texcoord_bits") {
-      ok = whole(value, 30, n);
-      w.texcoord_bits = static_cast<int>(n);
-    } else if (key == "draco_speed") {
-      ok = whole(value, 10, n);
-      w.encode_speed = w.decode_speed = static_cast<int>(n);
-    } else if (key == "exposure") {
-      ok = number(value, x) && x >= 0.0;
-      w.exposure = x;
-    } else {
-      return "unknown parameter '" + key + "'";
-    }
-    if (!ok) return "parameter " + key + " has a bad value '" + value + "'";
+const char* to_string(Method method) {
+  switch (method) {
+    case Method::kAntiAliased: return "aa";
+    case Method::kClassical: return "classical";
+    case Method::kHierarchical: return "hr";
+    case Method::kReference: return "reference";
   }
-  return solver::validate(p);
+  return "aa";
+}
+
+std::optional<Method> method_from(std::string_view name) {
+  for (Method m : {Method::kAntiAliased, Method::kClassical, Method::kHierarchical, Method::kReference})
+    if (name == to_string(m)) return m;
+  return std::nullopt;
+}
+
+solver::Params solver_params(const JobSpec& spec) {
+  solver::Params p = spec.params;
+  p.method = spec.method == Method::kClassical ? solver::Method::kClassical : solver::Method::kAntiAliased;
+  return p;
+}
+
+std::span<const ParamInfo> param_table() { return kParams; }
+
+std::string parse_param_value(const ParamInfo& p, const std::string& text, double& value) {
+  const std::string got = " (got '" + text + "')";
+  switch (p.kind) {
+    case Kind::kMethod:
+      if (const auto m = method_from(text)) return value = static_cast<double>(*m), "";
+      return "must be aa, classical, hr or reference" + got;
+    case Kind::kFlag:
+      if (flag(text, value)) return "";
+      return "must be true or false" + got;
+    case Kind::kWhole:
+      if (number(text, value) && value == std::floor(value) && value >= p.min && value <= p.max) return "";
+      return "must be a whole number from " + shortest(p.min) + " to " + shortest(p.max) + got;
+    case Kind::kNumber:
+      if (number(text, value) && value >= p.min && value <= p.max) return "";
+      if (p.max >= kNoLimit) return "must be a number from " + shortest(p.min) + " up" + got;
+      return "must be a number from " + shortest(p.min) + " to " + shortest(p.max) + got;
+  }
+  return "is not understood" + got;
+}
+
+const ParamInfo* find_param(std::string_view name) {
+  for (const ParamInfo& p : kParams)
+    if (name == p.name) return &p;
+  return nullptr;
+}
+
+std::string apply_params(const std::map<std::string, std::string>& values, JobSpec& spec) {
+  for (const auto& [key, value] : values) {
+    const ParamInfo* p = find_param(key);
+    if (p == nullptr) return "unknown parameter '" + key + "'";
+    double v = 0.0;
+    if (std::string e = parse_param_value(*p, value, v); !e.empty()) return key + " " + e;
+    p->set(spec, v);
+  }
+  return solver::validate(solver_params(spec));
 }
 
 std::string params_json(const JobSpec& spec) {
-  const solver::Params& p = spec.params;
-  const WriteOptions& w = spec.write;
   nlohmann::ordered_json j;
-  j["method"] = !w.method.empty() ? w.method : p.method == solver::Method::kAntiAliased ? "aa" : "classical";
-  j["resolution"] = p.resolution;
-  j["feps"] = p.feps;
-  j["aeps"] = p.aeps;
-  j["beps"] = p.beps;
-  j["convergence"] = p.convergence;
-  j["max_shots"] = p.max_shots;
-  j["max_elements"] = p.max_elements;
-  j["threads"] = p.threads;
-  j["reuse"] = p.reuse_visibility;
-  j["cluster_size"] = p.cluster_size;
-  j["shot_cache_mb"] = p.shot_cache_mb;
-  j["rays"] = spec.rays;
-  j["samples"] = spec.samples;
-  j["draco"] = w.draco;
-  j["position_bits"] = w.position_bits;
-  j["texcoord_bits"] = w.texcoord_bits;
-  j["draco_speed"] = w.encode_speed;
-  j["exposure"] = w.exposure;
+  for (const ParamInfo& p : kParams) {
+    const double v = p.get(spec);
+    switch (p.kind) {
+      case Kind::kMethod: j[p.name] = to_string(static_cast<Method>(v)); break;
+      case Kind::kFlag: j[p.name] = v != 0.0; break;
+      case Kind::kWhole: j[p.name] = static_cast<uint64_t>(v); break;
+      case Kind::kNumber: j[p.name] = v; break;
+    }
+  }
   return j.dump();
 }
 
@@ -138,7 +186,8 @@ std::string parse_params_json(const std::string& text, JobSpec& spec) {
   for (const auto& [key, v] : j.items()) {
     if (v.is_string()) values[key] = v.get<std::string>();
     else if (v.is_boolean()) values[key] = v.get<bool>() ? "true" : "false";
-    else if (v.is_number_integer() || v.is_number_unsigned()) values[key] = std::to_string(v.get<int64_t>());
+    else if (v.is_number_unsigned()) values[key] = std::to_string(v.get<uint64_t>());
+    else if (v.is_number_integer()) values[key] = std::to_string(v.get<int64_t>());
     else if (v.is_number()) {
       char buf[64];
       std::snprintf(buf, sizeof buf, "%.17g", v.get<double>());
@@ -146,6 +195,65 @@ std::string parse_params_json(const std::string& text, JobSpec& spec) {
     } else return "params." + key + " must be a string, number or boolean";
   }
   return apply_params(values, spec);
+}
+
+std::string params_usage() {
+  const JobSpec defaults;
+  std::string out;
+  for (const ParamInfo& p : kParams) {
+    const double v = p.get(defaults);
+    std::string head = "  --";
+    if (p.kind == Kind::kFlag && v != 0.0) head += std::string("no-") + p.flag;
+    else head += std::string(p.flag) + (p.kind == Kind::kMethod ? " M" : p.kind == Kind::kWhole ? " N" : " X");
+    if (head.size() < 26) head.resize(26, ' ');
+    else head += ' ';
+    std::string def;
+    switch (p.kind) {
+      case Kind::kMethod: def = to_string(static_cast<Method>(v)); break;
+      case Kind::kFlag: def = v != 0.0 ? "on" : "off"; break;
+      default: def = shortest(v); break;
+    }
+    out += head + p.help + " (default " + def + ")\n";
+  }
+  return out;
+}
+
+std::string progress_json(const JobProgress& p) {
+  nlohmann::json j = {{"phase", p.phase},         {"fraction", p.fraction},       {"shots", p.shots},
+                      {"unshot_fraction", p.unshot_fraction}, {"elements", p.elements}, {"eta_seconds", p.eta_seconds},
+                      {"elapsed_seconds", p.elapsed_seconds}};
+  if (p.hierarchical) {
+    j["links"] = p.links;
+    j["iterations"] = p.iterations;
+  }
+  return j.dump();
+}
+
+std::optional<JobProgress> parse_progress_json(const std::string& text) {
+  const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
+  if (j.is_discarded() || !j.is_object()) return std::nullopt;
+  JobProgress p;
+  // value() throws on a member of another type; a stream from another version is shown, not fatal.
+  auto read = [&](const char* key, auto& out) {
+    const auto it = j.find(key);
+    if (it == j.end()) return;
+    if constexpr (std::is_same_v<std::decay_t<decltype(out)>, std::string>) {
+      if (it->is_string()) out = it->template get<std::string>();
+    } else {
+      if (it->is_number()) out = it->template get<std::decay_t<decltype(out)>>();
+    }
+  };
+  read("phase", p.phase);
+  read("fraction", p.fraction);
+  read("shots", p.shots);
+  read("unshot_fraction", p.unshot_fraction);
+  read("elements", p.elements);
+  read("eta_seconds", p.eta_seconds);
+  read("elapsed_seconds", p.elapsed_seconds);
+  read("links", p.links);
+  read("iterations", p.iterations);
+  p.hierarchical = j.contains("links");
+  return p;
 }
 
 }  // namespace hemibake::protocol

@@ -1,7 +1,6 @@
 #include "hemibake/server/service.h"
 
-#include "hemibake/baselines/hierarchical.h"
-#include "hemibake/baselines/reference.h"
+#include "hemibake/protocol/bake.h"
 #include "hemibake/protocol/gltf.h"
 #include "hemibake/protocol/job.h"
 #include "hemibake/solver/solver.h"
@@ -243,108 +242,48 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
     store_->add_event(id, "state", json{{"state", "failed"}, {"error", loaded.error}}.dump());
     return;
   }
-  const solver::Scene& input = protocol::scene_of(*loaded.document);
   bool over_budget = false;
   double last_report = -1.0;
-  // Stores a progress record (at most every 0.5 s unless `force`) and checks the time budget.
-  auto report = [&](json progress, bool force) {
+  protocol::BakeHooks hooks;
+  hooks.cancel = &token;
+  // Stores a progress record (at most every 0.5 s, and the last one) and checks the time budget.
+  hooks.progress = [&](const protocol::JobProgress& p) {
     const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (elapsed > options_.job_seconds) {
       over_budget = true;
       token.cancel();
     }
-    if (!force && elapsed - last_report < 0.5) return;
+    if (p.phase != "done" && elapsed - last_report < 0.5) return;
     last_report = elapsed;
-    progress["elapsed_seconds"] = elapsed;
-    store_->set_progress(id, progress.dump());
-    store_->add_event(id, "progress", progress.dump());
+    protocol::JobProgress timed = p;
+    timed.elapsed_seconds = elapsed;  // since the job started, loading included
+    const std::string text = protocol::progress_json(timed);
+    store_->set_progress(id, text);
+    store_->add_event(id, "progress", text);
   };
-  auto set_previews = [&](bool on) {
+  hooks.previews_possible = [&](bool on) {
     std::lock_guard lock(mutex_);
     if (auto it = active_.find(id); it != active_.end()) it->second.previews = on;
     preview_ready_.notify_all();
   };
-  solver::Mesh mesh;
-  solver::Stats st;
-  if (spec.write.method == "hr") {
-    set_previews(false);
-    baselines::HierarchicalParams hp;
-    hp.feps = spec.params.feps;
-    hp.aeps = spec.params.aeps;
-    hp.rays = spec.rays;
-    hp.threads = spec.params.threads;
-    baselines::HierarchicalStats hs;
-    mesh = baselines::solve_hierarchical(
-        input, hp, hs,
-        [&](const baselines::HierarchicalProgress& p) {
-          report({{"phase", p.linking ? "linking" : "gathering"}, {"fraction", p.fraction}, {"links", p.links},
-                  {"iterations", p.iterations}, {"shots", 0}, {"unshot_fraction", p.linking ? 1.0 : 0.0},
-                  {"elements", 0}, {"eta_seconds", -1.0}},
-                 false);
-        },
-        &token);
-    st.cancelled = hs.cancelled;
-    st.converged = !hs.cancelled;
-    st.unshot_fraction = 0.0;
-    st.elements = hs.elements;
-    st.patches = input.patches.size();
-    st.seconds = hs.seconds;
-  } else {
-    solver::Solver solver(input, spec.params);
-    solver.run(
-        [&](const solver::Progress& p) {
-          // A preview asked for: the current state, with the ambient term so it is displayable.
-          {
-            std::unique_lock lock(mutex_);
-            auto it = active_.find(id);
-            if (it != active_.end() && it->second.preview_wanted) {
-              it->second.preview_wanted = false;
-              lock.unlock();
-              const auto written = protocol::write_baked_glb(*loaded.document, solver.mesh(true), spec.params,
-                                                             solver.stats(), spec.write);
-              lock.lock();
-              it = active_.find(id);
-              if (it != active_.end()) {
-                it->second.preview.assign(written.glb.begin(), written.glb.end());
-                ++it->second.preview_serial;
-              }
-              preview_ready_.notify_all();
-            }
-          }
-          // Time left, from how fast the unshot power has fallen so far (it falls roughly
-          // geometrically): elapsed * log(u / target) / log(1 / u).
-          const double target = spec.params.convergence;
-          double eta = -1.0;
-          if (p.unshot_fraction > target && p.unshot_fraction < 1.0)
-            eta = p.elapsed_seconds * std::log(p.unshot_fraction / target) / std::log(1.0 / p.unshot_fraction);
-          const double fraction = p.unshot_fraction >= 1.0 ? 0.0
-                                  : p.unshot_fraction <= target
-                                      ? 1.0
-                                      : std::log(p.unshot_fraction) / std::log(target);
-          report({{"phase", "shooting"}, {"fraction", fraction}, {"shots", p.shots},
-                  {"unshot_fraction", p.unshot_fraction}, {"elements", p.elements}, {"eta_seconds", eta}},
-                 false);
-        },
-        &token);
-    st = solver.stats();
-    mesh = solver.mesh();
-    if (spec.write.method == "reference" && !st.cancelled) {
-      set_previews(false);
-      const auto rs = baselines::apply_reference(
-          input, mesh, spec.samples, spec.params.threads,
-          [&](double fraction) {
-            report({{"phase", "tracing"}, {"fraction", fraction}, {"shots", st.shots}, {"unshot_fraction", 0.0},
-                    {"elements", st.elements}, {"eta_seconds", -1.0}},
-                   false);
-          },
-          &token);
-      st.cancelled = rs.cancelled;
+  hooks.preview_wanted = [&] {
+    std::lock_guard lock(mutex_);
+    auto it = active_.find(id);
+    if (it == active_.end() || !it->second.preview_wanted) return false;
+    it->second.preview_wanted = false;
+    return true;
+  };
+  hooks.preview = [&](std::vector<uint8_t> glb) {
+    std::lock_guard lock(mutex_);
+    if (auto it = active_.find(id); it != active_.end()) {
+      it->second.preview.assign(glb.begin(), glb.end());
+      ++it->second.preview_serial;
     }
-  }
+    preview_ready_.notify_all();
+  };
+  auto baked = protocol::bake(*loaded.document, spec, hooks);
+  const solver::Stats& st = baked.solution.stats;
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  report({{"phase", "done"}, {"fraction", 1.0}, {"shots", st.shots}, {"unshot_fraction", st.unshot_fraction},
-          {"elements", st.elements}, {"eta_seconds", 0.0}},
-         true);
   if (st.cancelled) {
     if (over_budget) {
       const std::string e = "the bake exceeded its time budget of " + std::to_string(options_.job_seconds) + " s";
@@ -357,13 +296,12 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
     }
     return;
   }
-  const auto written = protocol::write_baked_glb(*loaded.document, mesh, spec.params, st, spec.write);
-  if (!written.error.empty()) {
-    store_->fail(id, written.error);
-    store_->add_event(id, "state", json{{"state", "failed"}, {"error", written.error}}.dump());
+  if (!baked.error.empty()) {
+    store_->fail(id, baked.error);
+    store_->add_event(id, "state", json{{"state", "failed"}, {"error", baked.error}}.dump());
     return;
   }
-  const std::string glb(written.glb.begin(), written.glb.end());
+  const std::string glb(baked.glb.begin(), baked.glb.end());
   store_->succeed(id, glb, "\"" + sha256_hex(glb) + "\"");
   store_->add_event(id, "state", json{{"state", "succeeded"}}.dump());
   std::lock_guard lock(metrics_mutex_);
@@ -372,7 +310,7 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
   size_t b = 0;
   while (b < bake_seconds_buckets_.size() && seconds > bake_seconds_buckets_[b]) ++b;
   ++bake_seconds_counts_[b];
-  if (spec.write.method != "hr") {  // a reference job's shots are its aa solve's
+  if (spec.method != protocol::Method::kHierarchical) {  // a reference job's shots are its aa solve's
     shots_ += st.shots;
     shot_seconds_ += st.seconds;
   }

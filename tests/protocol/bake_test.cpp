@@ -1,5 +1,6 @@
 // glTF in, bake, GLB out, read back with Draco's own decoder and a GLB parser written here: the
 // geometry survives, the radiosity is the closed form, COLOR_0 is in [0, 1].
+#include "hemibake/protocol/bake.h"
 #include "hemibake/protocol/gltf.h"
 #include "hemibake/solver/solver.h"
 #include "glb_reader.h"
@@ -175,11 +176,10 @@ Baked bake(const std::vector<uint8_t>& gltf, bool draco, solver::Params params =
   const LoadResult loaded = load_gltf_memory(gltf, ".", {});
   EXPECT_TRUE(loaded.document) << loaded.error;
   if (!loaded.document) return {};
-  solver::Solver solver(scene_of(*loaded.document), params);
-  solver.run();
-  WriteOptions options;
-  options.draco = draco;
-  const WriteResult written = write_baked_glb(*loaded.document, solver.mesh(), params, solver.stats(), options);
+  JobSpec spec;
+  spec.params = params;
+  spec.write.draco = draco;
+  const BakeOutput written = protocol::bake(*loaded.document, spec);
   EXPECT_EQ(written.error, "");
   return {written.glb, written.exposure};
 }

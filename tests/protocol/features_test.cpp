@@ -9,6 +9,7 @@
 #include "gltf_builder.h"
 #include "glb_reader.h"
 
+#include "hemibake/protocol/bake.h"
 #include "hemibake/protocol/gltf.h"
 #include "hemibake/solver/solver.h"
 
@@ -284,11 +285,10 @@ Baked bake(const std::vector<uint8_t>& bytes, bool draco = false, solver::Params
   r.loaded = load_gltf_memory(bytes, ".");
   EXPECT_TRUE(r.loaded.document) << r.loaded.error;
   if (!r.loaded.document) return r;
-  solver::Solver solver(scene_of(*r.loaded.document), params);
-  solver.run();
-  WriteOptions options;
-  options.draco = draco;
-  const WriteResult w = write_baked_glb(*r.loaded.document, solver.mesh(), params, solver.stats(), options);
+  JobSpec spec;
+  spec.params = params;
+  spec.write.draco = draco;
+  const BakeOutput w = protocol::bake(*r.loaded.document, spec);
   EXPECT_EQ(w.error, "");
   const auto parts = test::split_glb(w.glb);
   EXPECT_TRUE(parts.has_value()) << "the output is not a well-formed GLB";

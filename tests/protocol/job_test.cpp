@@ -15,7 +15,8 @@ TEST(JobParams, EveryNameIsAppliedAndRoundTrips) {
                                         {"texcoord_bits", "10"}, {"draco_speed", "3"}, {"exposure", "2.5"}},
                                        spec);
   ASSERT_EQ(err, "");
-  EXPECT_EQ(spec.params.method, solver::Method::kClassical);
+  EXPECT_EQ(spec.method, Method::kClassical);
+  EXPECT_EQ(solver_params(spec).method, solver::Method::kClassical);
   EXPECT_EQ(spec.params.resolution, 64u);
   EXPECT_EQ(spec.params.feps, 0.002);
   EXPECT_EQ(spec.params.aeps, 0.0005);
@@ -45,18 +46,19 @@ TEST(JobParams, BaselineMethodsAreRecordedAndDistinct) {
   ASSERT_EQ(apply_params({{"method", "aa"}}, aa), "");
   ASSERT_EQ(apply_params({{"method", "hr"}}, hr), "");
   ASSERT_EQ(apply_params({{"method", "reference"}}, reference), "");
-  EXPECT_EQ(aa.write.method, "");
-  EXPECT_EQ(hr.write.method, "hr");
-  EXPECT_EQ(reference.write.method, "reference");
+  EXPECT_EQ(aa.method, Method::kAntiAliased);
+  EXPECT_EQ(hr.method, Method::kHierarchical);
+  EXPECT_EQ(reference.method, Method::kReference);
+  // A reference bakes the aa mesh first.
+  EXPECT_EQ(solver_params(reference).method, solver::Method::kAntiAliased);
   // Different methods are different cache keys; a round trip keeps the method.
   EXPECT_NE(params_json(aa), params_json(hr));
   EXPECT_NE(params_json(hr), params_json(reference));
   JobSpec back;
   ASSERT_EQ(parse_params_json(params_json(hr), back), "");
-  EXPECT_EQ(back.write.method, "hr");
-  // Switching back to a solver method clears it.
+  EXPECT_EQ(back.method, Method::kHierarchical);
   ASSERT_EQ(apply_params({{"method", "classical"}}, back), "");
-  EXPECT_EQ(back.write.method, "");
+  EXPECT_EQ(back.method, Method::kClassical);
 }
 
 TEST(JobParams, BadValuesAreRefusedByName) {
@@ -74,6 +76,91 @@ TEST(JobParams, BadValuesAreRefusedByName) {
   JobSpec spec;
   EXPECT_NE(parse_params_json("[1,2]", spec), "");
   EXPECT_NE(parse_params_json("{\"feps\":[1]}", spec).find("feps"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace hemibake::protocol
+
+namespace hemibake::protocol {
+namespace {
+
+// A value of `p` other than the default's, inside its range.
+std::string other_value(const ParamInfo& p, const JobSpec& defaults) {
+  const double v = p.get(defaults);
+  switch (p.kind) {
+    case ParamInfo::Kind::kMethod: return v == 0.0 ? "classical" : "aa";
+    case ParamInfo::Kind::kFlag: return v != 0.0 ? "false" : "true";
+    case ParamInfo::Kind::kWhole: return std::to_string(static_cast<uint64_t>(v == p.max ? v - 2 : v + 2));
+    case ParamInfo::Kind::kNumber: return std::to_string(v == 0.0 ? 0.25 : v * 0.5);
+  }
+  return {};
+}
+
+// The cache key is params_json: a job that asks for anything else must not get another's result.
+TEST(JobParams, EveryParameterChangesTheCacheKey) {
+  const JobSpec defaults;
+  for (const ParamInfo& p : param_table()) {
+    JobSpec changed;
+    const std::string value = other_value(p, defaults);
+    ASSERT_EQ(apply_params({{p.name, value}}, changed), "") << p.name << "=" << value;
+    EXPECT_NE(params_json(changed), params_json(defaults)) << p.name;
+    JobSpec back;
+    ASSERT_EQ(parse_params_json(params_json(changed), back), "") << p.name;
+    EXPECT_EQ(params_json(back), params_json(changed)) << p.name;
+  }
+  // The two that were once left out of the key.
+  JobSpec a, b;
+  b.params.shooter_size = 0.25;
+  EXPECT_NE(params_json(a), params_json(b));
+  JobSpec c;
+  c.write.color_bits = 8;
+  EXPECT_NE(params_json(a), params_json(c));
+}
+
+// Each parameter is accepted at both ends of its range and refused just past them, with a message
+// that names it.
+TEST(JobParams, RangesAreEnforcedAtTheirBounds) {
+  for (const ParamInfo& p : param_table()) {
+    if (p.kind != ParamInfo::Kind::kWhole) continue;
+    for (const double inside : {p.min, p.max}) {
+      JobSpec spec;
+      const std::string text = std::to_string(static_cast<uint64_t>(inside));
+      EXPECT_EQ(apply_params({{p.name, text}}, spec), "") << p.name << "=" << text;
+    }
+    JobSpec spec;
+    const std::string past = std::to_string(static_cast<uint64_t>(p.max) + 1);
+    const std::string err = apply_params({{p.name, past}}, spec);
+    EXPECT_NE(err.find(p.name), std::string::npos) << p.name << "=" << past << ": " << err;
+  }
+  // Where the command line and the wire used to disagree: 2^20 samples, and exposure 0 (automatic).
+  JobSpec spec;
+  EXPECT_EQ(apply_params({{"samples", "1048576"}, {"exposure", "0"}}, spec), "");
+  EXPECT_EQ(spec.samples, 1048576u);
+  EXPECT_EQ(spec.write.exposure, 0.0);
+}
+
+TEST(JobProgressJson, RoundTrips) {
+  JobProgress p;
+  p.phase = "gathering";
+  p.fraction = 0.25;
+  p.links = 1234;
+  p.iterations = 3;
+  p.hierarchical = true;
+  p.elapsed_seconds = 2.5;
+  const auto back = parse_progress_json(progress_json(p));
+  ASSERT_TRUE(back.has_value());
+  EXPECT_EQ(back->phase, "gathering");
+  EXPECT_EQ(back->fraction, 0.25);
+  EXPECT_EQ(back->links, 1234u);
+  EXPECT_EQ(back->iterations, 3u);
+  EXPECT_TRUE(back->hierarchical);
+  EXPECT_EQ(back->elapsed_seconds, 2.5);
+  EXPECT_FALSE(parse_progress_json("[]").has_value());
+  // Members of another type are left at their defaults instead of throwing.
+  const auto odd = parse_progress_json(R"({"phase":3,"shots":"x"})");
+  ASSERT_TRUE(odd.has_value());
+  EXPECT_EQ(odd->phase, "shooting");
+  EXPECT_EQ(odd->shots, 0u);
 }
 
 }  // namespace

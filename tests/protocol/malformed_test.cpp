@@ -4,6 +4,7 @@
 // below can pass vacuously. The byte layout of GLB follows the glTF 2.0 specification, section 4.4.
 #include "gltf_builder.h"
 
+#include "hemibake/protocol/bake.h"
 #include "hemibake/protocol/gltf.h"
 #include "hemibake/solver/solver.h"
 
@@ -840,15 +841,12 @@ TEST(GltfMalformedImage, ImageBufferViewPastTheBufferIsRefused) {
 std::vector<uint8_t> draco_quad_glb() {
   const LoadResult in = load(quad_asset().glb_bytes());
   if (!in.document) return {};
-  solver::Params params;
-  params.resolution = 16;
-  params.threads = 1;
-  params.max_shots = 4;
-  solver::Solver solver(protocol::scene_of(*in.document), params);
-  const solver::Stats stats = solver.run();
-  protocol::WriteOptions options;
-  options.draco = true;
-  return protocol::write_baked_glb(*in.document, solver.mesh(), params, stats, options).glb;
+  protocol::JobSpec spec;
+  spec.params.resolution = 16;
+  spec.params.threads = 1;
+  spec.params.max_shots = 4;
+  spec.write.draco = true;
+  return protocol::bake(*in.document, spec).glb;
 }
 
 TEST(GltfMalformedDraco, DracoQuadFromTheWriterLoads) {

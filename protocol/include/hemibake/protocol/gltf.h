@@ -2,6 +2,7 @@
 // colours, optionally Draco-compressed).
 #pragma once
 
+#include "hemibake/protocol/method.h"
 #include "hemibake/solver/solver.h"
 
 #include <cstdint>
@@ -56,7 +57,6 @@ struct WriteOptions {
   int encode_speed = 5;     ///< Draco speed options, 0 (best compression) to 10 (fastest)
   int decode_speed = 5;
   double exposure = 0.0;    ///< radiosity-to-[0, 1] scale for COLOR_0; 0 chooses one
-  std::string method;       ///< recorded in asset.extras; empty: the solver's (aa or classical)
 };
 
 struct WriteResult {
@@ -69,9 +69,9 @@ struct WriteResult {
 /// instance replaced by its radiosity mesh (crack-free triangles over the solver's elements),
 /// COLOR_0 = exposure * radiosity / base colour in [0, 1] (materials get KHR_materials_unlit, so
 /// base colour x COLOR_0 shows the light), _RADIOSITY = linear radiosity per vertex, and the
-/// parameters, statistics and exposure in asset.extras.hemibake. `mesh` must come from a solver
-/// run on scene_of(document).
-WriteResult write_baked_glb(const SceneDocument& document, const solver::Mesh& mesh,
+/// method, parameters, statistics and exposure in asset.extras.hemibake. `mesh` must come from a
+/// solve of scene_of(document).
+WriteResult write_baked_glb(const SceneDocument& document, const solver::Mesh& mesh, Method method,
                             const solver::Params& params, const solver::Stats& stats,
                             const WriteOptions& options = {});
 

@@ -1,0 +1,38 @@
+// The `hemibake` commands that talk to a hemibake-server.
+#pragma once
+
+#include "hemibake/client/console.h"
+#include "hemibake/protocol/job.h"
+
+#include <map>
+#include <string>
+
+namespace hemibake::client {
+
+struct Remote {
+  std::string host;
+  std::string port;
+  std::string token;  ///< bearer token, or empty
+};
+
+/// Parses http://HOST[:PORT][/] into `out`; returns an error message or an empty string.
+std::string parse_server(const std::string& url, Remote& out);
+
+// Each command returns its exit status: 0 done, 1 failed (the reason is on console.err).
+
+/// hemibake submit: prints the job id (or stores it in *id_out instead).
+int remote_submit(const Remote& r, const std::string& path, const protocol::JobSpec& spec, const Console& console,
+                  std::string* id_out = nullptr);
+/// The job's JSON, indented.
+int remote_status(const Remote& r, const std::string& id, const Console& console);
+/// Follows the job's event stream with its progress; 0 if it succeeded.
+int remote_watch(const Remote& r, const std::string& id, const Console& console);
+int remote_fetch(const Remote& r, const std::string& id, const std::string& out_path, const Console& console);
+int remote_cancel(const Remote& r, const std::string& id, const Console& console);
+/// The newest 100 jobs, one line each (`state` empty: all).
+int remote_list(const Remote& r, const std::string& state, const Console& console);
+/// submit + watch + fetch.
+int remote_bake(const Remote& r, const std::string& in, const std::string& out, const protocol::JobSpec& spec,
+                const Console& console);
+
+}  // namespace hemibake::client
