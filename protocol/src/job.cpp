@@ -218,6 +218,40 @@ std::string params_usage() {
   return out;
 }
 
+std::string params_openapi_json() {
+  const JobSpec defaults;
+  nlohmann::ordered_json list = nlohmann::ordered_json::array();
+  for (const ParamInfo& p : kParams) {
+    const double v = p.get(defaults);
+    nlohmann::ordered_json schema;
+    switch (p.kind) {
+      case Kind::kMethod:
+        schema["type"] = "string";
+        schema["enum"] = {"aa", "classical", "hr", "reference"};
+        schema["default"] = to_string(static_cast<Method>(v));
+        break;
+      case Kind::kFlag:
+        schema["type"] = "boolean";
+        schema["default"] = v != 0.0;
+        break;
+      case Kind::kWhole:
+        schema["type"] = "integer";
+        schema["default"] = static_cast<uint64_t>(v);
+        schema["minimum"] = static_cast<uint64_t>(p.min);
+        schema["maximum"] = static_cast<uint64_t>(p.max);
+        break;
+      case Kind::kNumber:
+        schema["type"] = "number";
+        schema["default"] = v;
+        schema["minimum"] = p.min;
+        if (p.max < kNoLimit) schema["maximum"] = p.max;
+        break;
+    }
+    list.push_back({{"name", p.name}, {"in", "query"}, {"required", false}, {"description", p.help}, {"schema", schema}});
+  }
+  return list.dump();
+}
+
 std::string progress_json(const JobProgress& p) {
   nlohmann::json j = {{"phase", p.phase},         {"fraction", p.fraction},       {"shots", p.shots},
                       {"unshot_fraction", p.unshot_fraction}, {"elements", p.elements}, {"eta_seconds", p.eta_seconds},

@@ -2,6 +2,7 @@
 #include "hemibake/protocol/job.h"
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 namespace hemibake::protocol {
 namespace {
@@ -137,6 +138,25 @@ TEST(JobParams, RangesAreEnforcedAtTheirBounds) {
   EXPECT_EQ(apply_params({{"samples", "1048576"}, {"exposure", "0"}}, spec), "");
   EXPECT_EQ(spec.samples, 1048576u);
   EXPECT_EQ(spec.write.exposure, 0.0);
+}
+
+// The API description's parameters are the table's, with the defaults a JobSpec starts from and
+// ranges that apply_params enforces.
+TEST(JobParams, OpenApiListsEveryParameterWithItsDefaultAndRange) {
+  const nlohmann::json list = nlohmann::json::parse(params_openapi_json());
+  ASSERT_TRUE(list.is_array());
+  ASSERT_EQ(list.size(), param_table().size());
+  const nlohmann::json defaults = nlohmann::json::parse(params_json(JobSpec{}));
+  for (const auto& p : list) {
+    const std::string name = p.at("name");
+    EXPECT_EQ(p.at("in"), "query");
+    EXPECT_EQ(p.at("schema").at("default"), defaults.at(name)) << name;
+    if (p.at("schema").contains("maximum") && p.at("schema").at("type") == "integer") {
+      JobSpec spec;
+      const uint64_t max = p.at("schema").at("maximum");
+      EXPECT_NE(apply_params({{name, std::to_string(max + 1)}}, spec), "") << name;
+    }
+  }
 }
 
 TEST(JobProgressJson, RoundTrips) {

@@ -68,6 +68,10 @@ std::string parse_params_json(const std::string& text, JobSpec& spec);
 /// The parameters' command-line help: "  --flag VALUE   help (default D)" lines.
 std::string params_usage();
 
+/// The parameters as a JSON array of OpenAPI 3 query parameter objects (name, description, and a
+/// schema with type, default, minimum and maximum or enum), for the API description and forms.
+std::string params_openapi_json();
+
 /// Where a running job is, as its event stream and status report it.
 struct JobProgress {
   std::string phase = "shooting";  ///< shooting, linking, gathering, tracing or done
