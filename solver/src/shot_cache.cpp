@@ -1,0 +1,143 @@
+// Replays: a shooter that shoots again reuses the form factors of its last shot.
+#include "solver_impl.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace hemibake::solver {
+
+// A shooter that shoots again (its patches received light since) places the same hemicubes and, as
+// long as none of its receivers has been split since, finds the same form factors: a split
+// occluder's children hide exactly what it hid. A replay takes them from the last shot's record and
+// only recomputes each piece's unshot radiosity. Every piece must shoot no more than when it was
+// recorded, in every channel: the refinement near the shooter, the hemicubes' resolution and the
+// subdivision criteria all ask less of a weaker shot, so it would have placed coarser hemicubes and
+// split nothing more (the recorded shot ended with a round that split nothing).
+bool Solver::Impl::replay(uint32_t unit) {
+  if (u_record.empty()) return false;
+  ShotRecord& r = u_record[unit];
+  if (r.pieces.empty()) return false;
+  auto drop = [&] {
+    keep_record(unit, {});
+    return false;
+  };
+  // Receivers split since need form factors for their children. When they are few, the rest is
+  // replayed and the children are shot anew from the same shooter, its hemicubes seeing only what
+  // may hide them (as near-field hemicubes do); otherwise the whole shot is made anew. A shot that
+  // split a receiver recorded it in its earlier pieces and its children in later ones: the children
+  // are shot anew from the whole shooter, so none of their entries replays either.
+  std::vector<uint8_t> stale(r.recv.size(), 0);
+  size_t stale_count = 0;
+  ++mark;
+  for (size_t k = 0; k < r.recv.size(); ++k)
+    if (e_child[r.recv[k]] != kNone) stale[k] = 1, ++stale_count, e_mark[r.recv[k]] = mark;
+  if (stale_count > 0)
+    for (size_t k = 0; k < r.recv.size(); ++k)
+      for (uint32_t x = e_parent[r.recv[k]]; x != kNone && !stale[k]; x = e_parent[x])
+        if (e_mark[x] == mark) stale[k] = 1, ++stale_count;
+  if (stale_count * 4 > r.recv.size()) return drop();  // splits are for good: it never replays again
+  std::vector<glm::dvec3> dBs(r.pieces.size());
+  double total = 0.0, coarse = 0.0;
+  for (size_t i = 0; i < r.pieces.size(); ++i) {
+    const ShotRecord::Piece& rp = r.pieces[i];
+    glm::dvec3 power(0.0);
+    for (uint32_t k = rp.src_begin; k < rp.src_end; ++k)
+      for_leaves(r.src[k], [&](uint32_t e) { power += e_unshot[e] * e_area[e]; });
+    dBs[i] = power / rp.src_area;
+    // The most any channel grew: every decision of the shot is a sum of channels with non-negative
+    // weights, so it grew by at most this factor.
+    double growth = 0.0;
+    for (int c = 0; c < 3; ++c) {
+      if (dBs[i][c] <= 0.0) continue;
+      growth = rp.dB[c] > 0.0 ? std::max(growth, dBs[i][c] / rp.dB[c]) : std::numeric_limits<double>::infinity();
+    }
+    if (std::isinf(growth) || growth > rp.headroom) return false;
+    if (rp.extra) continue;
+    const double shot = channel_sum(dBs[i]) * rp.area;
+    total += shot;
+    if (rp.coarse) coarse += shot;
+  }
+  // Coarser hemicubes may not shoot more than their share (coarser_levels): shoot anew instead.
+  if (coarse > 0.0 && power_coarse + coarse > kCoarseShare * (power_shot + total)) return false;
+  power_shot += total;
+  power_coarse += coarse;
+  for (size_t i = 0; i < r.pieces.size(); ++i) {
+    const ShotRecord::Piece& rp = r.pieces[i];
+    for (uint32_t k = rp.recv_begin; k < rp.recv_end; ++k)
+      if (!stale[k] && r.f[k] > 0.0f) receive(r.recv[k], dBs[i], r.f[k]);
+  }
+  if (stale_count == 0) return true;
+
+  // The split receivers, each once and none below another (the shot expands them to their leaves).
+  std::vector<uint32_t> redo;
+  for (size_t k = 0; k < r.recv.size(); ++k) {
+    if (e_mark[r.recv[k]] != mark) continue;
+    bool below = false;
+    for (uint32_t x = e_parent[r.recv[k]]; x != kNone && !below; x = e_parent[x]) below = e_mark[x] == mark;
+    if (!below) redo.push_back(r.recv[k]);
+  }
+  std::sort(redo.begin(), redo.end());
+  redo.erase(std::unique(redo.begin(), redo.end()), redo.end());
+  ShotRecord part;
+  // The unit's power is counted above already; the partial shot's pieces do not count again.
+  const double shot_before = power_shot, coarse_before = power_coarse;
+  recording = &part;
+  record_broken = false;
+  grow_scratch();
+  if (unit_node[unit] == kNone) shoot_patch(unit_patch[unit], redo, false);
+  else shoot_cluster(unit_node[unit], redo, false, 0);
+  recording = nullptr;
+  power_shot = shot_before;
+  power_coarse = coarse_before;
+  ++stats.replays_reshot;
+
+  // The record now holds the replayed receivers and the partial shot's pieces. Each partial shot
+  // adds pieces (with the sources of the shooter's own): past four times the fresh shot's, the
+  // record is dropped, and the next shot makes a compact one.
+  if (record_broken || r.pieces.size() + part.pieces.size() > 4 * r.fresh_pieces) {
+    drop();
+    return true;
+  }
+  ShotRecord merged;
+  merged.fresh_pieces = r.fresh_pieces;
+  auto add = [&](const ShotRecord& from, ShotRecord::Piece np, bool extra, const uint8_t* skip) {
+    const uint32_t src_begin = np.src_begin, src_end = np.src_end, recv_begin = np.recv_begin, recv_end = np.recv_end;
+    np.recv_begin = static_cast<uint32_t>(merged.recv.size());
+    for (uint32_t k = recv_begin; k < recv_end; ++k) {
+      if (skip != nullptr && skip[k]) continue;
+      merged.recv.push_back(from.recv[k]);
+      merged.f.push_back(from.f[k]);
+    }
+    np.recv_end = static_cast<uint32_t>(merged.recv.size());
+    if (np.recv_end == np.recv_begin) return;
+    np.src_begin = static_cast<uint32_t>(merged.src.size());
+    merged.src.insert(merged.src.end(), from.src.begin() + src_begin, from.src.begin() + src_end);
+    np.src_end = static_cast<uint32_t>(merged.src.size());
+    np.extra = np.extra || extra;
+    merged.pieces.push_back(np);
+  };
+  for (const ShotRecord::Piece& rp : r.pieces) add(r, rp, false, stale.data());
+  for (const ShotRecord::Piece& rp : part.pieces) add(part, rp, true, nullptr);
+  keep_record(unit, std::move(merged));
+  return true;
+}
+
+// Puts `record` in place of the unit's record, if the records' memory allows.
+void Solver::Impl::keep_record(uint32_t unit, ShotRecord record) {
+  if (!u_record.empty()) {
+    record_bytes -= u_record[unit].bytes();
+    u_record[unit] = ShotRecord{};
+  }
+  if (record.pieces.empty()) return;
+  record.pieces.shrink_to_fit();
+  record.src.shrink_to_fit();
+  record.recv.shrink_to_fit();
+  record.f.shrink_to_fit();
+  if (record_bytes + record.bytes() > static_cast<size_t>(params.shot_cache_mb) << 20) return;
+  if (u_record.empty()) u_record.resize(unit_node.size());
+  record_bytes += record.bytes();
+  u_record[unit] = std::move(record);
+}
+
+}  // namespace hemibake::solver

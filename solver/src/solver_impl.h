@@ -1,0 +1,253 @@
+// The solver's shared state: Solver::Impl, whose members are spread over the files named for
+// what they hold (element_tree, patch_bvh, clusters, projection, near_field, shooters, shoot_piece,
+// shot_cache, mesh_export, solver). Private to solver/src.
+#pragma once
+
+#include "hemibake/solver/solver.h"
+
+#include "geometry.h"
+#include "hemicube_engine.h"
+#include "scene_prep.h"
+#include "thread_pool.h"
+
+#include <glm/vec3.hpp>
+
+#include <array>
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <unordered_map>
+#include <vector>
+
+namespace hemibake::solver {
+
+using detail::channel_sum;
+using detail::child_corners;
+using detail::Corners;
+using detail::edge_key;
+using detail::Fragment;
+using detail::mean;
+using detail::median_cut;
+using detail::polygon_area;
+using detail::polygon_centre;
+using detail::polygon_diameter;
+using Clock = std::chrono::steady_clock;
+
+inline double seconds_since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+// A receiver nearer to a shooting area's centre than kNearFactor times its diameter takes its share
+// from the area's quarters, down to kMaxShooterDepth levels.
+constexpr double kNearFactor = 2.0;
+constexpr int kMaxShooterDepth = 3;
+// A near-field hemicube projects only what may hide its receivers: elements overlapping the joint
+// bounding box of the piece and the receivers of one surface, at most this many boxes.
+constexpr size_t kMaxShaftBoxes = 32;
+// A close receiver is refined for only if the point view's error could exceed this share of the
+// radiosity tolerance (shoot_piece).
+constexpr double kNearError = 0.25;
+constexpr uint32_t kMinResolution = 20;
+// A cluster of a curved surface shoots along its patches' mean normal, as if flat: its patches'
+// normals stay within this cosine (20 degrees) of it, so a receiver's cosine at the cluster errs by
+// under 6 % where it faces the cluster (build_clusters).
+constexpr double kClusterCone = 0.9397;
+// A shooting piece with an absorbing back close in front of it that takes at least this share of
+// the light from its centre is refined (absorber_close).
+constexpr double kAbsorberShare = 0.1;
+// Coarser hemicubes may shoot at most this share of all the power shot (see coarser_levels).
+constexpr double kCoarseShare = 0.25;
+// Cluster pieces carrying at least this share of the emitted power take a finer hemicube
+// (finer_level).
+constexpr double kFinePower = 1e-3;
+// Pieces carrying at least this share of the emitted power refine for receivers whose plane cuts
+// through them, however far (shoot_piece).
+constexpr double kStraddlePower = 0.05;
+
+struct Solver::Impl {
+  Impl(const Scene& scene, const Params& p);
+
+  // Geometry and tree.
+  uint32_t corner_count(uint32_t e) const { return patches[e_patch[e]].corner_count; }
+  void corners_of(uint32_t e, Corners& out) const {
+    for (uint32_t i = 0; i < corner_count(e); ++i) out[i] = vpos[e_corner[e][i]];
+  }
+  Corners corners_of_copy(uint32_t e) const {
+    Corners c{};
+    corners_of(e, c);
+    return c;
+  }
+  uint32_t midpoint(uint32_t a, uint32_t b);
+  uint32_t add_element(uint32_t patch, uint32_t parent, const std::array<uint32_t, 4>& corners,
+                       const glm::dvec3& b, const glm::dvec3& unshot);
+  void split(uint32_t e);
+  template <typename Fn>
+  void for_leaves(uint32_t e, Fn&& fn) const;
+
+  // Shooting.
+  bool step();
+  struct ShooterNode {
+    Corners c;
+    uint32_t element;  // kNone: a geometric piece of a leaf
+    glm::dvec3 unshot;
+    int depth;
+    uint32_t source;   // `element`, or for a geometric piece the leaf it was cut from
+  };
+  // What one hemicube shoots from: a piece of a patch, or a cluster of patches of one surface.
+  struct Piece {
+    uint32_t patch;                   // a patch of the piece: its plane and occlusion group
+    glm::dvec3 normal;                // the hemicube's axis: the patch's normal, a cluster's mean
+    glm::dvec3 centre, up;            // the hemicube's centre and rotation hint
+    double area, diameter;
+    glm::dvec3 dB;                    // unshot radiosity shot (uniform over the piece)
+    std::vector<glm::dvec3> points;   // points whose hull holds the piece (facing tests)
+    int depth;                        // hemicube level (each halves the resolution)
+    bool may_refine;                  // near receivers are left to sub-pieces
+    // Where dB comes from (for replays): the unshot power of the leaves under `src`, divided by
+    // src_area.
+    std::vector<uint32_t> src;
+    double src_area;
+  };
+  // A shot's form factors, kept for a replay (step): per piece, in the order they shot, its
+  // sources and the receivers that took light with their F(element -> piece).
+  struct ShotRecord {
+    struct Piece {
+      uint32_t src_begin, src_end, recv_begin, recv_end;
+      double src_area, area;
+      glm::dvec3 dB;  // the unshot radiosity it shot when recorded
+      double headroom;  // a replay may shoot up to this times dB (shoot_piece)
+      bool coarse;    // shot from a hemicube coarser than its level (kCoarseShare)
+      bool extra;     // shot for children of split receivers: its power counts once, elsewhere
+    };
+    size_t fresh_pieces = 0;  // pieces of the shot that made it (replays may add more)
+    std::vector<Piece> pieces;
+    std::vector<uint32_t> src, recv;
+    std::vector<float> f;
+    size_t bytes() const {
+      if (pieces.capacity() + src.capacity() + recv.capacity() + f.capacity() == 0) return 0;  // none
+      return sizeof(ShotRecord) + pieces.capacity() * sizeof(Piece) +
+             (src.capacity() + recv.capacity()) * sizeof(uint32_t) + f.capacity() * sizeof(float);
+    }
+  };
+  bool replay(uint32_t unit);
+  void keep_record(uint32_t unit, ShotRecord record);
+  void receive(uint32_t e, const glm::dvec3& dB, double f);
+  // A node of a cluster's binary tree over its patches (by median cuts of their centres).
+  struct ClusterNode {
+    uint32_t begin = 0, end = 0;  // its patches: cluster_patch[begin, end)
+    uint32_t child = kNone;       // children at child and child + 1
+    glm::dvec3 centre{0.0};       // area centroid
+    glm::dvec3 normal{0.0};       // area-weighted mean of its patches' normals, unit
+    double min_cos = 1.0;         // least cosine between a patch's normal and `normal`
+    double area = 0.0, diameter = 0.0;
+    std::array<glm::dvec3, 8> box{};  // corners of the bounding box of its patches' corners
+  };
+  void shoot_patch(uint32_t p, const std::vector<uint32_t>& receivers, bool whole_scene);
+  void shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers, bool whole_scene);
+  void shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bool whole_scene, int depth);
+  std::vector<uint32_t> shoot_piece(const Piece& piece, std::vector<uint32_t> receivers, bool whole_scene);
+  bool absorber_close(const Piece& piece) const;
+  void build_cluster(uint32_t id, uint32_t begin, uint32_t end);
+  void build_clusters();
+  void build_patch_tree(uint32_t node, uint32_t begin, uint32_t end);
+  void replace_split(std::vector<uint32_t>& list) const;
+  void grow_scratch();
+  int coarser_levels(double power) const;
+  bool finer_level(const Piece& piece, double power) const;
+  // Projects `elements` onto the placed hemicube, but for the patches of the shooting piece
+  // (p_shooting == shooting_stamp).
+  void project(std::span<const uint32_t> elements);
+  void project_children(const std::vector<uint32_t>& parents);
+  void sum_form_factors(std::span<const uint32_t> elements);
+  void update_unshot_total();
+
+  Params params;
+  std::vector<Patch> patches;
+  detail::PreparedScene prep;
+  double aeps_area = 0.0;       // smallest element area allowed
+  double b_tolerance = 0.0;     // radiosity tolerance for criteria (b) and (c)
+  double shooter_limit = 0.0;   // widest shooting sub-area
+  double emitted_power = 0.0;   // sum over patches of channel_sum(E) * A
+  double power_shot = 0.0;      // by all hemicubes so far
+  double power_coarse = 0.0;    // by hemicubes coarser than their level
+
+  // Vertices (shared within a smoothing group) and edge midpoints.
+  std::vector<glm::dvec3> vpos;
+  std::unordered_map<uint64_t, uint32_t> midpoints;
+
+  // Elements, structure of arrays. Children of an element are consecutive.
+  std::vector<uint32_t> e_patch, e_parent, e_child;
+  std::vector<uint32_t> e_group;  // the patch's occlusion group
+  std::vector<std::array<uint32_t, 4>> e_corner;
+  std::vector<double> e_area;
+  std::vector<glm::dvec3> e_centre;  // bounding sphere
+  std::vector<double> e_radius;
+  std::vector<glm::dvec3> e_b, e_unshot;
+  std::vector<uint32_t> leaves;
+  std::vector<uint32_t> p_root;
+  std::vector<double> p_unshot;  // unshot power per patch (channel sum times area)
+  // Shooters: a unit is a patch that shoots alone or a cluster of small coplanar patches that
+  // shoot together (cluster trees in c_nodes; unit_node kNone for a single patch).
+  std::vector<ClusterNode> c_nodes;
+  std::vector<uint32_t> cluster_patch;
+  std::vector<uint32_t> unit_patch, unit_node, p_unit;
+  std::vector<double> u_unshot;  // unshot power per unit
+  // Replays: per unit, the form factors of its last shot (replay()).
+  std::vector<ShotRecord> u_record;
+  size_t record_bytes = 0;
+  ShotRecord* recording = nullptr;  // the shot being recorded
+  bool record_broken = false;       // a piece of it was skipped (no power): not replayable
+
+  // Bounding-box tree over the patches (median cuts), for finding what lies near a hemicube.
+  struct BoxNode {
+    glm::dvec3 lo, hi;
+    uint32_t begin = 0, end = 0;  // its patches: tree_patch[begin, end)
+    uint32_t child = kNone;       // children at child and child + 1
+  };
+  std::vector<BoxNode> tree;
+  std::vector<uint32_t> tree_patch;
+  std::vector<glm::dvec3> p_lo, p_hi;  // per patch: bounding box
+  std::vector<uint64_t> p_mark;        // per patch: listed for hemicube `mark`
+  std::vector<uint32_t> p_surface;     // per patch: its surface for clustering (build_clusters)
+  std::vector<uint64_t> p_shooting;    // per patch: part of the piece shooting hemicube `shooting_stamp`
+  uint64_t shooting_stamp = 0;
+
+  // Per-hemicube scratch.
+  // Hemicubes of halving resolution (at least kMinResolution): a quarter-size shooting area serves
+  // receivers half as far, which project as large, so its hemicube needs half the resolution; weak
+  // shots may use coarser ones still (coarser_levels).
+  std::vector<detail::Hemicube> cubes;
+  std::unique_ptr<detail::Hemicube> finer_cube;  // for strong cluster shots (finer_level)
+  detail::Hemicube* cube = nullptr;  // the one in use
+  detail::ThreadPool pool;
+  std::vector<Fragment> frags;
+  std::vector<uint32_t> f_begin, f_end;  // per element: its fragments in `frags`
+  std::vector<uint64_t> e_stamp;         // per element: the hemicube its form factor belongs to
+  std::vector<double> e_ff, e_ff_open;   // per element: visible and unoccluded form factor
+  uint64_t stamp = 0;
+  std::vector<detail::ProjectScratch> scratch;
+  std::vector<std::vector<Fragment>> chunk_frags;
+  std::vector<std::vector<uint32_t>> gather_chunks;  // per chunk: elements a hemicube must see
+  std::vector<uint32_t> order, pixel_start;
+  std::vector<double> shot_b, vmin, vmax;
+  std::vector<double> f_recv, f_open;  // per accepted receiver: F(element -> piece), visible and open
+  std::vector<uint64_t> e_mark;        // per element: holds a receiver of hemicube `mark`
+  uint64_t mark = 0;
+  std::vector<double> e_exact;         // per element: exact F(element -> piece), for stamp e_exact_stamp
+  std::vector<uint64_t> e_exact_stamp;
+
+  Stats stats;
+  bool done = false;
+};
+
+template <typename Fn>
+void Solver::Impl::for_leaves(uint32_t e, Fn&& fn) const {
+  if (e_child[e] == kNone) {
+    fn(e);
+    return;
+  }
+  for (uint32_t k = 0; k < 4; ++k) for_leaves(e_child[e] + k, fn);
+}
+
+}  // namespace hemibake::solver
