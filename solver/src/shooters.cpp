@@ -35,8 +35,9 @@ void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<u
   piece.diameter = polygon_diameter(node.c, n);
   piece.points.assign(node.c.begin(), node.c.begin() + n);
   piece.depth = node.depth;
+  piece.power = channel_sum(piece.dB) * piece.area;
   // Weak shots stay whole.
-  piece.may_refine = node.depth < kMaxShooterDepth && channel_sum(piece.dB) * piece.area >= params.feps * emitted_power;
+  piece.may_refine = node.depth < kMaxShooterDepth && piece.power >= params.feps * emitted_power;
   const std::vector<uint32_t> near = shoot_piece(piece, std::move(receivers), whole_scene);
   if (near.empty()) return;
   const bool is_leaf = node.element == kNone || e_child[node.element] == kNone;
@@ -77,6 +78,7 @@ void Solver::Impl::shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bo
   piece.src_area = node.area;
   piece.area = node.area;
   piece.dB = power / node.area;
+  piece.power = channel_sum(piece.dB) * piece.area;
   piece.centre = node.centre;
   piece.up = node.box[1] - node.box[0];
   if (glm::length(glm::cross(piece.up, piece.normal)) < 1e-9 * prep.diagonal) piece.up = node.box[2] - node.box[0];

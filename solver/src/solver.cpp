@@ -59,21 +59,9 @@ Solver::Impl::Impl(const Scene& scene, const Params& p)
     leaves.push_back(p_root[i]);
   }
   build_clusters();
-  p_lo.resize(patches.size());
-  p_hi.resize(patches.size());
-  tree_patch.resize(patches.size());
   p_mark.assign(patches.size(), 0);
   p_shooting.assign(patches.size(), 0);
-  for (uint32_t q = 0; q < patches.size(); ++q) {
-    tree_patch[q] = q;
-    p_lo[q] = p_hi[q] = patches[q].corners[0];
-    for (uint32_t k = 1; k < patches[q].corner_count; ++k) {
-      p_lo[q] = glm::min(p_lo[q], patches[q].corners[k]);
-      p_hi[q] = glm::max(p_hi[q], patches[q].corners[k]);
-    }
-  }
-  tree.emplace_back();
-  if (!patches.empty()) build_patch_tree(0, 0, static_cast<uint32_t>(patches.size()));
+  build_patch_bvh();
   stats.patches = patches.size();
   stats.elements = leaves.size();
   stats.emitted_power = emitted_power;

@@ -8,10 +8,12 @@
 #include "geometry.h"
 #include "hemicube_engine.h"
 #include "scene_prep.h"
+#include "shaft.h"
 #include "thread_pool.h"
 
 #include <glm/vec3.hpp>
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cstdint>
@@ -65,10 +67,86 @@ constexpr double kFinePower = 1e-3;
 // through them, however far (shoot_piece).
 constexpr double kStraddlePower = 0.05;
 
-struct Solver::Impl {
-  Impl(const Scene& scene, const Params& p);
+// A shot is repeated after splits (refine) at most this many times; one still splitting after them
+// is not recorded for replays.
+constexpr int kMaxRounds = 64;
 
-  // Geometry and tree.
+// Lowers `room`, the factor by which a shot's dB may grow, to the factor at which `value` (which
+// scales with dB) reaches `limit`.
+inline void lower_headroom(double& room, double limit, double value) {
+  if (value > 0.0) room = std::min(room, limit / value);
+}
+
+struct Solver::Impl {
+  // What one hemicube shoots from: a piece of a patch, or a cluster of patches of one surface.
+  struct Piece {
+    uint32_t patch;                   // a patch of the piece: its plane and occlusion group
+    glm::dvec3 normal;                // the hemicube's axis: the patch's normal, a cluster's mean
+    glm::dvec3 centre, up;            // the hemicube's centre and rotation hint
+    double area, diameter;
+    glm::dvec3 dB;                    // unshot radiosity shot (uniform over the piece)
+    double power;                     // unshot power shot: channel_sum(dB) * area
+    std::vector<glm::dvec3> points;   // points whose hull holds the piece (facing tests)
+    int depth;                        // hemicube level (each halves the resolution)
+    bool may_refine;                  // near receivers are left to sub-pieces
+    // Where dB comes from (for replays): the unshot power of the leaves under `src`, divided by
+    // src_area.
+    std::vector<uint32_t> src;
+    double src_area;
+  };
+  // A piece of a patch on the way down its quadtree (shooters.cpp).
+  struct ShooterNode {
+    Corners c;
+    uint32_t element;  // kNone: a geometric piece of a leaf
+    glm::dvec3 unshot;
+    int depth;
+    uint32_t source;   // `element`, or for a geometric piece the leaf it was cut from
+  };
+  // A shot's form factors, kept for a replay (step): per piece, in the order they shot, its
+  // sources and the receivers that took light with their F(element -> piece).
+  struct ShotRecord {
+    struct Piece {
+      uint32_t src_begin, src_end, recv_begin, recv_end;
+      double src_area, area;
+      glm::dvec3 dB;  // the unshot radiosity it shot when recorded
+      double headroom;  // a replay may shoot up to this times dB (piece_headroom)
+      bool coarse;    // shot from a hemicube coarser than its level (kCoarseShare)
+      bool extra;     // shot for children of split receivers: its power counts once, elsewhere
+    };
+    size_t fresh_pieces = 0;  // pieces of the shot that made it (replays may add more)
+    std::vector<Piece> pieces;
+    std::vector<uint32_t> src, recv;
+    std::vector<float> f;
+    size_t bytes() const {
+      if (pieces.capacity() + src.capacity() + recv.capacity() + f.capacity() == 0) return 0;  // none
+      return sizeof(ShotRecord) + pieces.capacity() * sizeof(Piece) +
+             (src.capacity() + recv.capacity()) * sizeof(uint32_t) + f.capacity() * sizeof(float);
+    }
+    void append(const ShotRecord& from, Piece piece, bool extra, const uint8_t* skip);
+  };
+  // A node of a cluster's binary tree over its patches (by median cuts of their centres).
+  struct ClusterNode {
+    uint32_t begin = 0, end = 0;  // its patches: cluster_patch[begin, end)
+    uint32_t child = kNone;       // children at child and child + 1
+    glm::dvec3 centre{0.0};       // area centroid
+    glm::dvec3 normal{0.0};       // area-weighted mean of its patches' normals, unit
+    double min_cos = 1.0;         // least cosine between a patch's normal and `normal`
+    double area = 0.0, diameter = 0.0;
+    std::array<glm::dvec3, 8> box{};  // corners of the bounding box of its patches' corners
+  };
+  // A node of the bounding-box tree over the patches (patch_bvh.cpp).
+  struct BoxNode {
+    glm::dvec3 lo, hi;
+    uint32_t begin = 0, end = 0;  // its patches: tree_patch[begin, end)
+    uint32_t child = kNone;       // children at child and child + 1
+  };
+
+  // solver.cpp: set-up, and the Southwell step that picks the shooter.
+  Impl(const Scene& scene, const Params& p);
+  bool step();
+  void receive(uint32_t e, const glm::dvec3& dB, double f);
+
+  // element_tree.cpp: the elements' quadtree.
   uint32_t corner_count(uint32_t e) const { return patches[e_patch[e]].corner_count; }
   void corners_of(uint32_t e, Corners& out) const {
     for (uint32_t i = 0; i < corner_count(e); ++i) out[i] = vpos[e_corner[e][i]];
@@ -84,83 +162,83 @@ struct Solver::Impl {
   void split(uint32_t e);
   template <typename Fn>
   void for_leaves(uint32_t e, Fn&& fn) const;
+  void replace_split(std::vector<uint32_t>& list) const;
+  void grow_scratch();
+  void update_unshot_total();
 
-  // Shooting.
-  bool step();
-  struct ShooterNode {
-    Corners c;
-    uint32_t element;  // kNone: a geometric piece of a leaf
-    glm::dvec3 unshot;
-    int depth;
-    uint32_t source;   // `element`, or for a geometric piece the leaf it was cut from
-  };
-  // What one hemicube shoots from: a piece of a patch, or a cluster of patches of one surface.
-  struct Piece {
-    uint32_t patch;                   // a patch of the piece: its plane and occlusion group
-    glm::dvec3 normal;                // the hemicube's axis: the patch's normal, a cluster's mean
-    glm::dvec3 centre, up;            // the hemicube's centre and rotation hint
-    double area, diameter;
-    glm::dvec3 dB;                    // unshot radiosity shot (uniform over the piece)
-    std::vector<glm::dvec3> points;   // points whose hull holds the piece (facing tests)
-    int depth;                        // hemicube level (each halves the resolution)
-    bool may_refine;                  // near receivers are left to sub-pieces
-    // Where dB comes from (for replays): the unshot power of the leaves under `src`, divided by
-    // src_area.
-    std::vector<uint32_t> src;
-    double src_area;
-  };
-  // A shot's form factors, kept for a replay (step): per piece, in the order they shot, its
-  // sources and the receivers that took light with their F(element -> piece).
-  struct ShotRecord {
-    struct Piece {
-      uint32_t src_begin, src_end, recv_begin, recv_end;
-      double src_area, area;
-      glm::dvec3 dB;  // the unshot radiosity it shot when recorded
-      double headroom;  // a replay may shoot up to this times dB (shoot_piece)
-      bool coarse;    // shot from a hemicube coarser than its level (kCoarseShare)
-      bool extra;     // shot for children of split receivers: its power counts once, elsewhere
-    };
-    size_t fresh_pieces = 0;  // pieces of the shot that made it (replays may add more)
-    std::vector<Piece> pieces;
-    std::vector<uint32_t> src, recv;
-    std::vector<float> f;
-    size_t bytes() const {
-      if (pieces.capacity() + src.capacity() + recv.capacity() + f.capacity() == 0) return 0;  // none
-      return sizeof(ShotRecord) + pieces.capacity() * sizeof(Piece) +
-             (src.capacity() + recv.capacity()) * sizeof(uint32_t) + f.capacity() * sizeof(float);
-    }
-  };
-  bool replay(uint32_t unit);
-  void keep_record(uint32_t unit, ShotRecord record);
-  void receive(uint32_t e, const glm::dvec3& dB, double f);
-  // A node of a cluster's binary tree over its patches (by median cuts of their centres).
-  struct ClusterNode {
-    uint32_t begin = 0, end = 0;  // its patches: cluster_patch[begin, end)
-    uint32_t child = kNone;       // children at child and child + 1
-    glm::dvec3 centre{0.0};       // area centroid
-    glm::dvec3 normal{0.0};       // area-weighted mean of its patches' normals, unit
-    double min_cos = 1.0;         // least cosine between a patch's normal and `normal`
-    double area = 0.0, diameter = 0.0;
-    std::array<glm::dvec3, 8> box{};  // corners of the bounding box of its patches' corners
-  };
+  // patch_bvh.cpp, clusters.cpp: built once.
+  void build_patch_bvh();
+  void build_patch_tree(uint32_t node, uint32_t begin, uint32_t end);
+  void patches_meeting(const detail::Shaft& shaft, std::vector<uint32_t>& out);
+  void build_cluster(uint32_t id, uint32_t begin, uint32_t end);
+  void build_clusters();
+
+  // shooters.cpp: a unit breaks into pieces, each of which shoot_piece shoots.
   void shoot_patch(uint32_t p, const std::vector<uint32_t>& receivers, bool whole_scene);
   void shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers, bool whole_scene);
   void shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bool whole_scene, int depth);
+
+  // shoot_piece.cpp: one hemicube, stage by stage.
   std::vector<uint32_t> shoot_piece(const Piece& piece, std::vector<uint32_t> receivers, bool whole_scene);
-  bool absorber_close(const Piece& piece) const;
-  void build_cluster(uint32_t id, uint32_t begin, uint32_t end);
-  void build_clusters();
-  void build_patch_tree(uint32_t node, uint32_t begin, uint32_t end);
-  void replace_split(std::vector<uint32_t>& list) const;
-  void grow_scratch();
+  void mark_shooting_patches(const Piece& piece);
+  std::vector<uint32_t> current_leaves(const std::vector<uint32_t>& receivers) const;
+  void classify_receivers(const Piece& piece, const std::vector<uint32_t>& current,
+                          std::vector<uint32_t>& accepted, std::vector<uint32_t>& near);
   int coarser_levels(double power) const;
   bool finer_level(const Piece& piece, double power) const;
-  // Projects `elements` onto the placed hemicube, but for the patches of the shooting piece
-  // (p_shooting == shooting_stamp).
+  bool place_hemicube(const Piece& piece);
+  void receiver_form_factors(const Piece& piece, const std::vector<uint32_t>& accepted);
+  void distribute(const glm::dvec3& dB, const std::vector<uint32_t>& accepted);
+  // Whether element e has form factors from the hemicube in use.
+  bool projected(uint32_t e) const { return e_stamp[e] == stamp && e_ff_open[e] > 0.0; }
+  // F(element -> piece) from F(piece -> element) = ff, by reciprocity (capped at 1).
+  double by_reciprocity(const Piece& piece, uint32_t e, double ff) const {
+    return std::min(1.0, ff * piece.area / e_area[e]);
+  }
+  // The radiosity element e gains from a shot of dB with F(element -> piece) = f (channels' mean).
+  double shot_radiosity(uint32_t e, const glm::dvec3& dB, double f) const {
+    return mean(patches[e_patch[e]].reflectance * dB) * f;
+  }
+
+  // near_field.cpp: receivers close to the piece.
+  bool is_close(const Piece& piece, uint32_t e) const;
+  double near_error(const Piece& piece, uint32_t e) const;
+  bool absorber_close(const Piece& piece) const;
+  static double point_piece_form_factor(const Piece& piece, const glm::dvec3& x, const glm::dvec3& n);
+  double element_piece_form_factor(const Piece& piece, uint32_t e, int side) const;
+  double exact_form_factor(const Piece& piece, uint32_t e, int side);
+
+  // shaft.cpp: what the hemicube must see.
+  detail::Shaft shaft_of(const Piece& piece, const std::vector<uint32_t>& accepted, bool whole_scene) const;
+  void gather_seen(const detail::Shaft& shaft, const std::vector<uint32_t>& accepted, std::vector<uint32_t>& seen);
+
+  // projection.cpp: onto the placed hemicube. Projects `elements`, but for the patches of the
+  // shooting piece (p_shooting == shooting_stamp).
   void project(std::span<const uint32_t> elements);
   void project_children(const std::vector<uint32_t>& parents);
   void sum_form_factors(std::span<const uint32_t> elements);
-  void update_unshot_total();
+
+  // refine.cpp: a posteriori subdivision.
+  bool refine(const Piece& piece, const detail::Shaft& shaft, std::vector<uint32_t>& accepted,
+              std::vector<uint32_t>& seen, double& split_room);
+  void spread_shot(const glm::dvec3& dB, const std::vector<uint32_t>& accepted);
+  void reset_spread(const std::vector<uint32_t>& accepted);
+  std::vector<uint32_t> too_coarse(const glm::dvec3& dB, double weight, const std::vector<uint32_t>& accepted);
+  double split_headroom(const glm::dvec3& dB, double weight, const std::vector<uint32_t>& accepted) const;
+  bool trim_to_element_limit(std::vector<uint32_t>& to_split);
+  void split_receivers(const std::vector<uint32_t>& to_split, const detail::Shaft& shaft,
+                       std::vector<uint32_t>& accepted, std::vector<uint32_t>& seen);
+  // A split makes four children, none smaller than aeps_area.
+  double min_split_area() const { return 4.0 * aeps_area; }
+
+  // shot_cache.cpp: records and replays.
+  bool replay(uint32_t unit);
+  size_t mark_stale(const ShotRecord& r, std::vector<uint8_t>& stale);
+  bool replayed_radiosities(const ShotRecord& r, std::vector<glm::dvec3>& dBs);
+  ShotRecord reshoot_split(uint32_t unit, const ShotRecord& r);
+  void keep_record(uint32_t unit, ShotRecord record);
+  void record_piece(const Piece& piece, bool coarse, double split_room, const std::vector<uint32_t>& accepted);
+  double piece_headroom(const Piece& piece, double split_room, const std::vector<uint32_t>& accepted) const;
 
   Params params;
   std::vector<Patch> patches;
@@ -199,12 +277,7 @@ struct Solver::Impl {
   ShotRecord* recording = nullptr;  // the shot being recorded
   bool record_broken = false;       // a piece of it was skipped (no power): not replayable
 
-  // Bounding-box tree over the patches (median cuts), for finding what lies near a hemicube.
-  struct BoxNode {
-    glm::dvec3 lo, hi;
-    uint32_t begin = 0, end = 0;  // its patches: tree_patch[begin, end)
-    uint32_t child = kNone;       // children at child and child + 1
-  };
+  // Bounding-box tree over the patches (patch_bvh.cpp), for finding what lies near a hemicube.
   std::vector<BoxNode> tree;
   std::vector<uint32_t> tree_patch;
   std::vector<glm::dvec3> p_lo, p_hi;  // per patch: bounding box
