@@ -20,6 +20,13 @@ namespace hemibake::solver {
 namespace detail {
 namespace {
 
+// A corner nearer to the eye than this share of the polygon's extent does not give a trustworthy
+// 1/depth: the polygon is clipped there. clip_to_face's fast path and its clipper must agree, or
+// a polygon's fragments would depend on which path it took.
+constexpr double kNearPlane = 1e-9;
+// A pixel covered by less than this fraction gets no fragment (rounding of the scan converter).
+constexpr double kMinCoverage = 1e-9;
+
 // Axes of the five faces in the hemicube's own frame (x, y tangent, z the normal).
 struct LocalFace {
   glm::dvec3 right, up, forward;
@@ -199,7 +206,7 @@ bool Hemicube::clip_to_face(size_t f, ProjectScratch& s, bool inside) const {
     bool near = false;
     for (int i = 0; i < s.local_n && !near; ++i) {
       const glm::dvec3 q = to_face(f, s.local[i]);
-      near = q.z < 1e-9 * scale;
+      near = q.z < kNearPlane * scale;
       const double inv_z = 1.0 / q.z;
       const double x = std::clamp((q.x * inv_z + 1.0) * half_n, 0.0, static_cast<double>(n_));
       const double y = std::clamp((q.y * inv_z - face.b_min) * half_n, 0.0, static_cast<double>(face.height));
@@ -255,7 +262,7 @@ bool Hemicube::clip_to_face(size_t f, ProjectScratch& s, bool inside) const {
       clip([](const glm::dvec3& q) { return q.y; });
     }
   }
-  const double near = 1e-9 * scale;
+  const double near = kNearPlane * scale;
   bool near_cut = false;
   for (int i = 0; i < in->n && !near_cut; ++i) near_cut = in->v[i].z < near;
   if (near_cut) clip([near](const glm::dvec3& q) { return q.z - near; });
@@ -345,7 +352,7 @@ void Hemicube::rasterize(const Face& face, uint32_t element, Method method,
   if (method == Method::kAntiAliased) {
     if (child) {
       detail::scan_walk<false>(s.poly2, win, s.scan, [&](int col, int row, double a, double, double) __attribute__((always_inline)) {
-        if (a > 1e-9) emit(col, row, static_cast<float>(std::min(a, 1.0)), 0.5, 0.5);
+        if (a > kMinCoverage) emit(col, row, static_cast<float>(std::min(a, 1.0)), 0.5, 0.5);
       });
     } else {
       // The depth that orders a partly covered pixel is the polygon's mean depth over the part it
@@ -353,7 +360,7 @@ void Hemicube::rasterize(const Face& face, uint32_t element, Method method,
       // centre would misorder surfaces that meet inside a pixel, such as a block standing on a
       // floor.
       detail::scan_walk<true>(s.poly2, win, s.scan, [&](int col, int row, double a, double mx, double my) __attribute__((always_inline)) {
-        if (a <= 1e-9) return;
+        if (a <= kMinCoverage) return;
         emit(col, row, static_cast<float>(std::min(a, 1.0)), std::clamp(mx / a, 0.0, 1.0),
              std::clamp(my / a, 0.0, 1.0));
       });

@@ -24,7 +24,7 @@ namespace hemibake::solver {
 bool Solver::Impl::is_close(const Piece& piece, uint32_t e) const {
   const uint32_t p = piece.patch;
   const glm::dvec3& centre = piece.centre;
-  const double eps = 1e-6 * prep.diagonal;
+  const double eps = kCloseFacingLength * prep.diagonal;
   const bool cut_rule = piece.points.size() <= 4 && piece.power >= kStraddlePower * emitted_power;
   const uint32_t q = e_patch[e];
   if (prep.occlusion_group[q] == prep.occlusion_group[p]) return false;
@@ -128,7 +128,7 @@ double Solver::Impl::exact_form_factor(const Piece& piece, uint32_t e, int side)
 bool Solver::Impl::absorber_close(const Piece& piece) const {
   const glm::dvec3& c = piece.centre;
   const double r = piece.diameter;
-  const double eps = 1e-9 * prep.diagonal;
+  const double eps = kRoundingLength * prep.diagonal;
   std::vector<uint32_t> nodes{0};
   while (!nodes.empty()) {
     const BoxNode& node = tree[nodes.back()];

@@ -51,7 +51,7 @@ void Solver::Impl::build_patch_tree(uint32_t id, uint32_t begin, uint32_t end) {
 // Appends the patches whose boxes meet the shaft's to `out` and marks them (p_mark = mark), in
 // the tree's order: the hemicube projects in this order, and ties in depth keep it.
 void Solver::Impl::patches_meeting(const detail::Shaft& shaft, std::vector<uint32_t>& out) {
-  const double slack = 1e-9 * prep.diagonal;
+  const double slack = kRoundingLength * prep.diagonal;
   std::vector<uint32_t> nodes{0};
   while (!nodes.empty()) {
     const BoxNode& node = tree[nodes.back()];

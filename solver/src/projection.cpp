@@ -33,7 +33,7 @@ void Solver::Impl::project(std::span<const uint32_t> elements) {
   ++stats.projections;
   stats.elements_projected += elements.size();
   const glm::dvec3 eye = cube->eye();
-  const double eps = 1e-9 * prep.diagonal;
+  const double eps = kRoundingLength * prep.diagonal;
   const size_t n = elements.size();
   const size_t chunks = pool.chunk_count(n);
   pool.parallel_for(n, [&](size_t b, size_t e, size_t c) {

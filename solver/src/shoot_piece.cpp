@@ -8,6 +8,12 @@
 #include <limits>
 
 namespace hemibake::solver {
+namespace {
+
+// A finer hemicube (finer_level) has at most this resolution: pixels cost memory and time.
+constexpr uint32_t kMaxFinerResolution = 400;
+
+}  // namespace
 
 // Returns the receivers this piece's sub-pieces must serve instead (near-field): the caller's
 // recursion shoots them from the quarters.
@@ -81,11 +87,13 @@ void Solver::Impl::classify_receivers(const Piece& piece, const std::vector<uint
 // of small patches), their errors add up: coarser hemicubes may shoot at most kCoarseShare of all the
 // power shot so far (place_hemicube), which took a 1746-patch room from 7.5 % to 6.1 % RMS error.
 int Solver::Impl::coarser_levels(double power) const {
+  static_assert(kCoarserLevels == 2, "one level per share");
   if (params.method != Method::kAntiAliased) return 0;
-  return (power < 0.05 * emitted_power ? 1 : 0) + (power < 0.005 * emitted_power ? 1 : 0);
+  return (power < kHalfResolutionPower * emitted_power ? 1 : 0) +
+         (power < kQuarterResolutionPower * emitted_power ? 1 : 0);
 }
 
-// Whether a shooting piece takes a hemicube of twice its level's resolution (at most 400). A
+// Whether a shooting piece takes a hemicube of twice its level's resolution (kMaxFinerResolution). A
 // cluster shoots for many small patches, and its receivers are the scene's many small patches, whose
 // silhouettes a hemicube resolves coarsely (pixels mixing a piece of furniture and the wall behind
 // it); there a hemicube's cost is mostly per projected element, so twice the resolution costs
@@ -114,10 +122,9 @@ bool Solver::Impl::place_hemicube(const Piece& piece) {
   ++stamp;
   const size_t level = std::min<size_t>(static_cast<size_t>(piece.depth) + coarser, cubes.size() - 1);
   cube = &cubes[level];
-  const uint32_t finer_resolution = std::max(params.resolution, std::min(2 * params.resolution, 400u));
+  const uint32_t finer_resolution = std::max(params.resolution, std::min(2 * params.resolution, kMaxFinerResolution));
   if (finer && finer_resolution > params.resolution) {
-    // Made when first needed; at most 400 (pixels cost memory and time), and none at all where the
-    // resolution is that fine already.
+    // Made when first needed, and none at all where the resolution is that fine already.
     if (!finer_cube) finer_cube = std::make_unique<detail::Hemicube>(finer_resolution);
     cube = finer_cube.get();
   }

@@ -7,6 +7,13 @@
 #include <algorithm>
 
 namespace hemibake::solver {
+namespace {
+
+// A patch is cut for shooter_limit at most this many levels (4096 pieces): a sliver as long as the
+// scene stays a few sliver-shaped pieces rather than millions.
+constexpr int kMaxCutLevels = 6;
+
+}  // namespace
 
 void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers,
                               bool whole_scene) {
@@ -81,7 +88,7 @@ void Solver::Impl::shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bo
   piece.power = channel_sum(piece.dB) * piece.area;
   piece.centre = node.centre;
   piece.up = node.box[1] - node.box[0];
-  if (glm::length(glm::cross(piece.up, piece.normal)) < 1e-9 * prep.diagonal) piece.up = node.box[2] - node.box[0];
+  if (glm::length(glm::cross(piece.up, piece.normal)) < kRoundingLength * prep.diagonal) piece.up = node.box[2] - node.box[0];
   piece.diameter = node.diameter;
   piece.points.assign(node.box.begin(), node.box.end());
   piece.depth = depth / 2;  // each level halves the area, every second one the width
@@ -115,7 +122,7 @@ void Solver::Impl::shoot_patch(uint32_t p, const std::vector<uint32_t>& receiver
     stack.pop_back();
     const bool leaf = node.element == kNone || e_child[node.element] == kNone;
     if (node.element != kNone && leaf) node.unshot = e_unshot[node.element];
-    if (polygon_diameter(node.c, n) <= shooter_limit || node.depth >= 6) {
+    if (polygon_diameter(node.c, n) <= shooter_limit || node.depth >= kMaxCutLevels) {
       node.depth = 0;  // near-field refinement counts from here
       tops.push_back(node);
       continue;

@@ -182,20 +182,24 @@ double Solver::Impl::piece_headroom(const Piece& piece, double split_room, const
   double headroom = split_room;
   const bool patch_piece = piece.points.size() <= 4;
   // Two rules save work rather than decide structure, and a replay may exceed them by up to
-  // twice: a weak piece that was not refined (its close receivers took exact form factors) stays
-  // so up to twice FEPS of the emitted power, and a close receiver left to this hemicube because
-  // its point view errs by under a quarter of the radiosity tolerance stays so until half of it.
+  // kSavingRuleSlack: a weak piece that was not refined (its close receivers took exact form
+  // factors) stays so up to twice FEPS of the emitted power, and a close receiver left to this
+  // hemicube because its point view errs by under a quarter of the radiosity tolerance stays so
+  // until half of it.
   if (patch_piece && !piece.may_refine && piece.depth < kMaxShooterDepth)
-    lower_headroom(headroom, 2.0 * params.feps * emitted_power, power);
+    lower_headroom(headroom, kSavingRuleSlack * params.feps * emitted_power, power);
   if (patch_piece && power < kStraddlePower * emitted_power) lower_headroom(headroom, kStraddlePower * emitted_power, power);
   if (params.method == Method::kAntiAliased) {
-    if (power < 0.005 * emitted_power) lower_headroom(headroom, 0.005 * emitted_power, power);
-    else if (power < 0.05 * emitted_power) lower_headroom(headroom, 0.05 * emitted_power, power);
+    // The next coarser_levels threshold above the power: past it, a fresh shot takes a finer hemicube.
+    if (power < kQuarterResolutionPower * emitted_power)
+      lower_headroom(headroom, kQuarterResolutionPower * emitted_power, power);
+    else if (power < kHalfResolutionPower * emitted_power)
+      lower_headroom(headroom, kHalfResolutionPower * emitted_power, power);
     if (!patch_piece && piece.depth == 0 && power < kFinePower * emitted_power) lower_headroom(headroom, kFinePower * emitted_power, power);
   }
   if (piece.may_refine)
     for (uint32_t e : accepted)
-      if (is_close(piece, e)) lower_headroom(headroom, 2.0 * kNearError * b_tolerance, near_error(piece, e));
+      if (is_close(piece, e)) lower_headroom(headroom, kSavingRuleSlack * kNearError * b_tolerance, near_error(piece, e));
   return headroom;
 }
 

@@ -37,7 +37,7 @@ Solver::Impl::Impl(const Scene& scene, const Params& p)
       prep(detail::prepare(scene)),
 
       pool(p.threads != 0 ? p.threads : std::max(1u, std::thread::hardware_concurrency())) {
-  for (int d = 0; d <= kMaxShooterDepth + 2; ++d) {
+  for (int d = 0; d <= kMaxShooterDepth + kCoarserLevels; ++d) {
     const uint32_t res = std::max(kMinResolution, ((params.resolution >> d) + 1) & ~1u);
     cubes.emplace_back(std::min(res, params.resolution));
   }

@@ -40,17 +40,44 @@ inline double seconds_since(Clock::time_point t) {
   return std::chrono::duration<double>(Clock::now() - t).count();
 }
 
+// Shared thresholds. Those that compare a piece's power with the emitted power are read twice: by
+// the fresh shot that decides with them, and by piece_headroom, which stops a replay of that shot
+// where a fresh one would decide differently. A replay reuses the recorded form factors, so it is
+// exact only while both places read the same constant.
+
 // A receiver nearer to a shooting area's centre than kNearFactor times its diameter takes its share
 // from the area's quarters, down to kMaxShooterDepth levels.
 constexpr double kNearFactor = 2.0;
 constexpr int kMaxShooterDepth = 3;
 // A near-field hemicube projects only what may hide its receivers: elements overlapping the joint
-// bounding box of the piece and the receivers of one surface, at most this many boxes.
+// bounding box of the piece and the receivers of one surface, at most this many boxes (shaft_of).
 constexpr size_t kMaxShaftBoxes = 32;
 // A close receiver is refined for only if the point view's error could exceed this share of the
-// radiosity tolerance (shoot_piece).
+// radiosity tolerance (classify_receivers, near_error).
 constexpr double kNearError = 0.25;
+// Two rules save work rather than decide structure, so a replay may exceed them by this factor
+// (piece_headroom): a weak piece left unrefined (power under FEPS of the emitted power), and a
+// close receiver left to the hemicube (point view's error under kNearError of the tolerance).
+constexpr double kSavingRuleSlack = 2.0;
+// Hemicubes halve their resolution per level, down to this.
 constexpr uint32_t kMinResolution = 20;
+// Weak pieces, under these shares of the emitted power, take a hemicube of half (a quarter of)
+// their level's resolution (coarser_levels); piece_headroom stops a replay at the same shares, so
+// that a replayed shot never reuses form factors of a coarser hemicube than a fresh shot would take.
+constexpr double kHalfResolutionPower = 0.05;
+constexpr double kQuarterResolutionPower = 0.005;
+// How many levels coarser than its depth's a piece's hemicube may be (the two shares above): the
+// solver keeps kMaxShooterDepth + kCoarserLevels + 1 hemicubes.
+constexpr int kCoarserLevels = 2;
+// Coarser hemicubes may shoot at most this share of all the power shot (place_hemicube, and the
+// replay's check in replayed_radiosities).
+constexpr double kCoarseShare = 0.25;
+// Cluster pieces carrying at least this share of the emitted power take a finer hemicube
+// (finer_level, piece_headroom).
+constexpr double kFinePower = 1e-3;
+// Pieces carrying at least this share of the emitted power refine for receivers whose plane cuts
+// through them, however far (is_close, piece_headroom).
+constexpr double kStraddlePower = 0.05;
 // A cluster of a curved surface shoots along its patches' mean normal, as if flat: its patches'
 // normals stay within this cosine (20 degrees) of it, so a receiver's cosine at the cluster errs by
 // under 6 % where it faces the cluster (build_clusters).
@@ -58,15 +85,14 @@ constexpr double kClusterCone = 0.9397;
 // A shooting piece with an absorbing back close in front of it that takes at least this share of
 // the light from its centre is refined (absorber_close).
 constexpr double kAbsorberShare = 0.1;
-// Coarser hemicubes may shoot at most this share of all the power shot (see coarser_levels).
-constexpr double kCoarseShare = 0.25;
-// Cluster pieces carrying at least this share of the emitted power take a finer hemicube
-// (finer_level).
-constexpr double kFinePower = 1e-3;
-// Pieces carrying at least this share of the emitted power refine for receivers whose plane cuts
-// through them, however far (shoot_piece).
-constexpr double kStraddlePower = 0.05;
-
+// Lengths under this share of the scene's diagonal are rounding. An eye that near a patch's plane
+// sees it edge-on: project() leaves such patches out and projects backs beyond it, and
+// absorber_close, which predicts which absorbing backs the hemicube will see, must draw the same
+// line. Boxes that near meet (patches_meeting).
+constexpr double kRoundingLength = 1e-9;
+// A receiver counts as close (is_close) only where the piece lies in front of it, and it in front
+// of the piece, by more than this share of the scene's diagonal.
+constexpr double kCloseFacingLength = 1e-6;
 // A shot is repeated after splits (refine) at most this many times; one still splitting after them
 // is not recorded for replays.
 constexpr int kMaxRounds = 64;
