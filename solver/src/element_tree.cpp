@@ -16,6 +16,9 @@ uint32_t Solver::Impl::add_element(uint32_t patch, uint32_t parent,
                                    const std::array<uint32_t, 4>& corners, const glm::dvec3& b,
                                    const glm::dvec3& unshot) {
   const uint32_t id = static_cast<uint32_t>(e_patch.size());
+  HEMIBAKE_DCHECK(patch < patches.size());
+  HEMIBAKE_DCHECK(parent == kNone || (parent < id && e_patch[parent] == patch));
+  for (uint32_t i = 0; i < patches[patch].corner_count; ++i) HEMIBAKE_DCHECK(corners[i] < vpos.size());
   e_patch.push_back(patch);
   e_group.push_back(prep.occlusion_group[patch]);
   e_parent.push_back(parent);
@@ -44,6 +47,7 @@ uint32_t Solver::Impl::add_element(uint32_t patch, uint32_t parent,
 }
 
 void Solver::Impl::split(uint32_t e) {
+  HEMIBAKE_DCHECK(e < e_child.size() && e_child[e] == kNone);  // only leaves split
   const std::array<uint32_t, 4> c = e_corner[e];
   const uint32_t p = e_patch[e];
   // Children start with the parent's radiosity and unshot radiosity: energy carries over.
@@ -63,12 +67,16 @@ void Solver::Impl::split(uint32_t e) {
   const uint32_t first = add_element(p, e, kids[0], b, u);
   for (int k = 1; k < 4; ++k) add_element(p, e, kids[k], b, u);
   e_child[e] = first;
+  HEMIBAKE_DCHECK(first + 3 < e_parent.size() && e_parent[first] == e && e_parent[first + 3] == e);
   ++stats.splits;
 }
 
 void Solver::Impl::update_unshot_total() {
   double total = 0.0;
   for (double u : p_unshot) total += u;
+  for (double u : p_unshot) HEMIBAKE_DCHECK(u >= 0.0);
+  // Every patch is a root, and every split turns a leaf into four.
+  HEMIBAKE_DCHECK(leaves.size() == patches.size() + 3 * stats.splits);
   stats.unshot_fraction = emitted_power > 0.0 ? total / emitted_power : 0.0;
   stats.elements = leaves.size();
 }
@@ -82,6 +90,7 @@ void Solver::Impl::replace_split(std::vector<uint32_t>& list) const {
   out.reserve(list.size() + 16);
   for (uint32_t e : list) for_leaves(e, [&](uint32_t leaf) { out.push_back(leaf); });
   list.swap(out);
+  for (uint32_t e : list) HEMIBAKE_DCHECK(e_child[e] == kNone);
 }
 
 void Solver::Impl::grow_scratch() {

@@ -5,6 +5,7 @@
 #include "hemicube_engine.h"
 
 #include "hemibake/solver/hemicube.h"
+#include "check.h"
 #include "scan_walk.h"
 
 #include <glm/geometric.hpp>
@@ -15,6 +16,7 @@
 #include <limits>
 #include <map>
 #include <numbers>
+#include <numeric>
 
 namespace hemibake::solver {
 namespace detail {
@@ -139,6 +141,9 @@ Hemicube::Hemicube(uint32_t resolution) : n_(resolution) {
     faces_[f].offset = offset;
     offset += height * n_;
   }
+  HEMIBAKE_DCHECK(offset == pixel_count_);
+  // The pixels tile the hemisphere: their exact form factors sum to 1.
+  HEMIBAKE_DCHECK(std::abs(std::accumulate(dff_.begin(), dff_.end(), 0.0) - 1.0) < 1e-6);
   place(glm::dvec3(0.0), glm::dvec3(0, 0, 1), glm::dvec3(0, 1, 0));
 }
 
@@ -627,6 +632,8 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
       }
     }
   });
+  // A fragment sees at most all of its pixel share, and nearer layers take at most all of it.
+  for (const Fragment& f : fragments) HEMIBAKE_DCHECK(f.trans >= 0.0f && f.trans <= 1.0f);
 }
 
 }  // namespace detail

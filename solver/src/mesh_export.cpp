@@ -72,6 +72,7 @@ Mesh Solver::mesh(bool ambient) const {
     el.corners = s.e_corner[e];
     el.area = s.e_area[e];
     el.radiosity = s.e_b[e] + s.patches[el.patch].reflectance * amb;
+    HEMIBAKE_DCHECK(el.radiosity.x >= 0.0 && el.radiosity.y >= 0.0 && el.radiosity.z >= 0.0);
     el.boundary_begin = static_cast<uint32_t>(m.boundary.size());
     for (uint32_t k = 0; k < el.corner_count; ++k) {
       const uint32_t a = el.corners[k], b = el.corners[(k + 1) % el.corner_count];
@@ -87,6 +88,7 @@ Mesh Solver::mesh(bool ambient) const {
     }
     m.elements.push_back(el);
   }
+  for (uint32_t v : m.boundary) HEMIBAKE_DCHECK(v < m.positions.size());
   m.radiosity.resize(m.positions.size(), glm::dvec3(0.0));
   for (size_t v = 0; v < s.vpos.size(); ++v)
     if (weight[v] > 0.0) m.radiosity[v] = acc[v] / weight[v];

@@ -23,7 +23,9 @@ void Solver::Impl::build_patch_bvh() {
   if (!patches.empty()) build_patch_tree(0, 0, static_cast<uint32_t>(patches.size()));
 }
 
+// Tree node `id` over tree_patch[begin, end), and its subtree: leaves hold at most four patches.
 void Solver::Impl::build_patch_tree(uint32_t id, uint32_t begin, uint32_t end) {
+  HEMIBAKE_DCHECK(begin < end && end <= tree_patch.size() && id < tree.size());
   BoxNode node;
   node.begin = begin;
   node.end = end;

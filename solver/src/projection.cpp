@@ -77,6 +77,7 @@ void Solver::Impl::project(std::span<const uint32_t> elements) {
       f_end[elements[i]] += base;
     }
   }
+  for (uint32_t el : elements) HEMIBAKE_DCHECK(f_begin[el] <= f_end[el] && f_end[el] <= frags.size());
   detail::resolve(frags, cube->pixel_count(), params.method, e_group, prep.adjacency, pool, order, pixel_start);
   stats.peak_fragments = std::max<uint64_t>(stats.peak_fragments, frags.size());
   stats.seconds_projecting += seconds_since(t0);
@@ -118,6 +119,7 @@ void Solver::Impl::project_children(const std::vector<uint32_t>& parents) {
       }
     }
   }
+  for (uint32_t ch : children) HEMIBAKE_DCHECK(f_begin[ch] <= f_end[ch] && f_end[ch] <= frags.size());
   sum_form_factors(children);
   stats.reused_children += children.size();
   stats.peak_fragments = std::max<uint64_t>(stats.peak_fragments, frags.size());

@@ -24,7 +24,11 @@ bool Solver::Impl::refine(const Piece& piece, const detail::Shaft& shaft, std::v
     std::vector<uint32_t> to_split = too_coarse(piece.dB, weight, accepted);
     if (recording != nullptr) split_room = split_headroom(piece.dB, weight, accepted);
     reset_spread(accepted);
-    if (to_split.empty()) return true;
+    if (to_split.empty()) {
+      // Nothing passed a criterion, so dB may grow by at least 1 before anything does.
+      HEMIBAKE_DCHECK(recording == nullptr || split_room >= 1.0);
+      return true;
+    }
     if (!trim_to_element_limit(to_split)) {
       split_room = std::numeric_limits<double>::infinity();  // no split is possible any more
       return true;
@@ -122,6 +126,7 @@ void Solver::Impl::split_receivers(const std::vector<uint32_t>& to_split, const 
   for (uint32_t e : to_split) split(e);
   replace_split(leaves);
   replace_split(accepted);
+  HEMIBAKE_DCHECK(leaves.size() == patches.size() + 3 * stats.splits);
   grow_scratch();
   if (params.reuse_visibility) {
     project_children(to_split);

@@ -42,6 +42,7 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   double split_room = std::numeric_limits<double>::infinity();
   const bool settled = refine(piece, shaft, accepted, seen, split_room);
   receiver_form_factors(piece, accepted);
+  HEMIBAKE_DCHECK(hemicube_share(accepted) <= 1.0 + 1e-4);
   if (!settled) record_broken = true;  // kMaxRounds still splitting: no headroom to record
   if (recording != nullptr) record_piece(piece, coarse, split_room, accepted);
   distribute(piece.dB, accepted);
@@ -77,6 +78,7 @@ void Solver::Impl::classify_receivers(const Piece& piece, const std::vector<uint
         goes_near[i] = is_close(piece, current[i]) && near_error(piece, current[i]) > kNearError * b_tolerance;
     });
   for (size_t i = 0; i < current.size(); ++i) (goes_near[i] ? near : accepted).push_back(current[i]);
+  HEMIBAKE_DCHECK(accepted.size() + near.size() == current.size());
 }
 
 // How many times coarser than its depth's hemicube a shooting piece's hemicube may be. Weak shots
@@ -161,8 +163,19 @@ void Solver::Impl::receiver_form_factors(const Piece& piece, const std::vector<u
         f_recv[e] = seen_here ? f * (e_ff[e] / e_ff_open[e]) : f;
         f_open[e] = f;
       }
+      // Visible shares are at most the unoccluded ones, and both form factors at most 1.
+      HEMIBAKE_DCHECK(f_recv[e] >= 0.0 && f_recv[e] <= f_open[e] && f_open[e] <= 1.0);
     }
   });
+}
+
+// The share of the hemicube's view that its receivers take, sum of F(piece -> receiver): at most 1
+// (the pixels' delta form factors sum to 1, and the visible shares in a pixel to at most 1).
+double Solver::Impl::hemicube_share(const std::vector<uint32_t>& accepted) const {
+  double sum = 0.0;
+  for (uint32_t e : accepted)
+    if (projected(e)) sum += e_ff[e];
+  return sum;
 }
 
 // Southwell step: the piece's unshot radiosity goes to the receivers that took light here.

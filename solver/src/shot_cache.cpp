@@ -19,6 +19,7 @@ bool Solver::Impl::replay(uint32_t unit) {
   if (u_record.empty()) return false;
   ShotRecord& r = u_record[unit];
   if (r.pieces.empty()) return false;
+  HEMIBAKE_DCHECK(r.consistent());
   // Receivers split since need form factors for their children. When they are few, the rest is
   // replayed and the children are shot anew from the same shooter, its hemicubes seeing only what
   // may hide them (as near-field hemicubes do); otherwise the whole shot is made anew.
@@ -49,6 +50,7 @@ bool Solver::Impl::replay(uint32_t unit) {
   merged.fresh_pieces = r.fresh_pieces;
   for (const ShotRecord::Piece& rp : r.pieces) merged.append(r, rp, false, stale.data());
   for (const ShotRecord::Piece& rp : part.pieces) merged.append(part, rp, true, nullptr);
+  HEMIBAKE_DCHECK(merged.consistent());
   keep_record(unit, std::move(merged));
   return true;
 }
@@ -67,6 +69,7 @@ size_t Solver::Impl::mark_stale(const ShotRecord& r, std::vector<uint8_t>& stale
     for (size_t k = 0; k < r.recv.size(); ++k)
       for (uint32_t x = e_parent[r.recv[k]]; x != kNone && !stale[k]; x = e_parent[x])
         if (e_mark[x] == mark) stale[k] = 1, ++stale_count;
+  HEMIBAKE_DCHECK(stale_count <= r.recv.size());
   return stale_count;
 }
 
@@ -82,6 +85,7 @@ bool Solver::Impl::replayed_radiosities(const ShotRecord& r, std::vector<glm::dv
     for (uint32_t k = rp.src_begin; k < rp.src_end; ++k)
       for_leaves(r.src[k], [&](uint32_t e) { power += e_unshot[e] * e_area[e]; });
     dBs[i] = power / rp.src_area;
+    HEMIBAKE_DCHECK(dBs[i].x >= 0.0 && dBs[i].y >= 0.0 && dBs[i].z >= 0.0);
     // The most any channel grew: every decision of the shot is a sum of channels with non-negative
     // weights, so it grew by at most this factor.
     double growth = 0.0;
@@ -148,6 +152,20 @@ void Solver::Impl::ShotRecord::append(const ShotRecord& from, Piece np, bool ext
   pieces.push_back(np);
 }
 
+// The pieces' receiver ranges follow one another and cover recv (f alongside); their source ranges
+// lie in src; every piece shot from an area.
+bool Solver::Impl::ShotRecord::consistent() const {
+  if (f.size() != recv.size()) return false;
+  uint32_t recv_at = 0;
+  for (const Piece& p : pieces) {
+    if (p.recv_begin != recv_at || p.recv_end < p.recv_begin) return false;
+    if (p.src_begin > p.src_end || p.src_end > src.size()) return false;
+    if (!(p.src_area > 0.0 && p.area > 0.0)) return false;
+    recv_at = p.recv_end;
+  }
+  return recv_at == recv.size();
+}
+
 // Records a piece's shot: its sources, every accepted receiver with F(element -> piece), and its
 // headroom (piece_headroom).
 void Solver::Impl::record_piece(const Piece& piece, bool coarse, double split_room, const std::vector<uint32_t>& accepted) {
@@ -206,6 +224,7 @@ double Solver::Impl::piece_headroom(const Piece& piece, double split_room, const
 // Puts `record` in place of the unit's record, if the records' memory allows.
 void Solver::Impl::keep_record(uint32_t unit, ShotRecord record) {
   if (!u_record.empty()) {
+    HEMIBAKE_DCHECK(unit < u_record.size() && record_bytes >= u_record[unit].bytes());
     record_bytes -= u_record[unit].bytes();
     u_record[unit] = ShotRecord{};
   }

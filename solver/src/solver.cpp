@@ -73,6 +73,10 @@ Solver::Impl::Impl(const Scene& scene, const Params& p)
 }
 
 void Solver::Impl::receive(uint32_t e, const glm::dvec3& dB, double f) {
+  // Light goes to leaves only, and only adds: unshot power and radiosity stay non-negative.
+  HEMIBAKE_DCHECK(e < e_child.size() && e_child[e] == kNone);
+  HEMIBAKE_DCHECK(f > 0.0 && f <= 1.0);
+  HEMIBAKE_DCHECK(dB.x >= 0.0 && dB.y >= 0.0 && dB.z >= 0.0);
   const uint32_t q = e_patch[e];
   const glm::dvec3 gain = patches[q].reflectance * dB * f;
   e_b[e] += gain;
@@ -94,47 +98,64 @@ bool Solver::Impl::step() {
     return false;
   }
   const auto t0 = Clock::now();
-  uint32_t best = 0;
-  for (uint32_t u = 1; u < u_unshot.size(); ++u)
-    if (u_unshot[u] > u_unshot[best]) best = u;
+  const uint32_t best = strongest_unit();
   if (replay(best)) {
     ++stats.replayed_shots;
   } else {
-    // A fresh shot, recorded for a replay while the cache has room (in place of the unit's
-    // record, which could not be replayed).
-    ShotRecord record;
-    keep_record(best, {});
-    recording = params.shot_cache_mb > 0 ? &record : nullptr;
-    record_broken = false;
-    if (unit_node[best] == kNone) {
-      shoot_patch(unit_patch[best], leaves, true);
-    } else {
-      grow_scratch();
-      shoot_cluster(unit_node[best], leaves, true, 0);
-    }
-    recording = nullptr;
-    if (params.shot_cache_mb > 0 && !record_broken) {
-      record.fresh_pieces = record.pieces.size();
-      keep_record(best, std::move(record));
-    }
+    fresh_shot(best);
   }
-  if (unit_node[best] != kNone) {
-    const ClusterNode& c = c_nodes[unit_node[best]];
+  clear_unshot(best);
+  ++stats.shots;
+  update_unshot_total();
+  stats.seconds += seconds_since(t0);
+  return true;
+}
+
+// The unit with the most unshot power (the first of equals).
+uint32_t Solver::Impl::strongest_unit() const {
+  uint32_t best = 0;
+  for (uint32_t u = 1; u < u_unshot.size(); ++u)
+    if (u_unshot[u] > u_unshot[best]) best = u;
+  for (double u : u_unshot) HEMIBAKE_DCHECK(u >= 0.0);
+  return best;
+}
+
+// A fresh shot of the unit to every leaf, recorded for a replay while the cache has room (in place
+// of the unit's record, which could not be replayed).
+void Solver::Impl::fresh_shot(uint32_t unit) {
+  ShotRecord record;
+  keep_record(unit, {});
+  recording = params.shot_cache_mb > 0 ? &record : nullptr;
+  record_broken = false;
+  if (unit_node[unit] == kNone) {
+    shoot_patch(unit_patch[unit], leaves, true);
+  } else {
+    grow_scratch();
+    shoot_cluster(unit_node[unit], leaves, true, 0);
+  }
+  recording = nullptr;
+  if (params.shot_cache_mb > 0 && !record_broken) {
+    record.fresh_pieces = record.pieces.size();
+    HEMIBAKE_DCHECK(record.consistent());
+    keep_record(unit, std::move(record));
+  }
+}
+
+// The unit has shot all its unshot power.
+void Solver::Impl::clear_unshot(uint32_t unit) {
+  if (unit_node[unit] != kNone) {
+    const ClusterNode& c = c_nodes[unit_node[unit]];
     for (uint32_t i = c.begin; i < c.end; ++i) {
       const uint32_t q = cluster_patch[i];
       for_leaves(p_root[q], [&](uint32_t e) { e_unshot[e] = glm::dvec3(0.0); });
       p_unshot[q] = 0.0;
     }
   } else {
-    const uint32_t p = unit_patch[best];
+    const uint32_t p = unit_patch[unit];
     for_leaves(p_root[p], [&](uint32_t e) { e_unshot[e] = glm::dvec3(0.0); });
     p_unshot[p] = 0.0;
   }
-  u_unshot[best] = 0.0;
-  ++stats.shots;
-  update_unshot_total();
-  stats.seconds += seconds_since(t0);
-  return true;
+  u_unshot[unit] = 0.0;
 }
 
 Solver::Solver(const Scene& scene, const Params& params)

@@ -5,6 +5,7 @@
 
 #include "hemibake/solver/solver.h"
 
+#include "check.h"
 #include "geometry.h"
 #include "hemicube_engine.h"
 #include "scene_prep.h"
@@ -149,6 +150,7 @@ struct Solver::Impl {
              (src.capacity() + recv.capacity()) * sizeof(uint32_t) + f.capacity() * sizeof(float);
     }
     void append(const ShotRecord& from, Piece piece, bool extra, const uint8_t* skip);
+    bool consistent() const;  // for HEMIBAKE_DCHECK: the pieces' ranges tile src and recv
   };
   // A node of a cluster's binary tree over its patches (by median cuts of their centres).
   struct ClusterNode {
@@ -170,6 +172,9 @@ struct Solver::Impl {
   // solver.cpp: set-up, and the Southwell step that picks the shooter.
   Impl(const Scene& scene, const Params& p);
   bool step();
+  uint32_t strongest_unit() const;
+  void fresh_shot(uint32_t unit);
+  void clear_unshot(uint32_t unit);
   void receive(uint32_t e, const glm::dvec3& dB, double f);
 
   // element_tree.cpp: the elements' quadtree.
@@ -196,8 +201,11 @@ struct Solver::Impl {
   void build_patch_bvh();
   void build_patch_tree(uint32_t node, uint32_t begin, uint32_t end);
   void patches_meeting(const detail::Shaft& shaft, std::vector<uint32_t>& out);
-  void build_cluster(uint32_t id, uint32_t begin, uint32_t end);
   void build_clusters();
+  void find_surfaces();
+  std::vector<std::vector<uint32_t>> cluster_candidates(double limit) const;
+  void cut_into_units(const std::vector<uint32_t>& members, double limit);
+  void build_cluster(uint32_t id, uint32_t begin, uint32_t end);
 
   // shooters.cpp: a unit breaks into pieces, each of which shoot_piece shoots.
   void shoot_patch(uint32_t p, const std::vector<uint32_t>& receivers, bool whole_scene);
@@ -215,6 +223,7 @@ struct Solver::Impl {
   bool place_hemicube(const Piece& piece);
   void receiver_form_factors(const Piece& piece, const std::vector<uint32_t>& accepted);
   void distribute(const glm::dvec3& dB, const std::vector<uint32_t>& accepted);
+  double hemicube_share(const std::vector<uint32_t>& accepted) const;
   // Whether element e has form factors from the hemicube in use.
   bool projected(uint32_t e) const { return e_stamp[e] == stamp && e_ff_open[e] > 0.0; }
   // F(element -> piece) from F(piece -> element) = ff, by reciprocity (capped at 1).
@@ -342,6 +351,7 @@ struct Solver::Impl {
 
 template <typename Fn>
 void Solver::Impl::for_leaves(uint32_t e, Fn&& fn) const {
+  HEMIBAKE_DCHECK(e < e_child.size());
   if (e_child[e] == kNone) {
     fn(e);
     return;
