@@ -5,6 +5,7 @@
 #include "hemicube_engine.h"
 
 #include "hemibake/solver/hemicube.h"
+#include "check.h"
 #include "scan_walk.h"
 
 #include <glm/geometric.hpp>
@@ -15,10 +16,18 @@
 #include <limits>
 #include <map>
 #include <numbers>
+#include <numeric>
 
 namespace hemibake::solver {
 namespace detail {
 namespace {
+
+// A corner nearer to the eye than this share of the polygon's extent does not give a trustworthy
+// 1/depth: the polygon is clipped there. clip_to_face's fast path and its clipper must agree, or
+// a polygon's fragments would depend on which path it took.
+constexpr double kNearPlane = 1e-9;
+// A pixel covered by less than this fraction gets no fragment (rounding of the scan converter).
+constexpr double kMinCoverage = 1e-9;
 
 // Axes of the five faces in the hemicube's own frame (x, y tangent, z the normal).
 struct LocalFace {
@@ -132,6 +141,9 @@ Hemicube::Hemicube(uint32_t resolution) : n_(resolution) {
     faces_[f].offset = offset;
     offset += height * n_;
   }
+  HEMIBAKE_DCHECK(offset == pixel_count_);
+  // The pixels tile the hemisphere: their exact form factors sum to 1.
+  HEMIBAKE_DCHECK(std::abs(std::accumulate(dff_.begin(), dff_.end(), 0.0) - 1.0) < 1e-6);
   place(glm::dvec3(0.0), glm::dvec3(0, 0, 1), glm::dvec3(0, 1, 0));
 }
 
@@ -199,7 +211,7 @@ bool Hemicube::clip_to_face(size_t f, ProjectScratch& s, bool inside) const {
     bool near = false;
     for (int i = 0; i < s.local_n && !near; ++i) {
       const glm::dvec3 q = to_face(f, s.local[i]);
-      near = q.z < 1e-9 * scale;
+      near = q.z < kNearPlane * scale;
       const double inv_z = 1.0 / q.z;
       const double x = std::clamp((q.x * inv_z + 1.0) * half_n, 0.0, static_cast<double>(n_));
       const double y = std::clamp((q.y * inv_z - face.b_min) * half_n, 0.0, static_cast<double>(face.height));
@@ -255,7 +267,7 @@ bool Hemicube::clip_to_face(size_t f, ProjectScratch& s, bool inside) const {
       clip([](const glm::dvec3& q) { return q.y; });
     }
   }
-  const double near = 1e-9 * scale;
+  const double near = kNearPlane * scale;
   bool near_cut = false;
   for (int i = 0; i < in->n && !near_cut; ++i) near_cut = in->v[i].z < near;
   if (near_cut) clip([near](const glm::dvec3& q) { return q.z - near; });
@@ -345,7 +357,7 @@ void Hemicube::rasterize(const Face& face, uint32_t element, Method method,
   if (method == Method::kAntiAliased) {
     if (child) {
       detail::scan_walk<false>(s.poly2, win, s.scan, [&](int col, int row, double a, double, double) __attribute__((always_inline)) {
-        if (a > 1e-9) emit(col, row, static_cast<float>(std::min(a, 1.0)), 0.5, 0.5);
+        if (a > kMinCoverage) emit(col, row, static_cast<float>(std::min(a, 1.0)), 0.5, 0.5);
       });
     } else {
       // The depth that orders a partly covered pixel is the polygon's mean depth over the part it
@@ -353,7 +365,7 @@ void Hemicube::rasterize(const Face& face, uint32_t element, Method method,
       // centre would misorder surfaces that meet inside a pixel, such as a block standing on a
       // floor.
       detail::scan_walk<true>(s.poly2, win, s.scan, [&](int col, int row, double a, double mx, double my) __attribute__((always_inline)) {
-        if (a <= 1e-9) return;
+        if (a <= kMinCoverage) return;
         emit(col, row, static_cast<float>(std::min(a, 1.0)), std::clamp(mx / a, 0.0, 1.0),
              std::clamp(my / a, 0.0, 1.0));
       });
@@ -421,6 +433,235 @@ void Hemicube::project_child(std::span<const glm::dvec3> polygon, uint32_t eleme
   }
 }
 
+namespace {
+
+// A pixel's fragments of one surface, summed (PixelResolver::layers).
+struct GroupSum {
+  uint64_t group;
+  uint32_t root;
+  double area;
+  float inv_depth;
+  float trans;
+};
+
+// One thread's share of resolve(): the rule for one pixel's fragments, with the lists it reuses
+// from pixel to pixel. A pixel's fragments are fragments[order[lo]] .. fragments[order[hi - 1]].
+class PixelResolver {
+ public:
+  PixelResolver(std::span<Fragment> fragments, std::span<const uint32_t> order,
+                std::span<const uint32_t> group_of, const GroupAdjacency& adjacency)
+      : fragments_(fragments), order_(order), group_of_(group_of), adjacency_(adjacency) {}
+
+  // Classical: the nearest fragment takes the pixel.
+  void nearest(uint32_t lo, uint32_t hi);
+  // One or two surfaces (most shared pixels: inside a subdivided patch, along an edge where two
+  // meet, one in front of another): the rule of layers() without lists or sorting. False, doing
+  // nothing, when the pixel holds more.
+  bool two_surfaces(uint32_t lo, uint32_t hi);
+  // Any number of surfaces: E_k = A_k (1 - f_{k-1}) over the pixel's layers, nearest first.
+  void layers(uint32_t lo, uint32_t hi);
+
+ private:
+  // A fragment's surface: its occlusion group, with the back faces of a group apart (bit 32).
+  uint64_t surface_of(uint32_t element) const {
+    if (element & kBackFace) return (uint64_t{1} << 32) | group_of_[element & ~kBackFace];
+    return group_of_[element];
+  }
+  bool adjacent(uint64_t a, uint64_t b);
+  void sum_groups(uint32_t lo, uint32_t hi);
+  bool merge_neighbours();
+  void order_layers(bool any_back);
+  void share_pixel(bool any_back);
+  uint32_t root(uint32_t i) {
+    while (groups_[i].root != i) i = groups_[i].root = groups_[groups_[i].root].root;
+    return i;
+  }
+  // A surface's place among the pixel's (sorted) surfaces, or -1.
+  int64_t index_of(uint64_t id) const {
+    const auto it = std::lower_bound(groups_.begin(), groups_.end(), id,
+                                     [](const GroupSum& g, uint64_t v) { return g.group < v; });
+    return it != groups_.end() && it->group == id ? it - groups_.begin() : -1;
+  }
+
+  std::span<Fragment> fragments_;
+  std::span<const uint32_t> order_;
+  std::span<const uint32_t> group_of_;
+  const GroupAdjacency& adjacency_;
+  // Neighbouring pixels mostly ask about the same two surfaces: the last answer is kept.
+  uint64_t asked_a_ = 0, asked_b_ = 0;
+  bool asked_answer_ = false, asked_any_ = false;
+  std::vector<std::pair<uint64_t, uint32_t>> by_group_;  // (surface, fragment)
+  std::vector<GroupSum> groups_;
+  std::vector<uint32_t> layers_;
+  std::vector<uint32_t> rank_;  // per group root: its place in `layers_`
+};
+
+// Two back faces that share an edge tile like two front faces; a front and a back face do not.
+bool PixelResolver::adjacent(uint64_t a, uint64_t b) {
+  if (!asked_any_ || a != asked_a_ || b != asked_b_) {
+    asked_a_ = a;
+    asked_b_ = b;
+    asked_answer_ = (a >> 32) == (b >> 32) &&
+                    adjacency_.adjacent(static_cast<uint32_t>(a), static_cast<uint32_t>(b));
+    asked_any_ = true;
+  }
+  return asked_answer_;
+}
+
+void PixelResolver::nearest(uint32_t lo, uint32_t hi) {
+  uint32_t best = order_[lo];
+  for (uint32_t k = lo + 1; k < hi; ++k) {
+    const Fragment& f = fragments_[order_[k]];
+    const Fragment& b = fragments_[best];
+    if (f.inv_depth > b.inv_depth || (f.inv_depth == b.inv_depth && f.element < b.element))
+      best = order_[k];
+  }
+  for (uint32_t k = lo; k < hi; ++k) fragments_[order_[k]].trans = order_[k] == best ? 1.0f : 0.0f;
+}
+
+bool PixelResolver::two_surfaces(uint32_t lo, uint32_t hi) {
+  // Scalars rather than arrays indexed by the fragment's surface: no store-to-load chain.
+  const uint64_t g0 = surface_of(fragments_[order_[lo]].element);
+  uint64_t g1 = g0;
+  double sum0 = 0.0, sum1 = 0.0;
+  float depth0 = std::numeric_limits<float>::lowest(), depth1 = depth0;
+  for (uint32_t k = lo; k < hi; ++k) {
+    const Fragment& f = fragments_[order_[k]];
+    const uint64_t g = surface_of(f.element);
+    if (g == g0) {
+      sum0 += f.area;
+      depth0 = std::max(depth0, f.inv_depth);
+      continue;
+    }
+    if (g1 != g0 && g != g1) return false;
+    g1 = g;
+    sum1 += f.area;
+    depth1 = std::max(depth1, f.inv_depth);
+  }
+  float trans0, trans1;
+  if (g1 == g0 || adjacent(g0, g1)) {
+    const double total = sum0 + sum1;
+    trans0 = trans1 = static_cast<float>(total > 1.0 ? 1.0 / total : 1.0);
+  } else {
+    // Nearest first; ties go to the lower id (a back face's is higher: front faces win).
+    const bool first_near = depth0 != depth1 ? depth0 > depth1 : g0 < g1;
+    const double near_sum = first_near ? sum0 : sum1, far_sum = first_near ? sum1 : sum0;
+    const float near_trans = static_cast<float>(near_sum > 1.0 ? 1.0 / near_sum : 1.0);
+    double t = 1.0 - std::min(near_sum, 1.0);
+    // A front and a back face with a common edge project to the same side of it, the far
+    // one folded behind the near one (a wall seen past the edge of the roof it meets): in a
+    // pixel on that edge the far one shows only where it reaches past the near one.
+    if ((g0 >> 32) != (g1 >> 32) && adjacent(g0 & 0xffffffffu, g1 & 0xffffffffu) && far_sum > 0.0)
+      t = std::min(t, std::max(0.0, far_sum - near_sum) / far_sum);
+    const float far_trans = static_cast<float>(far_sum > 1.0 ? t / far_sum : t);
+    trans0 = first_near ? near_trans : far_trans;
+    trans1 = first_near ? far_trans : near_trans;
+  }
+  for (uint32_t k = lo; k < hi; ++k) {
+    Fragment& f = fragments_[order_[k]];
+    f.trans = surface_of(f.element) == g0 ? trans0 : trans1;
+  }
+  return true;
+}
+
+void PixelResolver::layers(uint32_t lo, uint32_t hi) {
+  sum_groups(lo, hi);
+  const bool any_back = merge_neighbours();
+  order_layers(any_back);
+  share_pixel(any_back);
+  for (uint32_t i = 0; i < groups_.size(); ++i) groups_[i].trans = groups_[root(i)].trans;
+  size_t gi = 0;
+  for (const auto& [g, fi] : by_group_) {
+    while (groups_[gi].group != g) ++gi;
+    fragments_[fi].trans = groups_[gi].trans;
+  }
+}
+
+// Sums the coverage of each occlusion group: pieces of one surface never hide each other.
+void PixelResolver::sum_groups(uint32_t lo, uint32_t hi) {
+  by_group_.clear();
+  for (uint32_t k = lo; k < hi; ++k) by_group_.emplace_back(surface_of(fragments_[order_[k]].element), order_[k]);
+  std::sort(by_group_.begin(), by_group_.end());
+  groups_.clear();
+  for (const auto& [g, fi] : by_group_) {
+    const Fragment& f = fragments_[fi];
+    if (groups_.empty() || groups_.back().group != g) {
+      groups_.push_back({g, static_cast<uint32_t>(groups_.size()), 0.0, f.inv_depth, 1.0f});
+    }
+    groups_.back().area += f.area;
+    groups_.back().inv_depth = std::max(groups_.back().inv_depth, f.inv_depth);
+  }
+}
+
+// Merges groups that share an edge (front-facing neighbours project side by side). A surface's
+// neighbours are looked up among the pixel's (sorted) surfaces: linear in the surfaces, where
+// testing every pair was quadratic (a pixel of a coarse near-field hemicube can hold hundreds of a
+// finely tessellated sphere's facets). Returns whether any back face is among them.
+bool PixelResolver::merge_neighbours() {
+  bool any_back = false;
+  if (!adjacency_.empty() && groups_.size() > 1) {
+    for (uint32_t i = 0; i < groups_.size(); ++i) {
+      const uint64_t side = groups_[i].group & ~uint64_t{0xffffffffu};
+      any_back = any_back || side != 0;
+      for (uint64_t key : adjacency_.neighbours(static_cast<uint32_t>(groups_[i].group))) {
+        const int64_t j = index_of(side | (key & 0xffffffffu));
+        if (j < 0) continue;
+        const uint32_t ri = root(i), rj = root(static_cast<uint32_t>(j));
+        if (ri != rj) groups_[std::max(ri, rj)].root = std::min(ri, rj);
+      }
+    }
+  }
+  return any_back;
+}
+
+// The merged groups' roots as layers, nearest first; ties go to the lower group id so the order is
+// deterministic.
+void PixelResolver::order_layers(bool any_back) {
+  layers_.clear();
+  for (uint32_t i = 0; i < groups_.size(); ++i) {
+    const uint32_t r = root(i);
+    if (r != i) {
+      groups_[r].area += groups_[i].area;
+      groups_[r].inv_depth = std::max(groups_[r].inv_depth, groups_[i].inv_depth);
+    } else {
+      layers_.push_back(i);
+    }
+  }
+  std::sort(layers_.begin(), layers_.end(), [&](uint32_t a, uint32_t b) {
+    if (groups_[a].inv_depth != groups_[b].inv_depth) return groups_[a].inv_depth > groups_[b].inv_depth;
+    return groups_[a].group < groups_[b].group;
+  });
+  if (any_back) {
+    rank_.assign(groups_.size(), 0);
+    for (uint32_t li = 0; li < layers_.size(); ++li) rank_[layers_[li]] = li;
+  }
+}
+
+// Each layer's transmission: what nearer layers left of the pixel (the paper's 1 - f_{k-1}).
+void PixelResolver::share_pixel(bool any_back) {
+  double f = 0.0;  // the paper's f_{k-1}: the pixel's fraction taken by nearer layers
+  for (size_t li = 0; li < layers_.size(); ++li) {
+    GroupSum& g = groups_[layers_[li]];
+    double t = 1.0 - f;
+    // Folded behind a nearer layer of the other facing that shares an edge with it
+    // (two_surfaces).
+    if (any_back && g.area > 0.0) {
+      const uint64_t other = (g.group & ~uint64_t{0xffffffffu}) ^ (uint64_t{1} << 32);
+      for (uint64_t key : adjacency_.neighbours(static_cast<uint32_t>(g.group))) {
+        const int64_t j = index_of(other | (key & 0xffffffffu));
+        if (j < 0) continue;
+        const uint32_t r = root(static_cast<uint32_t>(j));
+        if (rank_[r] < li) t = std::min(t, std::max(0.0, g.area - groups_[r].area) / g.area);
+      }
+    }
+    // Overlapping pieces of one layer (sum > 1) share the pixel in proportion.
+    g.trans = static_cast<float>(g.area > 1.0 ? t / g.area : t);
+    f += std::min(g.area, 1.0) * t;
+  }
+}
+
+}  // namespace
+
 void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
              std::span<const uint32_t> group_of, const GroupAdjacency& adjacency, ThreadPool& pool,
              std::vector<uint32_t>& order,
@@ -434,192 +675,22 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
     std::vector<uint32_t> cursor(pixel_start.begin(), pixel_start.end() - 1);
     for (uint32_t i = 0; i < fragments.size(); ++i) order[cursor[fragments[i].pixel]++] = i;
   }
-
-  // A fragment's surface: its occlusion group, with the back faces of a group apart (bit 32).
-  auto surface_of = [&](uint32_t element) -> uint64_t {
-    if (element & kBackFace) return (uint64_t{1} << 32) | group_of[element & ~kBackFace];
-    return group_of[element];
-  };
   pool.parallel_for(pixel_count, [&](size_t begin, size_t end, size_t) {
-    struct GroupSum {
-      uint64_t group;
-      uint32_t root;
-      double area;
-      float inv_depth;
-      float trans;
-    };
-    // Neighbouring pixels mostly ask about the same two surfaces: the last answer is kept.
-    // Two back faces that share an edge tile like two front faces; a front and a back face do not.
-    uint64_t asked_a = 0, asked_b = 0;
-    bool asked_answer = false, asked_any = false;
-    auto adjacent = [&](uint64_t a, uint64_t b) {
-      if (!asked_any || a != asked_a || b != asked_b) {
-        asked_a = a;
-        asked_b = b;
-        asked_answer = (a >> 32) == (b >> 32) &&
-                       adjacency.adjacent(static_cast<uint32_t>(a), static_cast<uint32_t>(b));
-        asked_any = true;
-      }
-      return asked_answer;
-    };
-    std::vector<std::pair<uint64_t, uint32_t>> by_group;  // (surface, fragment)
-    std::vector<GroupSum> groups;
-    std::vector<uint32_t> layers;
-    std::vector<uint32_t> rank;  // per group root: its place in `layers`
+    PixelResolver pixel(fragments, order, group_of, adjacency);
     for (size_t p = begin; p < end; ++p) {
       const uint32_t lo = pixel_start[p], hi = pixel_start[p + 1];
       if (lo == hi) continue;
       if (method == Method::kClassical) {
-        uint32_t best = order[lo];
-        for (uint32_t k = lo + 1; k < hi; ++k) {
-          const Fragment& f = fragments[order[k]];
-          const Fragment& b = fragments[best];
-          if (f.inv_depth > b.inv_depth || (f.inv_depth == b.inv_depth && f.element < b.element))
-            best = order[k];
-        }
-        for (uint32_t k = lo; k < hi; ++k) fragments[order[k]].trans = order[k] == best ? 1.0f : 0.0f;
-        continue;
-      }
-      if (hi - lo == 1) {
+        pixel.nearest(lo, hi);
+      } else if (hi - lo == 1) {
         fragments[order[lo]].trans = 1.0f;
-        continue;
-      }
-      // One or two surfaces (most shared pixels: inside a subdivided patch, along an edge where two
-      // meet, one in front of another): the general rule below, without lists or sorting.
-      {
-        // Scalars rather than arrays indexed by the fragment's surface: no store-to-load chain.
-        const uint64_t g0 = surface_of(fragments[order[lo]].element);
-        uint64_t g1 = g0;
-        double sum0 = 0.0, sum1 = 0.0;
-        float depth0 = std::numeric_limits<float>::lowest(), depth1 = depth0;
-        bool few = true;
-        for (uint32_t k = lo; k < hi; ++k) {
-          const Fragment& f = fragments[order[k]];
-          const uint64_t g = surface_of(f.element);
-          if (g == g0) {
-            sum0 += f.area;
-            depth0 = std::max(depth0, f.inv_depth);
-            continue;
-          }
-          if (g1 != g0 && g != g1) {
-            few = false;
-            break;
-          }
-          g1 = g;
-          sum1 += f.area;
-          depth1 = std::max(depth1, f.inv_depth);
-        }
-        if (few) {
-          float trans0, trans1;
-          if (g1 == g0 || adjacent(g0, g1)) {
-            const double total = sum0 + sum1;
-            trans0 = trans1 = static_cast<float>(total > 1.0 ? 1.0 / total : 1.0);
-          } else {
-            // Nearest first; ties go to the lower id (a back face's is higher: front faces win).
-            const bool first_near = depth0 != depth1 ? depth0 > depth1 : g0 < g1;
-            const double near_sum = first_near ? sum0 : sum1, far_sum = first_near ? sum1 : sum0;
-            const float near_trans = static_cast<float>(near_sum > 1.0 ? 1.0 / near_sum : 1.0);
-            double t = 1.0 - std::min(near_sum, 1.0);
-            // A front and a back face with a common edge project to the same side of it, the far
-            // one folded behind the near one (a wall seen past the edge of the roof it meets): in a
-            // pixel on that edge the far one shows only where it reaches past the near one.
-            if ((g0 >> 32) != (g1 >> 32) && adjacent(g0 & 0xffffffffu, g1 & 0xffffffffu) && far_sum > 0.0)
-              t = std::min(t, std::max(0.0, far_sum - near_sum) / far_sum);
-            const float far_trans = static_cast<float>(far_sum > 1.0 ? t / far_sum : t);
-            trans0 = first_near ? near_trans : far_trans;
-            trans1 = first_near ? far_trans : near_trans;
-          }
-          for (uint32_t k = lo; k < hi; ++k) {
-            Fragment& f = fragments[order[k]];
-            f.trans = surface_of(f.element) == g0 ? trans0 : trans1;
-          }
-          continue;
-        }
-      }
-      // Sum the coverage of each occlusion group: pieces of one surface never hide each other.
-      by_group.clear();
-      for (uint32_t k = lo; k < hi; ++k) by_group.emplace_back(surface_of(fragments[order[k]].element), order[k]);
-      std::sort(by_group.begin(), by_group.end());
-      groups.clear();
-      for (const auto& [g, fi] : by_group) {
-        const Fragment& f = fragments[fi];
-        if (groups.empty() || groups.back().group != g) {
-          groups.push_back({g, static_cast<uint32_t>(groups.size()), 0.0, f.inv_depth, 1.0f});
-        }
-        groups.back().area += f.area;
-        groups.back().inv_depth = std::max(groups.back().inv_depth, f.inv_depth);
-      }
-      // Merge groups that share an edge (front-facing neighbours project side by side).
-      auto find = [&](uint32_t i) {
-        while (groups[i].root != i) i = groups[i].root = groups[groups[i].root].root;
-        return i;
-      };
-      // A surface's neighbours are looked up among the pixel's (sorted) surfaces: linear in the
-      // surfaces, where testing every pair was quadratic (a pixel of a coarse near-field hemicube
-      // can hold hundreds of a finely tessellated sphere's facets).
-      auto index_of = [&](uint64_t id) -> int64_t {
-        const auto it = std::lower_bound(groups.begin(), groups.end(), id,
-                                         [](const GroupSum& g, uint64_t v) { return g.group < v; });
-        return it != groups.end() && it->group == id ? it - groups.begin() : -1;
-      };
-      bool any_back = false;
-      if (!adjacency.empty() && groups.size() > 1) {
-        for (uint32_t i = 0; i < groups.size(); ++i) {
-          const uint64_t side = groups[i].group & ~uint64_t{0xffffffffu};
-          any_back = any_back || side != 0;
-          for (uint64_t key : adjacency.neighbours(static_cast<uint32_t>(groups[i].group))) {
-            const int64_t j = index_of(side | (key & 0xffffffffu));
-            if (j < 0) continue;
-            const uint32_t ri = find(i), rj = find(static_cast<uint32_t>(j));
-            if (ri != rj) groups[std::max(ri, rj)].root = std::min(ri, rj);
-          }
-        }
-      }
-      layers.clear();
-      for (uint32_t i = 0; i < groups.size(); ++i) {
-        const uint32_t r = find(i);
-        if (r != i) {
-          groups[r].area += groups[i].area;
-          groups[r].inv_depth = std::max(groups[r].inv_depth, groups[i].inv_depth);
-        } else {
-          layers.push_back(i);
-        }
-      }
-      // Nearest first; ties go to the lower group id so the order is deterministic.
-      std::sort(layers.begin(), layers.end(), [&](uint32_t a, uint32_t b) {
-        if (groups[a].inv_depth != groups[b].inv_depth) return groups[a].inv_depth > groups[b].inv_depth;
-        return groups[a].group < groups[b].group;
-      });
-      if (any_back) {
-        rank.assign(groups.size(), 0);
-        for (uint32_t li = 0; li < layers.size(); ++li) rank[layers[li]] = li;
-      }
-      double f = 0.0;  // the paper's f_{k-1}: the pixel's fraction taken by nearer layers
-      for (size_t li = 0; li < layers.size(); ++li) {
-        GroupSum& g = groups[layers[li]];
-        double t = 1.0 - f;
-        // Folded behind a nearer layer of the other facing that shares an edge with it (above).
-        if (any_back && g.area > 0.0) {
-          const uint64_t other = (g.group & ~uint64_t{0xffffffffu}) ^ (uint64_t{1} << 32);
-          for (uint64_t key : adjacency.neighbours(static_cast<uint32_t>(g.group))) {
-            const int64_t j = index_of(other | (key & 0xffffffffu));
-            if (j < 0) continue;
-            const uint32_t r = find(static_cast<uint32_t>(j));
-            if (rank[r] < li) t = std::min(t, std::max(0.0, g.area - groups[r].area) / g.area);
-          }
-        }
-        // Overlapping pieces of one layer (sum > 1) share the pixel in proportion.
-        g.trans = static_cast<float>(g.area > 1.0 ? t / g.area : t);
-        f += std::min(g.area, 1.0) * t;
-      }
-      for (uint32_t i = 0; i < groups.size(); ++i) groups[i].trans = groups[find(i)].trans;
-      size_t gi = 0;
-      for (const auto& [g, fi] : by_group) {
-        while (groups[gi].group != g) ++gi;
-        fragments[fi].trans = groups[gi].trans;
+      } else if (!pixel.two_surfaces(lo, hi)) {
+        pixel.layers(lo, hi);
       }
     }
   });
+  // A fragment sees at most all of its pixel share, and nearer layers take at most all of it.
+  for (const Fragment& f : fragments) HEMIBAKE_DCHECK(f.trans >= 0.0f && f.trans <= 1.0f);
 }
 
 }  // namespace detail

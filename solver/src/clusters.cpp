@@ -1,0 +1,143 @@
+// Clusters: small patches of one surface that shoot together, as binary trees of median cuts.
+#include "solver_impl.h"
+
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
+
+#include <limits>
+#include <map>
+#include <numeric>
+
+namespace hemibake::solver {
+
+// Cluster node `id` over cluster_patch[begin, end), and its subtree.
+void Solver::Impl::build_cluster(uint32_t id, uint32_t begin, uint32_t end) {
+  HEMIBAKE_DCHECK(begin < end && end <= cluster_patch.size() && id < c_nodes.size());
+  ClusterNode node;
+  node.begin = begin;
+  node.end = end;
+  glm::dvec3 lo(std::numeric_limits<double>::max()), hi(std::numeric_limits<double>::lowest());
+  glm::dvec3 clo = lo, chi = hi;  // of the patch centres
+  for (uint32_t i = begin; i < end; ++i) {
+    const uint32_t q = cluster_patch[i];
+    const Patch& patch = patches[q];
+    for (uint32_t k = 0; k < patch.corner_count; ++k) {
+      lo = glm::min(lo, patch.corners[k]);
+      hi = glm::max(hi, patch.corners[k]);
+    }
+    const glm::dvec3 pc = polygon_centre(patch.corners, patch.corner_count);
+    node.centre += pc * prep.area[q];
+    node.normal += prep.normal[q] * prep.area[q];
+    node.area += prep.area[q];
+    clo = glm::min(clo, pc);
+    chi = glm::max(chi, pc);
+  }
+  node.centre /= node.area;
+  const double nl = glm::length(node.normal);
+  node.normal = nl > 0.0 ? node.normal / nl : prep.normal[cluster_patch[begin]];
+  node.min_cos = nl > 0.0 ? 1.0 : -1.0;
+  for (uint32_t i = begin; i < end; ++i) node.min_cos = std::min(node.min_cos, glm::dot(node.normal, prep.normal[cluster_patch[i]]));
+  for (int k = 0; k < 8; ++k) node.box[k] = glm::dvec3(k & 1 ? hi.x : lo.x, k & 2 ? hi.y : lo.y, k & 4 ? hi.z : lo.z);
+  for (uint32_t i = begin; i < end; ++i) {
+    const Patch& patch = patches[cluster_patch[i]];
+    for (uint32_t k = 0; k < patch.corner_count; ++k)
+      node.diameter = std::max(node.diameter, 2.0 * glm::distance(node.centre, patch.corners[k]));
+  }
+  if (end - begin > 1) {
+    // Median cut of the patch centres across their widest extent.
+    const uint32_t mid = median_cut(cluster_patch, begin, end, clo, chi, [&](uint32_t q) {
+      return polygon_centre(patches[q].corners, patches[q].corner_count);
+    });
+    node.child = static_cast<uint32_t>(c_nodes.size());
+    c_nodes.resize(c_nodes.size() + 2);
+    build_cluster(node.child, begin, mid);
+    build_cluster(node.child + 1, mid, end);
+  }
+  c_nodes[id] = node;
+}
+
+// Small patches of one surface with the same emission shoot together: each surface's tree is cut
+// into clusters no wider than cluster_size of the scene's diagonal (units). Larger patches, and
+// patches left alone by the cuts, are units of their own.
+void Solver::Impl::build_clusters() {
+  const double limit = params.cluster_size * prep.diagonal;
+  find_surfaces();
+  p_unit.assign(patches.size(), kNone);
+  for (const std::vector<uint32_t>& members : cluster_candidates(limit))
+    if (members.size() >= 2) cut_into_units(members, limit);
+  for (uint32_t p = 0; p < patches.size(); ++p) {
+    if (p_unit[p] != kNone) continue;
+    p_unit[p] = static_cast<uint32_t>(unit_patch.size());
+    unit_patch.push_back(p);
+    unit_node.push_back(kNone);
+    u_unshot.push_back(p_unshot[p]);
+  }
+  HEMIBAKE_DCHECK(unit_patch.size() == unit_node.size() && unit_node.size() == u_unshot.size());
+  for (uint32_t p = 0; p < patches.size(); ++p) HEMIBAKE_DCHECK(p_unit[p] < unit_patch.size());
+}
+
+// A surface (p_surface): coplanar edge-connected patches (an occlusion group) joined with smoothly
+// curved ones (a smoothing group: same material, creases under 30 degrees). Group ids are patch
+// ids; a surface's id is its least patch's.
+void Solver::Impl::find_surfaces() {
+  std::vector<uint32_t> surface(patches.size());
+  std::iota(surface.begin(), surface.end(), 0u);
+  auto find = [&](uint32_t i) {
+    while (surface[i] != i) i = surface[i] = surface[surface[i]];
+    return i;
+  };
+  for (uint32_t p = 0; p < patches.size(); ++p)
+    for (uint32_t g : {prep.occlusion_group[p], prep.smoothing_group[p]}) {
+      const uint32_t a = find(p), b = find(g);
+      if (a != b) surface[std::max(a, b)] = std::min(a, b);
+    }
+  p_surface.resize(patches.size());
+  for (uint32_t p = 0; p < patches.size(); ++p) p_surface[p] = find(p);
+}
+
+// The patches narrower than half the cluster limit, grouped by surface and emission (in the order
+// of surface, then emission).
+std::vector<std::vector<uint32_t>> Solver::Impl::cluster_candidates(double limit) const {
+  std::map<std::pair<uint32_t, std::array<double, 3>>, std::vector<uint32_t>> groups;
+  for (uint32_t p = 0; p < patches.size(); ++p) {
+    Corners c{};
+    corners_of(p_root[p], c);
+    if (limit <= 0.0 || polygon_diameter(c, patches[p].corner_count) > 0.5 * limit) continue;
+    const glm::dvec3& e = patches[p].emission;
+    groups[{p_surface[p], {e.x, e.y, e.z}}].push_back(p);
+  }
+  std::vector<std::vector<uint32_t>> by_group;
+  for (auto& [key, members] : groups) by_group.push_back(std::move(members));
+  return by_group;
+}
+
+// Builds the cluster tree over `members` and cuts it from the top until the pieces are narrow
+// enough and flat enough (kClusterCone); each piece of two or more patches becomes a unit.
+void Solver::Impl::cut_into_units(const std::vector<uint32_t>& members, double limit) {
+  const uint32_t begin = static_cast<uint32_t>(cluster_patch.size());
+  cluster_patch.insert(cluster_patch.end(), members.begin(), members.end());
+  const uint32_t root = static_cast<uint32_t>(c_nodes.size());
+  c_nodes.emplace_back();
+  build_cluster(root, begin, static_cast<uint32_t>(cluster_patch.size()));
+  std::vector<uint32_t> stack{root};
+  while (!stack.empty()) {
+    const uint32_t c = stack.back();
+    stack.pop_back();
+    if ((c_nodes[c].diameter > limit || c_nodes[c].min_cos < kClusterCone) && c_nodes[c].child != kNone) {
+      stack.push_back(c_nodes[c].child);
+      stack.push_back(c_nodes[c].child + 1);
+      continue;
+    }
+    if (c_nodes[c].end - c_nodes[c].begin < 2) continue;  // one patch: it shoots alone
+    const uint32_t u = static_cast<uint32_t>(unit_patch.size());
+    unit_patch.push_back(kNone);
+    unit_node.push_back(c);
+    u_unshot.push_back(0.0);
+    for (uint32_t i = c_nodes[c].begin; i < c_nodes[c].end; ++i) {
+      p_unit[cluster_patch[i]] = u;
+      u_unshot[u] += p_unshot[cluster_patch[i]];
+    }
+  }
+}
+
+}  // namespace hemibake::solver

@@ -1,0 +1,168 @@
+// Rules for receivers close to a shooting piece, where the hemicube at its centre sees them
+// poorly: which receivers are close, when the point view's error matters, when an absorbing back
+// in front of the piece spoils its centre's view, and the exact form factors that close receivers
+// of an unrefined piece take instead.
+#include "solver_impl.h"
+
+#include "hemibake/solver/hemicube.h"
+
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
+
+#include <algorithm>
+#include <limits>
+#include <numbers>
+
+namespace hemibake::solver {
+
+// Near: within kNearFactor diameters of the piece, or (a piece of a patch carrying at least
+// kStraddlePower of the emitted power) on a plane that cuts through the piece: its centre may lie
+// behind the receiver while part of it is in front (a face of a block that sees part of the light
+// got nothing from the light's centre). Clusters are left to their quarters' own tests: planes
+// cut through them everywhere in a furnished room. Only a receiver that some of the piece can see,
+// and that can see some of the piece, counts.
+bool Solver::Impl::is_close(const Piece& piece, uint32_t e) const {
+  const uint32_t p = piece.patch;
+  const glm::dvec3& centre = piece.centre;
+  const double eps = kCloseFacingLength * prep.diagonal;
+  const bool cut_rule = piece.points.size() <= 4 && piece.power >= kStraddlePower * emitted_power;
+  const uint32_t q = e_patch[e];
+  if (prep.occlusion_group[q] == prep.occlusion_group[p]) return false;
+  const glm::dvec3& nq = prep.normal[q];
+  const glm::dvec3& oq = patches[q].corners[0];
+  // On a cluster's own curved surface, a receiver with the cluster's centroid behind its plane
+  // (a convex surface: a sphere's facets) sees none of the cluster. Without this every cluster
+  // of a 159k-facet sphere went down to single patches (526 659 hemicubes for 1303 shots).
+  if (piece.points.size() > 4 && p_surface[q] == p_surface[p] && glm::dot(nq, centre - oq) <= 0.0) return false;
+  const bool within = glm::distance(centre, e_centre[e]) - e_radius[e] < kNearFactor * piece.diameter;
+  if (!within) {
+    // The piece's centre behind the receiver's plane, or just in front of it: the centre's
+    // hemicube gives the receiver nothing, or a grazing, poor view.
+    const double dc = glm::dot(nq, centre - oq);
+    if (!cut_rule || dc > 0.1 * piece.diameter || dc < -0.5 * piece.diameter) return false;
+  }
+  double lo = 0.0, hi = 0.0;
+  for (const glm::dvec3& x : piece.points) {
+    const double d = glm::dot(nq, x - oq);
+    lo = std::min(lo, d);
+    hi = std::max(hi, d);
+  }
+  if (hi <= eps || (!within && lo >= -eps)) return false;
+  bool in_front = false;
+  for (uint32_t i = 0; i < corner_count(e) && !in_front; ++i)
+    in_front = glm::dot(piece.normal, vpos[e_corner[e][i]] - centre) > eps;
+  return in_front;
+}
+
+// The point view's possible error for a close receiver (infinite where it always matters). A close
+// receiver goes to the sub-pieces only where the centre's hemicube could err by more than
+// kNearError of the radiosity tolerance: it gains at most rho * dB * F, with F at most
+// A / (pi g^2) at a gap g between them (at most 1), and the hemicube's point view of the piece
+// errs by about (D / 2g)^2 of that (D the piece's diameter); within half a diameter, always.
+double Solver::Impl::near_error(const Piece& piece, uint32_t e) const {
+  const glm::dvec3& centre = piece.centre;
+  const double gap = glm::distance(centre, e_centre[e]) - e_radius[e] - 0.5 * piece.diameter;
+  if (gap <= 0.5 * piece.diameter) return std::numeric_limits<double>::infinity();
+  // A receiver whose plane cuts the piece (is_close) may get nothing at all from the centre.
+  if (glm::distance(centre, e_centre[e]) - e_radius[e] >= kNearFactor * piece.diameter)
+    return std::numeric_limits<double>::infinity();
+  const double f = std::min(1.0, piece.area / (std::numbers::pi * gap * gap));
+  const double share = 0.25 * piece.diameter * piece.diameter / (gap * gap);
+  return mean(patches[e_patch[e]].reflectance * piece.dB) * f * share;
+}
+
+// F(point x with normal n -> piece): Lambert's formula over the piece cut to x's front side;
+// nothing for a point behind the piece.
+double Solver::Impl::point_piece_form_factor(const Piece& piece, const glm::dvec3& x, const glm::dvec3& n) {
+  if (glm::dot(piece.normal, x - piece.centre) <= 0.0) return 0.0;
+  uint32_t m = 0;
+  std::array<glm::dvec3, 8> clipped{};
+  const size_t k = piece.points.size();
+  for (size_t i = 0; i < k; ++i) {
+    const glm::dvec3& a = piece.points[i];
+    const glm::dvec3& b = piece.points[(i + 1) % k];
+    const double da = glm::dot(n, a - x), db = glm::dot(n, b - x);
+    if (da > 0.0) clipped[m++] = a;
+    if ((da > 0.0) != (db > 0.0)) clipped[m++] = a + (b - a) * (da / (da - db));
+  }
+  return m < 3 ? 0.0 : point_polygon_form_factor(x, n, std::span(clipped.data(), m));
+}
+
+// F(element -> piece): the mean over `side` x `side` points of the element (quads: cell centres
+// of a bilinear grid; triangles: the centroid, or those of its four halved-edge triangles).
+double Solver::Impl::element_piece_form_factor(const Piece& piece, uint32_t e, int side) const {
+  const glm::dvec3& n = prep.normal[e_patch[e]];
+  const Corners c = corners_of_copy(e);
+  if (side <= 1) return point_piece_form_factor(piece, polygon_centre(c, corner_count(e)), n);
+  double sum = 0.0;
+  int count = 0;
+  if (corner_count(e) == 4) {
+    for (int i = 0; i < side; ++i)
+      for (int j = 0; j < side; ++j, ++count) {
+        const double u = (i + 0.5) / side, v = (j + 0.5) / side;
+        sum += point_piece_form_factor(piece, (1 - u) * (1 - v) * c[0] + u * (1 - v) * c[1] + u * v * c[2] + (1 - u) * v * c[3], n);
+      }
+  } else {
+    Corners sub{};
+    for (uint32_t k = 0; k < 4; ++k, ++count) {
+      child_corners(c, 3, k, sub);
+      sum += point_piece_form_factor(piece, (sub[0] + sub[1] + sub[2]) / 3.0, n);
+    }
+  }
+  return sum / count;
+}
+
+// The exact F(element -> piece) (element_piece_form_factor) over 1, 4 or 9 points of the receiver
+// as it is smaller than half the piece, than the piece, or larger (`side`), capped at 1; kept for
+// the hemicube's later rounds (e_exact_stamp).
+double Solver::Impl::exact_form_factor(const Piece& piece, uint32_t e, int side) {
+  if (e_exact_stamp[e] != stamp) {
+    e_exact[e] = std::min(1.0, element_piece_form_factor(piece, e, side));
+    e_exact_stamp[e] = stamp;
+  }
+  return e_exact[e];
+}
+
+// Whether a patch whose back the piece's centre sees (one that absorbs: not back_hidden), in front
+// of the piece and within one of its diameters, takes at least kAbsorberShare of the centre's light.
+bool Solver::Impl::absorber_close(const Piece& piece) const {
+  const glm::dvec3& c = piece.centre;
+  const double r = piece.diameter;
+  const double eps = kRoundingLength * prep.diagonal;
+  std::vector<uint32_t> nodes{0};
+  while (!nodes.empty()) {
+    const BoxNode& node = tree[nodes.back()];
+    nodes.pop_back();
+    const glm::dvec3 gap = glm::max(node.lo - c, glm::max(c - node.hi, glm::dvec3(0.0)));
+    if (glm::dot(gap, gap) > r * r) continue;
+    if (node.child != kNone) {
+      nodes.push_back(node.child);
+      nodes.push_back(node.child + 1);
+      continue;
+    }
+    for (uint32_t i = node.begin; i < node.end; ++i) {
+      const uint32_t q = tree_patch[i];
+      if (prep.back_hidden[q] || p_shooting[q] == shooting_stamp) continue;
+      if (glm::dot(prep.normal[q], c - patches[q].corners[0]) >= -eps) continue;  // not its back
+      const glm::dvec3 d = glm::max(p_lo[q] - c, glm::max(c - p_hi[q], glm::dvec3(0.0)));
+      const double d2 = glm::dot(d, d);
+      if (d2 > r * r) continue;
+      // The form factor from the centre to the patch cut to the piece's front side: the share of
+      // the centre's light it takes (a back seen edge-on takes little).
+      std::array<glm::dvec3, 8> cut{};
+      uint32_t m = 0;
+      const uint32_t cc = patches[q].corner_count;
+      for (uint32_t k = 0; k < cc; ++k) {
+        const glm::dvec3& a = patches[q].corners[k];
+        const glm::dvec3& b = patches[q].corners[(k + 1) % cc];
+        const double da = glm::dot(piece.normal, a - c), db = glm::dot(piece.normal, b - c);
+        if (da > eps) cut[m++] = a;
+        if ((da > eps) != (db > eps)) cut[m++] = a + (b - a) * ((da - eps) / (da - db));
+      }
+      if (m >= 3 && point_polygon_form_factor(c, piece.normal, std::span(cut.data(), m)) >= kAbsorberShare) return true;
+    }
+  }
+  return false;
+}
+
+}  // namespace hemibake::solver

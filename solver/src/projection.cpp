@@ -1,0 +1,129 @@
+// Projection of elements onto the placed hemicube, the reuse of a parent's pixels for its
+// children (section 2.3 of the paper), and the form factors summed from the resolved fragments.
+#include "solver_impl.h"
+
+#include <glm/geometric.hpp>
+
+#include <algorithm>
+#include <cmath>
+
+namespace hemibake::solver {
+
+void Solver::Impl::sum_form_factors(std::span<const uint32_t> elements) {
+  const auto& dff = cube->delta_form_factors();
+  pool.parallel_for(elements.size(), [&](size_t b, size_t e, size_t) {
+    for (size_t i = b; i < e; ++i) {
+      const uint32_t el = elements[i];
+      double ff = 0.0, open = 0.0;
+      for (uint32_t k = f_begin[el]; k < f_end[el]; ++k) {
+        const Fragment& f = frags[k];
+        const double a = static_cast<double>(f.area) * dff[f.pixel];
+        open += a;
+        ff += a * f.trans;
+      }
+      e_ff[el] = ff;
+      e_ff_open[el] = open;
+      e_stamp[el] = stamp;
+    }
+  });
+}
+
+void Solver::Impl::project(std::span<const uint32_t> elements) {
+  const auto t0 = Clock::now();
+  ++stats.projections;
+  stats.elements_projected += elements.size();
+  const glm::dvec3 eye = cube->eye();
+  const double eps = kRoundingLength * prep.diagonal;
+  const size_t n = elements.size();
+  const size_t chunks = pool.chunk_count(n);
+  pool.parallel_for(n, [&](size_t b, size_t e, size_t c) {
+    auto& out = chunk_frags[c];
+    out.clear();
+    Corners poly{};
+    for (size_t i = b; i < e; ++i) {
+      const uint32_t el = elements[i];
+      const uint32_t p = e_patch[el];
+      f_begin[el] = f_end[el] = static_cast<uint32_t>(out.size());
+      const double facing = glm::dot(prep.normal[p], eye - patches[p].corners[0]);
+      if (p_shooting[p] == shooting_stamp || std::abs(facing) <= eps) continue;
+      // The paper culls the parent patch's back faces (section 2.2), which is exact where every
+      // back face lies behind a front face of the same solid. A one-sided wall seen from behind has
+      // none: culled, it would let light through (a room of inward-facing walls lit from outside
+      // came out lit inside). So such backs (PreparedScene::back_hidden) are projected as occluders
+      // that take no light: flagged, and outside the element's fragment range. The backs of solids
+      // stay culled: projected too, they would over-occlude at every silhouette pixel (front and
+      // back cover the same part of it, and E_k takes them as independent).
+      if (facing < 0.0 && prep.back_hidden[p]) continue;
+      corners_of(el, poly);
+      const uint32_t cc = patches[p].corner_count;
+      if (facing > 0.0) {
+        cube->project(std::span(poly.data(), cc), el, params.method, scratch[c], out, &prep.normal[p]);
+        f_end[el] = static_cast<uint32_t>(out.size());
+        continue;
+      }
+      std::reverse(poly.begin(), poly.begin() + cc);  // its back, counter-clockwise as seen
+      const glm::dvec3 back = -prep.normal[p];
+      const size_t first = out.size();
+      cube->project(std::span(poly.data(), cc), el | detail::kBackFace, params.method, scratch[c], out, &back);
+      for (size_t k = first; k < out.size(); ++k) out[k].inv_depth *= detail::kBackDepthScale;
+    }
+  });
+  frags.clear();
+  for (size_t c = 0; c < chunks; ++c) {
+    const uint32_t base = static_cast<uint32_t>(frags.size());
+    frags.insert(frags.end(), chunk_frags[c].begin(), chunk_frags[c].end());
+    for (size_t i = n * c / chunks; i < n * (c + 1) / chunks; ++i) {
+      f_begin[elements[i]] += base;
+      f_end[elements[i]] += base;
+    }
+  }
+  for (uint32_t el : elements) HEMIBAKE_DCHECK(f_begin[el] <= f_end[el] && f_end[el] <= frags.size());
+  detail::resolve(frags, cube->pixel_count(), params.method, e_group, prep.adjacency, pool, order, pixel_start);
+  stats.peak_fragments = std::max<uint64_t>(stats.peak_fragments, frags.size());
+  stats.seconds_projecting += seconds_since(t0);
+}
+
+void Solver::Impl::project_children(const std::vector<uint32_t>& parents) {
+  const auto t0 = Clock::now();
+  const size_t n = parents.size();
+  const size_t chunks = pool.chunk_count(n);
+  pool.parallel_for(n, [&](size_t b, size_t e, size_t c) {
+    auto& out = chunk_frags[c];
+    out.clear();
+    Corners poly{};
+    for (size_t i = b; i < e; ++i) {
+      const uint32_t par = parents[i];
+      const std::span<const Fragment> pf(frags.data() + f_begin[par], f_end[par] - f_begin[par]);
+      for (uint32_t k = 0; k < 4; ++k) {
+        const uint32_t ch = e_child[par] + k;
+        f_begin[ch] = f_end[ch] = static_cast<uint32_t>(out.size());
+        if (pf.empty()) continue;
+        corners_of(ch, poly);
+        cube->project_child(std::span(poly.data(), corner_count(ch)), ch, pf, params.method,
+                           scratch[c], out);
+        f_end[ch] = static_cast<uint32_t>(out.size());
+      }
+    }
+  });
+  std::vector<uint32_t> children;
+  children.reserve(n * 4);
+  for (size_t c = 0; c < chunks; ++c) {
+    const uint32_t base = static_cast<uint32_t>(frags.size());
+    frags.insert(frags.end(), chunk_frags[c].begin(), chunk_frags[c].end());
+    for (size_t i = n * c / chunks; i < n * (c + 1) / chunks; ++i) {
+      for (uint32_t k = 0; k < 4; ++k) {
+        const uint32_t ch = e_child[parents[i]] + k;
+        f_begin[ch] += base;
+        f_end[ch] += base;
+        children.push_back(ch);
+      }
+    }
+  }
+  for (uint32_t ch : children) HEMIBAKE_DCHECK(f_begin[ch] <= f_end[ch] && f_end[ch] <= frags.size());
+  sum_form_factors(children);
+  stats.reused_children += children.size();
+  stats.peak_fragments = std::max<uint64_t>(stats.peak_fragments, frags.size());
+  stats.seconds_reusing += seconds_since(t0);
+}
+
+}  // namespace hemibake::solver

@@ -1,0 +1,140 @@
+// A posteriori subdivision of a hemicube's receivers (step 3 of the shot in solver.cpp): a leaf is
+// too large for this interaction when (a) its form factor weighted by the shooter's share of the
+// emitted power exceeds FEPS, or (b) it is partly hidden and the hidden part would have changed its
+// radiosity by more than the radiosity tolerance, or (c) the shot's radiosity differs across one of
+// its corners by more than that tolerance. Split elements cancel the shot; it is repeated with
+// their children, whose form factors come from their parent's pixels.
+#include "solver_impl.h"
+
+#include <algorithm>
+#include <limits>
+
+namespace hemibake::solver {
+
+// Repeats the piece's shot until a round splits nothing, at most kMaxRounds times. Returns whether
+// the last round split nothing (or could not: the element limit). While recording, `split_room`
+// is by how much the piece's dB could grow before that round would have split something.
+bool Solver::Impl::refine(const Piece& piece, const detail::Shaft& shaft, std::vector<uint32_t>& accepted,
+                          std::vector<uint32_t>& seen, double& split_room) {
+  // This piece's share of the emitted power: how much the interaction matters (criterion a).
+  const double weight = piece.power / emitted_power;
+  for (int round = 0; round < kMaxRounds; ++round) {
+    receiver_form_factors(piece, accepted);
+    spread_shot(piece.dB, accepted);
+    std::vector<uint32_t> to_split = too_coarse(piece.dB, weight, accepted);
+    if (recording != nullptr) split_room = split_headroom(piece.dB, weight, accepted);
+    reset_spread(accepted);
+    if (to_split.empty()) {
+      // Nothing passed a criterion, so dB may grow by at least 1 before anything does.
+      HEMIBAKE_DCHECK(recording == nullptr || split_room >= 1.0);
+      return true;
+    }
+    if (!trim_to_element_limit(to_split)) {
+      split_room = std::numeric_limits<double>::infinity();  // no split is possible any more
+      return true;
+    }
+    // The shot is cancelled and repeated with the split elements.
+    ++stats.rounds;
+    split_receivers(to_split, shaft, accepted, seen);
+  }
+  return false;
+}
+
+// This shot's radiosity at every accepted receiver (shot_b), and its spread around every vertex
+// (vmin, vmax).
+void Solver::Impl::spread_shot(const glm::dvec3& dB, const std::vector<uint32_t>& accepted) {
+  for (uint32_t e : accepted) {
+    const double v = shot_radiosity(e, dB, f_recv[e]);
+    shot_b[e] = v;
+    for (uint32_t k = 0; k < corner_count(e); ++k) {
+      const uint32_t vert = e_corner[e][k];
+      vmin[vert] = std::min(vmin[vert], v);
+      vmax[vert] = std::max(vmax[vert], v);
+    }
+  }
+}
+
+// Resets the vertex spreads for the next round (only the touched vertices).
+void Solver::Impl::reset_spread(const std::vector<uint32_t>& accepted) {
+  for (uint32_t e : accepted)
+    for (uint32_t k = 0; k < corner_count(e); ++k) {
+      vmin[e_corner[e][k]] = std::numeric_limits<double>::max();
+      vmax[e_corner[e][k]] = std::numeric_limits<double>::lowest();
+    }
+}
+
+// The receivers too coarse for this interaction (criteria a-c), counted by criterion in stats.
+std::vector<uint32_t> Solver::Impl::too_coarse(const glm::dvec3& dB, double weight,
+                                               const std::vector<uint32_t>& accepted) {
+  std::vector<uint32_t> to_split;
+  for (uint32_t e : accepted) {
+    if (e_area[e] < min_split_area()) continue;
+    bool split_it = false;
+    if (projected(e)) {
+      // (a) too coarse for this interaction.
+      split_it = e_ff[e] * weight > params.feps;
+      stats.splits_form_factor += split_it;
+      // (b) partly hidden, and the hidden part matters.
+      if (!split_it && e_ff[e] > 0.0 && e_ff[e] < e_ff_open[e]) {
+        const double open = shot_radiosity(e, dB, f_open[e]);
+        split_it = open - shot_b[e] > b_tolerance;
+        stats.splits_visibility += split_it;
+      }
+    }
+    // (c) the shot's radiosity jumps across one of its corners.
+    for (uint32_t k = 0; k < corner_count(e) && !split_it; ++k) {
+      const uint32_t vert = e_corner[e][k];
+      split_it = vmax[vert] - vmin[vert] > b_tolerance;
+      stats.splits_gradient += split_it;
+    }
+    if (split_it) to_split.push_back(e);
+  }
+  return to_split;
+}
+
+// For a replay: by how much dB could grow before this round would split something. The criteria
+// scale with dB, so each gives limit / value; the same tests as too_coarse.
+double Solver::Impl::split_headroom(const glm::dvec3& dB, double weight, const std::vector<uint32_t>& accepted) const {
+  double room = std::numeric_limits<double>::infinity();
+  for (uint32_t e : accepted) {
+    if (e_area[e] < min_split_area()) continue;
+    if (projected(e)) {
+      lower_headroom(room, params.feps, e_ff[e] * weight);
+      if (e_ff[e] > 0.0 && e_ff[e] < e_ff_open[e])
+        lower_headroom(room, b_tolerance, shot_radiosity(e, dB, f_open[e]) - shot_b[e]);
+    }
+    for (uint32_t k = 0; k < corner_count(e); ++k)
+      lower_headroom(room, b_tolerance, vmax[e_corner[e][k]] - vmin[e_corner[e][k]]);
+  }
+  return room;
+}
+
+// Keeps to the element limit (params.max_elements; a split adds three leaves): trims `to_split`
+// to what it allows. Returns false when nothing may split any more.
+bool Solver::Impl::trim_to_element_limit(std::vector<uint32_t>& to_split) {
+  const uint64_t room = params.max_elements > leaves.size() ? (params.max_elements - leaves.size()) / 3 : 0;
+  if (to_split.size() <= room) return true;
+  stats.element_limit = true;
+  to_split.resize(room);
+  return !to_split.empty();
+}
+
+// Splits the receivers and gives their children form factors: from their parent's pixels (no
+// other element is looked at again), or with reuse_visibility off, from a new projection.
+void Solver::Impl::split_receivers(const std::vector<uint32_t>& to_split, const detail::Shaft& shaft,
+                                   std::vector<uint32_t>& accepted, std::vector<uint32_t>& seen) {
+  for (uint32_t e : to_split) split(e);
+  replace_split(leaves);
+  replace_split(accepted);
+  HEMIBAKE_DCHECK(leaves.size() == patches.size() + 3 * stats.splits);
+  grow_scratch();
+  if (params.reuse_visibility) {
+    project_children(to_split);
+  } else {
+    gather_seen(shaft, accepted, seen);
+    project(seen);
+    sum_form_factors(accepted);
+  }
+}
+
+}  // namespace hemibake::solver

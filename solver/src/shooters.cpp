@@ -1,0 +1,144 @@
+// How a shooting unit (a patch, or a cluster of small patches of one surface) breaks into pieces,
+// each shooting from a hemicube of its own, and refines for near receivers.
+#include "solver_impl.h"
+
+#include <glm/geometric.hpp>
+
+#include <algorithm>
+
+namespace hemibake::solver {
+namespace {
+
+// A patch is cut for shooter_limit at most this many levels (4096 pieces): a sliver as long as the
+// scene stays a few sliver-shaped pieces rather than millions.
+constexpr int kMaxCutLevels = 6;
+
+}  // namespace
+
+void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers,
+                              bool whole_scene) {
+  const uint32_t n = patches[p].corner_count;
+  Piece piece;
+  piece.patch = p;
+  piece.normal = prep.normal[p];
+  piece.area = polygon_area(node.c, n);
+  piece.dB = node.unshot;
+  if (node.element != kNone && e_child[node.element] != kNone) {
+    glm::dvec3 power(0.0);
+    for_leaves(node.element, [&](uint32_t e) { power += e_unshot[e] * e_area[e]; });
+    piece.dB = power / piece.area;
+  } else if (node.element != kNone) {
+    piece.dB = e_unshot[node.element];
+  }
+  if (receivers.empty()) return;
+  if (channel_sum(piece.dB) <= 0.0) {
+    record_broken = true;  // a replay could not know this piece
+    return;
+  }
+  piece.src.assign(1, node.source);
+  piece.src_area = node.element != kNone ? piece.area : e_area[node.source];
+  piece.centre = polygon_centre(node.c, n);
+  piece.up = node.c[1] - node.c[0];
+  piece.diameter = polygon_diameter(node.c, n);
+  piece.points.assign(node.c.begin(), node.c.begin() + n);
+  piece.depth = node.depth;
+  piece.power = channel_sum(piece.dB) * piece.area;
+  // Weak shots stay whole.
+  piece.may_refine = node.depth < kMaxShooterDepth && piece.power >= params.feps * emitted_power;
+  const std::vector<uint32_t> near = shoot_piece(piece, std::move(receivers), whole_scene);
+  if (near.empty()) return;
+  const bool is_leaf = node.element == kNone || e_child[node.element] == kNone;
+  for (uint32_t k = 0; k < 4; ++k) {
+    ShooterNode kid;
+    child_corners(node.c, n, k, kid.c);
+    kid.depth = node.depth + 1;
+    kid.element = is_leaf ? kNone : e_child[node.element] + k;
+    kid.source = is_leaf ? node.source : kid.element;
+    kid.unshot = piece.dB;  // a geometric piece of a leaf shares the leaf's unshot radiosity
+    shoot_node(p, kid, near, false);
+  }
+}
+
+void Solver::Impl::shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bool whole_scene, int depth) {
+  if (receivers.empty()) return;
+  const ClusterNode& node = c_nodes[c];
+  if (node.end - node.begin == 1) {
+    // One patch: it shoots for these receivers as it would alone.
+    const uint32_t p = cluster_patch[node.begin];
+    Corners root{};
+    corners_of(p_root[p], root);
+    shoot_node(p, {root, p_root[p], glm::dvec3(0.0), std::min(depth / 2, kMaxShooterDepth), p_root[p]},
+               std::move(receivers), whole_scene);
+    return;
+  }
+  Piece piece;
+  piece.patch = cluster_patch[node.begin];
+  piece.normal = node.normal;
+  glm::dvec3 power(0.0);
+  for (uint32_t i = node.begin; i < node.end; ++i)
+    for_leaves(p_root[cluster_patch[i]], [&](uint32_t e) { power += e_unshot[e] * e_area[e]; });
+  if (channel_sum(power) <= 0.0) {
+    record_broken = true;
+    return;
+  }
+  for (uint32_t i = node.begin; i < node.end; ++i) piece.src.push_back(p_root[cluster_patch[i]]);
+  piece.src_area = node.area;
+  piece.area = node.area;
+  piece.dB = power / node.area;
+  piece.power = channel_sum(piece.dB) * piece.area;
+  piece.centre = node.centre;
+  piece.up = node.box[1] - node.box[0];
+  if (glm::length(glm::cross(piece.up, piece.normal)) < kRoundingLength * prep.diagonal) piece.up = node.box[2] - node.box[0];
+  piece.diameter = node.diameter;
+  piece.points.assign(node.box.begin(), node.box.end());
+  piece.depth = depth / 2;  // each level halves the area, every second one the width
+  // A cluster stands for its patches: receivers near it always go on to its halves, down to single
+  // patches, so that clustering never makes a receiver see a coarser shooter than the patches.
+  piece.may_refine = true;
+  const std::vector<uint32_t> near = shoot_piece(piece, std::move(receivers), whole_scene);
+  if (near.empty()) return;
+  // Near receivers go on to the quarters (the halves' halves: half as wide), as for a patch.
+  for (uint32_t h = node.child; h < node.child + 2; ++h) {
+    if (c_nodes[h].child == kNone) {
+      shoot_cluster(h, near, false, depth + 2);
+      continue;
+    }
+    shoot_cluster(c_nodes[h].child, near, false, depth + 2);
+    shoot_cluster(c_nodes[h].child + 1, near, false, depth + 2);
+  }
+}
+
+void Solver::Impl::shoot_patch(uint32_t p, const std::vector<uint32_t>& receivers, bool whole_scene) {
+  const uint32_t n = patches[p].corner_count;
+  // The patch shoots from pieces no wider than shooter_limit (a leaf wider than that is cut
+  // geometrically; its pieces share its unshot radiosity); each piece refines further for the
+  // receivers near it (shoot_node).
+  std::vector<ShooterNode> stack, tops;
+  Corners root{};
+  corners_of(p_root[p], root);
+  stack.push_back({root, p_root[p], glm::dvec3(0.0), 0, p_root[p]});
+  while (!stack.empty()) {
+    ShooterNode node = stack.back();
+    stack.pop_back();
+    const bool leaf = node.element == kNone || e_child[node.element] == kNone;
+    if (node.element != kNone && leaf) node.unshot = e_unshot[node.element];
+    if (polygon_diameter(node.c, n) <= shooter_limit || node.depth >= kMaxCutLevels) {
+      node.depth = 0;  // near-field refinement counts from here
+      tops.push_back(node);
+      continue;
+    }
+    for (uint32_t k = 4; k-- > 0;) {
+      ShooterNode kid;
+      child_corners(node.c, n, k, kid.c);
+      kid.depth = node.depth + 1;
+      kid.element = leaf ? kNone : e_child[node.element] + k;
+      kid.source = leaf ? node.source : kid.element;
+      kid.unshot = node.unshot;
+      stack.push_back(kid);
+    }
+  }
+  grow_scratch();
+  for (const ShooterNode& top : tops) shoot_node(p, top, receivers, whole_scene);
+}
+
+}  // namespace hemibake::solver

@@ -1,0 +1,362 @@
+// The solver's shared state: Solver::Impl, whose members are spread over the files named for
+// what they hold (element_tree, patch_bvh, clusters, projection, near_field, shooters, shoot_piece,
+// shot_cache, mesh_export, solver). Private to solver/src.
+#pragma once
+
+#include "hemibake/solver/solver.h"
+
+#include "check.h"
+#include "geometry.h"
+#include "hemicube_engine.h"
+#include "scene_prep.h"
+#include "shaft.h"
+#include "thread_pool.h"
+
+#include <glm/vec3.hpp>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <unordered_map>
+#include <vector>
+
+namespace hemibake::solver {
+
+using detail::channel_sum;
+using detail::child_corners;
+using detail::Corners;
+using detail::edge_key;
+using detail::Fragment;
+using detail::mean;
+using detail::median_cut;
+using detail::polygon_area;
+using detail::polygon_centre;
+using detail::polygon_diameter;
+using Clock = std::chrono::steady_clock;
+
+inline double seconds_since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+// Shared thresholds. Those that compare a piece's power with the emitted power are read twice: by
+// the fresh shot that decides with them, and by piece_headroom, which stops a replay of that shot
+// where a fresh one would decide differently. A replay reuses the recorded form factors, so it is
+// exact only while both places read the same constant.
+
+// A receiver nearer to a shooting area's centre than kNearFactor times its diameter takes its share
+// from the area's quarters, down to kMaxShooterDepth levels.
+constexpr double kNearFactor = 2.0;
+constexpr int kMaxShooterDepth = 3;
+// A near-field hemicube projects only what may hide its receivers: elements overlapping the joint
+// bounding box of the piece and the receivers of one surface, at most this many boxes (shaft_of).
+constexpr size_t kMaxShaftBoxes = 32;
+// A close receiver is refined for only if the point view's error could exceed this share of the
+// radiosity tolerance (classify_receivers, near_error).
+constexpr double kNearError = 0.25;
+// Two rules save work rather than decide structure, so a replay may exceed them by this factor
+// (piece_headroom): a weak piece left unrefined (power under FEPS of the emitted power), and a
+// close receiver left to the hemicube (point view's error under kNearError of the tolerance).
+constexpr double kSavingRuleSlack = 2.0;
+// Hemicubes halve their resolution per level, down to this.
+constexpr uint32_t kMinResolution = 20;
+// Weak pieces, under these shares of the emitted power, take a hemicube of half (a quarter of)
+// their level's resolution (coarser_levels); piece_headroom stops a replay at the same shares, so
+// that a replayed shot never reuses form factors of a coarser hemicube than a fresh shot would take.
+constexpr double kHalfResolutionPower = 0.05;
+constexpr double kQuarterResolutionPower = 0.005;
+// How many levels coarser than its depth's a piece's hemicube may be (the two shares above): the
+// solver keeps kMaxShooterDepth + kCoarserLevels + 1 hemicubes.
+constexpr int kCoarserLevels = 2;
+// Coarser hemicubes may shoot at most this share of all the power shot (place_hemicube, and the
+// replay's check in replayed_radiosities).
+constexpr double kCoarseShare = 0.25;
+// Cluster pieces carrying at least this share of the emitted power take a finer hemicube
+// (finer_level, piece_headroom).
+constexpr double kFinePower = 1e-3;
+// Pieces carrying at least this share of the emitted power refine for receivers whose plane cuts
+// through them, however far (is_close, piece_headroom).
+constexpr double kStraddlePower = 0.05;
+// A cluster of a curved surface shoots along its patches' mean normal, as if flat: its patches'
+// normals stay within this cosine (20 degrees) of it, so a receiver's cosine at the cluster errs by
+// under 6 % where it faces the cluster (build_clusters).
+constexpr double kClusterCone = 0.9397;
+// A shooting piece with an absorbing back close in front of it that takes at least this share of
+// the light from its centre is refined (absorber_close).
+constexpr double kAbsorberShare = 0.1;
+// Lengths under this share of the scene's diagonal are rounding. An eye that near a patch's plane
+// sees it edge-on: project() leaves such patches out and projects backs beyond it, and
+// absorber_close, which predicts which absorbing backs the hemicube will see, must draw the same
+// line. Boxes that near meet (patches_meeting).
+constexpr double kRoundingLength = 1e-9;
+// A receiver counts as close (is_close) only where the piece lies in front of it, and it in front
+// of the piece, by more than this share of the scene's diagonal.
+constexpr double kCloseFacingLength = 1e-6;
+// A shot is repeated after splits (refine) at most this many times; one still splitting after them
+// is not recorded for replays.
+constexpr int kMaxRounds = 64;
+
+// Lowers `room`, the factor by which a shot's dB may grow, to the factor at which `value` (which
+// scales with dB) reaches `limit`.
+inline void lower_headroom(double& room, double limit, double value) {
+  if (value > 0.0) room = std::min(room, limit / value);
+}
+
+struct Solver::Impl {
+  // What one hemicube shoots from: a piece of a patch, or a cluster of patches of one surface.
+  struct Piece {
+    uint32_t patch;                   // a patch of the piece: its plane and occlusion group
+    glm::dvec3 normal;                // the hemicube's axis: the patch's normal, a cluster's mean
+    glm::dvec3 centre, up;            // the hemicube's centre and rotation hint
+    double area, diameter;
+    glm::dvec3 dB;                    // unshot radiosity shot (uniform over the piece)
+    double power;                     // unshot power shot: channel_sum(dB) * area
+    std::vector<glm::dvec3> points;   // points whose hull holds the piece (facing tests)
+    int depth;                        // hemicube level (each halves the resolution)
+    bool may_refine;                  // near receivers are left to sub-pieces
+    // Where dB comes from (for replays): the unshot power of the leaves under `src`, divided by
+    // src_area.
+    std::vector<uint32_t> src;
+    double src_area;
+  };
+  // A piece of a patch on the way down its quadtree (shooters.cpp).
+  struct ShooterNode {
+    Corners c;
+    uint32_t element;  // kNone: a geometric piece of a leaf
+    glm::dvec3 unshot;
+    int depth;
+    uint32_t source;   // `element`, or for a geometric piece the leaf it was cut from
+  };
+  // A shot's form factors, kept for a replay (step): per piece, in the order they shot, its
+  // sources and the receivers that took light with their F(element -> piece).
+  struct ShotRecord {
+    struct Piece {
+      uint32_t src_begin, src_end, recv_begin, recv_end;
+      double src_area, area;
+      glm::dvec3 dB;  // the unshot radiosity it shot when recorded
+      double headroom;  // a replay may shoot up to this times dB (piece_headroom)
+      bool coarse;    // shot from a hemicube coarser than its level (kCoarseShare)
+      bool extra;     // shot for children of split receivers: its power counts once, elsewhere
+    };
+    size_t fresh_pieces = 0;  // pieces of the shot that made it (replays may add more)
+    std::vector<Piece> pieces;
+    std::vector<uint32_t> src, recv;
+    std::vector<float> f;
+    size_t bytes() const {
+      if (pieces.capacity() + src.capacity() + recv.capacity() + f.capacity() == 0) return 0;  // none
+      return sizeof(ShotRecord) + pieces.capacity() * sizeof(Piece) +
+             (src.capacity() + recv.capacity()) * sizeof(uint32_t) + f.capacity() * sizeof(float);
+    }
+    void append(const ShotRecord& from, Piece piece, bool extra, const uint8_t* skip);
+    bool consistent() const;  // for HEMIBAKE_DCHECK: the pieces' ranges tile src and recv
+  };
+  // A node of a cluster's binary tree over its patches (by median cuts of their centres).
+  struct ClusterNode {
+    uint32_t begin = 0, end = 0;  // its patches: cluster_patch[begin, end)
+    uint32_t child = kNone;       // children at child and child + 1
+    glm::dvec3 centre{0.0};       // area centroid
+    glm::dvec3 normal{0.0};       // area-weighted mean of its patches' normals, unit
+    double min_cos = 1.0;         // least cosine between a patch's normal and `normal`
+    double area = 0.0, diameter = 0.0;
+    std::array<glm::dvec3, 8> box{};  // corners of the bounding box of its patches' corners
+  };
+  // A node of the bounding-box tree over the patches (patch_bvh.cpp).
+  struct BoxNode {
+    glm::dvec3 lo, hi;
+    uint32_t begin = 0, end = 0;  // its patches: tree_patch[begin, end)
+    uint32_t child = kNone;       // children at child and child + 1
+  };
+
+  // solver.cpp: set-up, and the Southwell step that picks the shooter.
+  Impl(const Scene& scene, const Params& p);
+  bool step();
+  uint32_t strongest_unit() const;
+  void fresh_shot(uint32_t unit);
+  void clear_unshot(uint32_t unit);
+  void receive(uint32_t e, const glm::dvec3& dB, double f);
+
+  // element_tree.cpp: the elements' quadtree.
+  uint32_t corner_count(uint32_t e) const { return patches[e_patch[e]].corner_count; }
+  void corners_of(uint32_t e, Corners& out) const {
+    for (uint32_t i = 0; i < corner_count(e); ++i) out[i] = vpos[e_corner[e][i]];
+  }
+  Corners corners_of_copy(uint32_t e) const {
+    Corners c{};
+    corners_of(e, c);
+    return c;
+  }
+  uint32_t midpoint(uint32_t a, uint32_t b);
+  uint32_t add_element(uint32_t patch, uint32_t parent, const std::array<uint32_t, 4>& corners,
+                       const glm::dvec3& b, const glm::dvec3& unshot);
+  void split(uint32_t e);
+  template <typename Fn>
+  void for_leaves(uint32_t e, Fn&& fn) const;
+  void replace_split(std::vector<uint32_t>& list) const;
+  void grow_scratch();
+  void update_unshot_total();
+
+  // patch_bvh.cpp, clusters.cpp: built once.
+  void build_patch_bvh();
+  void build_patch_tree(uint32_t node, uint32_t begin, uint32_t end);
+  void patches_meeting(const detail::Shaft& shaft, std::vector<uint32_t>& out);
+  void build_clusters();
+  void find_surfaces();
+  std::vector<std::vector<uint32_t>> cluster_candidates(double limit) const;
+  void cut_into_units(const std::vector<uint32_t>& members, double limit);
+  void build_cluster(uint32_t id, uint32_t begin, uint32_t end);
+
+  // shooters.cpp: a unit breaks into pieces, each of which shoot_piece shoots.
+  void shoot_patch(uint32_t p, const std::vector<uint32_t>& receivers, bool whole_scene);
+  void shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers, bool whole_scene);
+  void shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bool whole_scene, int depth);
+
+  // shoot_piece.cpp: one hemicube, stage by stage.
+  std::vector<uint32_t> shoot_piece(const Piece& piece, std::vector<uint32_t> receivers, bool whole_scene);
+  void mark_shooting_patches(const Piece& piece);
+  std::vector<uint32_t> current_leaves(const std::vector<uint32_t>& receivers) const;
+  void classify_receivers(const Piece& piece, const std::vector<uint32_t>& current,
+                          std::vector<uint32_t>& accepted, std::vector<uint32_t>& near);
+  int coarser_levels(double power) const;
+  bool finer_level(const Piece& piece, double power) const;
+  bool place_hemicube(const Piece& piece);
+  void receiver_form_factors(const Piece& piece, const std::vector<uint32_t>& accepted);
+  void distribute(const glm::dvec3& dB, const std::vector<uint32_t>& accepted);
+  double hemicube_share(const std::vector<uint32_t>& accepted) const;
+  // Whether element e has form factors from the hemicube in use.
+  bool projected(uint32_t e) const { return e_stamp[e] == stamp && e_ff_open[e] > 0.0; }
+  // F(element -> piece) from F(piece -> element) = ff, by reciprocity (capped at 1).
+  double by_reciprocity(const Piece& piece, uint32_t e, double ff) const {
+    return std::min(1.0, ff * piece.area / e_area[e]);
+  }
+  // The radiosity element e gains from a shot of dB with F(element -> piece) = f (channels' mean).
+  double shot_radiosity(uint32_t e, const glm::dvec3& dB, double f) const {
+    return mean(patches[e_patch[e]].reflectance * dB) * f;
+  }
+
+  // near_field.cpp: receivers close to the piece.
+  bool is_close(const Piece& piece, uint32_t e) const;
+  double near_error(const Piece& piece, uint32_t e) const;
+  bool absorber_close(const Piece& piece) const;
+  static double point_piece_form_factor(const Piece& piece, const glm::dvec3& x, const glm::dvec3& n);
+  double element_piece_form_factor(const Piece& piece, uint32_t e, int side) const;
+  double exact_form_factor(const Piece& piece, uint32_t e, int side);
+
+  // shaft.cpp: what the hemicube must see.
+  detail::Shaft shaft_of(const Piece& piece, const std::vector<uint32_t>& accepted, bool whole_scene) const;
+  void gather_seen(const detail::Shaft& shaft, const std::vector<uint32_t>& accepted, std::vector<uint32_t>& seen);
+
+  // projection.cpp: onto the placed hemicube. Projects `elements`, but for the patches of the
+  // shooting piece (p_shooting == shooting_stamp).
+  void project(std::span<const uint32_t> elements);
+  void project_children(const std::vector<uint32_t>& parents);
+  void sum_form_factors(std::span<const uint32_t> elements);
+
+  // refine.cpp: a posteriori subdivision.
+  bool refine(const Piece& piece, const detail::Shaft& shaft, std::vector<uint32_t>& accepted,
+              std::vector<uint32_t>& seen, double& split_room);
+  void spread_shot(const glm::dvec3& dB, const std::vector<uint32_t>& accepted);
+  void reset_spread(const std::vector<uint32_t>& accepted);
+  std::vector<uint32_t> too_coarse(const glm::dvec3& dB, double weight, const std::vector<uint32_t>& accepted);
+  double split_headroom(const glm::dvec3& dB, double weight, const std::vector<uint32_t>& accepted) const;
+  bool trim_to_element_limit(std::vector<uint32_t>& to_split);
+  void split_receivers(const std::vector<uint32_t>& to_split, const detail::Shaft& shaft,
+                       std::vector<uint32_t>& accepted, std::vector<uint32_t>& seen);
+  // A split makes four children, none smaller than aeps_area.
+  double min_split_area() const { return 4.0 * aeps_area; }
+
+  // shot_cache.cpp: records and replays.
+  bool replay(uint32_t unit);
+  size_t mark_stale(const ShotRecord& r, std::vector<uint8_t>& stale);
+  bool replayed_radiosities(const ShotRecord& r, std::vector<glm::dvec3>& dBs);
+  ShotRecord reshoot_split(uint32_t unit, const ShotRecord& r);
+  void keep_record(uint32_t unit, ShotRecord record);
+  void record_piece(const Piece& piece, bool coarse, double split_room, const std::vector<uint32_t>& accepted);
+  double piece_headroom(const Piece& piece, double split_room, const std::vector<uint32_t>& accepted) const;
+
+  Params params;
+  std::vector<Patch> patches;
+  detail::PreparedScene prep;
+  double aeps_area = 0.0;       // smallest element area allowed
+  double b_tolerance = 0.0;     // radiosity tolerance for criteria (b) and (c)
+  double shooter_limit = 0.0;   // widest shooting sub-area
+  double emitted_power = 0.0;   // sum over patches of channel_sum(E) * A
+  double power_shot = 0.0;      // by all hemicubes so far
+  double power_coarse = 0.0;    // by hemicubes coarser than their level
+
+  // Vertices (shared within a smoothing group) and edge midpoints.
+  std::vector<glm::dvec3> vpos;
+  std::unordered_map<uint64_t, uint32_t> midpoints;
+
+  // Elements, structure of arrays. Children of an element are consecutive.
+  std::vector<uint32_t> e_patch, e_parent, e_child;
+  std::vector<uint32_t> e_group;  // the patch's occlusion group
+  std::vector<std::array<uint32_t, 4>> e_corner;
+  std::vector<double> e_area;
+  std::vector<glm::dvec3> e_centre;  // bounding sphere
+  std::vector<double> e_radius;
+  std::vector<glm::dvec3> e_b, e_unshot;
+  std::vector<uint32_t> leaves;
+  std::vector<uint32_t> p_root;
+  std::vector<double> p_unshot;  // unshot power per patch (channel sum times area)
+  // Shooters: a unit is a patch that shoots alone or a cluster of small coplanar patches that
+  // shoot together (cluster trees in c_nodes; unit_node kNone for a single patch).
+  std::vector<ClusterNode> c_nodes;
+  std::vector<uint32_t> cluster_patch;
+  std::vector<uint32_t> unit_patch, unit_node, p_unit;
+  std::vector<double> u_unshot;  // unshot power per unit
+  // Replays: per unit, the form factors of its last shot (replay()).
+  std::vector<ShotRecord> u_record;
+  size_t record_bytes = 0;
+  ShotRecord* recording = nullptr;  // the shot being recorded
+  bool record_broken = false;       // a piece of it was skipped (no power): not replayable
+
+  // Bounding-box tree over the patches (patch_bvh.cpp), for finding what lies near a hemicube.
+  std::vector<BoxNode> tree;
+  std::vector<uint32_t> tree_patch;
+  std::vector<glm::dvec3> p_lo, p_hi;  // per patch: bounding box
+  std::vector<uint64_t> p_mark;        // per patch: listed for hemicube `mark`
+  std::vector<uint32_t> p_surface;     // per patch: its surface for clustering (build_clusters)
+  std::vector<uint64_t> p_shooting;    // per patch: part of the piece shooting hemicube `shooting_stamp`
+  uint64_t shooting_stamp = 0;
+
+  // Per-hemicube scratch.
+  // Hemicubes of halving resolution (at least kMinResolution): a quarter-size shooting area serves
+  // receivers half as far, which project as large, so its hemicube needs half the resolution; weak
+  // shots may use coarser ones still (coarser_levels).
+  std::vector<detail::Hemicube> cubes;
+  std::unique_ptr<detail::Hemicube> finer_cube;  // for strong cluster shots (finer_level)
+  detail::Hemicube* cube = nullptr;  // the one in use
+  detail::ThreadPool pool;
+  std::vector<Fragment> frags;
+  std::vector<uint32_t> f_begin, f_end;  // per element: its fragments in `frags`
+  std::vector<uint64_t> e_stamp;         // per element: the hemicube its form factor belongs to
+  std::vector<double> e_ff, e_ff_open;   // per element: visible and unoccluded form factor
+  uint64_t stamp = 0;
+  std::vector<detail::ProjectScratch> scratch;
+  std::vector<std::vector<Fragment>> chunk_frags;
+  std::vector<std::vector<uint32_t>> gather_chunks;  // per chunk: elements a hemicube must see
+  std::vector<uint32_t> order, pixel_start;
+  std::vector<double> shot_b, vmin, vmax;
+  std::vector<double> f_recv, f_open;  // per accepted receiver: F(element -> piece), visible and open
+  std::vector<uint64_t> e_mark;        // per element: holds a receiver of hemicube `mark`
+  uint64_t mark = 0;
+  std::vector<double> e_exact;         // per element: exact F(element -> piece), for stamp e_exact_stamp
+  std::vector<uint64_t> e_exact_stamp;
+
+  Stats stats;
+  bool done = false;
+};
+
+template <typename Fn>
+void Solver::Impl::for_leaves(uint32_t e, Fn&& fn) const {
+  HEMIBAKE_DCHECK(e < e_child.size());
+  if (e_child[e] == kNone) {
+    fn(e);
+    return;
+  }
+  for (uint32_t k = 0; k < 4; ++k) for_leaves(e_child[e] + k, fn);
+}
+
+}  // namespace hemibake::solver
