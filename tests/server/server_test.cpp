@@ -7,10 +7,12 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <atomic>
 #include <csignal>
 #include <cstring>
 #include <map>
+#include <mutex>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -623,6 +625,132 @@ TEST(Server, ManyConcurrentClientsAndStreams) {
   }
   for (auto& t : clients) t.join();
   EXPECT_EQ(failures.load(), 0);
+}
+
+// The Cornell box with its light switched off, as a GLB whose BIN chunk is `bin_bytes` of zeros:
+// the server reads and checks all of it (container, JSON, buffers), then refuses it for having
+// no light (422), so nothing is stored.
+std::string dark_glb_with_padding(uint32_t bin_bytes) {
+  json g = json::parse(cornell());
+  for (auto& m : g["materials"]) {
+    m.erase("emissiveFactor");
+    m.erase("extensions");
+  }
+  // The BIN chunk is the buffer without a uri, and that buffer must come first.
+  g["buffers"].insert(g["buffers"].begin(), json{{"byteLength", bin_bytes}});
+  for (auto& v : g["bufferViews"]) v["buffer"] = v["buffer"].get<int>() + 1;
+  std::string text = g.dump();
+  text.append((4 - text.size() % 4) % 4, ' ');
+  bin_bytes += (4 - bin_bytes % 4) % 4;
+  std::string glb;
+  glb.reserve(28 + text.size() + bin_bytes);
+  auto u32 = [&](uint32_t v) { glb.append(reinterpret_cast<const char*>(&v), 4); };
+  glb += "glTF";
+  u32(2);
+  u32(static_cast<uint32_t>(28 + text.size() + bin_bytes));
+  u32(static_cast<uint32_t>(text.size()));
+  glb += "JSON" + text;
+  u32(bin_bytes);
+  glb.append("BIN\0", 4);
+  glb.append(bin_bytes, '\0');
+  return glb;
+}
+
+// Request handling never holds an I/O thread: while four clients wait for previews of a job with
+// long shots and a 200 MB scene arrives and is checked, /healthz answers each time within 100 ms.
+TEST(Server, HealthzAnswersWhilePreviewsWaitAndALargeSceneIsChecked) {
+  ServerProcess server(temp_dir("busy"), {"--workers", "1"});
+  ASSERT_NE(server.port(), 0);
+  const unsigned short port = server.port();
+  // 1024² hemicubes, none replayed: every shot takes a few tenths of a second or more (for minutes),
+  // and a preview waits for one.
+  const Reply posted = request(port, http::verb::post, "/v1/jobs?resolution=1024&reuse=false&convergence=0.00001", cornell(), kGltf);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = posted.js()["id"];
+  for (int i = 0; i < 200 && request(port, http::verb::get, "/v1/jobs/" + id).js()["state"] != "running"; ++i)
+    std::this_thread::sleep_for(20ms);
+  ASSERT_EQ(request(port, http::verb::get, "/v1/jobs/" + id).js()["state"], "running");
+
+  std::atomic<bool> stop{false};
+  std::atomic<int> previews{0}, preview_failures{0};
+  std::mutex failure_mutex;
+  std::string first_failure;
+  std::vector<std::thread> waiting;
+  for (int c = 0; c < 4; ++c) {
+    waiting.emplace_back([&] {
+      while (!stop) {
+        std::string failure;
+        try {
+          const Reply r = request(port, http::verb::get, "/v1/jobs/" + id + "/preview");
+          if (r.status == 200 && r.body.substr(0, 4) == "glTF") ++previews;
+          else failure = std::to_string(r.status) + " " + r.body;
+        } catch (const std::exception& e) {
+          failure = e.what();
+        }
+        if (!failure.empty()) {
+          ++preview_failures;
+          std::lock_guard lock(failure_mutex);
+          if (first_failure.empty()) first_failure = failure;
+        }
+      }
+    });
+  }
+  std::this_thread::sleep_for(300ms);  // the previews are asked for and wait for a shot
+
+  std::atomic<bool> sent{false}, answered{false};
+  Reply large;
+  std::thread poster([&, body = dark_glb_with_padding(200u << 20)]() mutable {
+    try {
+      net::io_context io;
+      beast::tcp_stream stream(io);
+      stream.expires_after(180s);
+      stream.connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
+      http::request<http::string_body> req(http::verb::post, "/v1/jobs", 11);
+      req.set(http::field::host, "127.0.0.1");
+      req.set(http::field::content_type, "model/gltf-binary");
+      req.body() = std::move(body);
+      req.prepare_payload();
+      http::write(stream, req);
+      sent = true;
+      beast::flat_buffer buffer;
+      http::response<http::string_body> res;
+      http::read(stream, buffer, res);
+      large.status = static_cast<int>(res.result_int());
+      large.body = res.body();
+    } catch (const std::exception& e) {
+      large.body = e.what();
+    }
+    answered = true;
+  });
+
+  // Round trips on fresh connections, from the start of the upload until the scene's answer: the
+  // slowest of them, and how many began after the whole body was sent (while it was checked).
+  std::chrono::steady_clock::duration slowest{};
+  int during_check = 0, samples = 0;
+  while (!answered) {
+    const bool checking = sent;
+    const auto t0 = std::chrono::steady_clock::now();
+    const Reply h = request(port, http::verb::get, "/healthz");
+    const auto took = std::chrono::steady_clock::now() - t0;
+    EXPECT_EQ(h.status, 200);
+    slowest = std::max(slowest, took);
+    ++samples;
+    if (checking && !answered) ++during_check;
+    std::this_thread::sleep_for(20ms);
+  }
+  poster.join();
+  stop = true;
+  for (auto& t : waiting) t.join();
+  const double slowest_ms = std::chrono::duration<double, std::milli>(slowest).count();
+  std::printf("healthz: %d round trips, %d while the scene was checked, slowest %.1f ms; %d previews made\n", samples,
+              during_check, slowest_ms, previews.load());
+  EXPECT_LT(slowest_ms, 100.0);
+  EXPECT_GE(during_check, 3) << "too few round trips while the scene was checked to show anything";
+  EXPECT_EQ(large.status, 422) << large.body;
+  EXPECT_NE(large.body.find("emits no light"), std::string::npos) << large.body;
+  EXPECT_GE(previews.load(), 4);
+  EXPECT_EQ(preview_failures.load(), 0) << "the first: " << first_failure;
+  request(port, http::verb::delete_, "/v1/jobs/" + id);
 }
 
 }  // namespace
