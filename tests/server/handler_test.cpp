@@ -1,6 +1,8 @@
 // The request handler as a function of the request: no sockets, a store in a temporary folder.
 #include "hemibake/server/service.h"
 
+#include "dark_glb.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -233,37 +235,13 @@ TEST(Handler, StopAnswersWaitingPreviews) {
   EXPECT_EQ(after.status, 503) << after.body;
 }
 
-// The Cornell box without its light as a GLB whose BIN chunk is `bin_bytes` of zeros: the check
-// reads it all, then refuses it (422, no light).
-std::string dark_padded_glb(uint32_t bin_bytes) {
-  json g = json::parse(cornell());
-  for (auto& m : g["materials"]) {
-    m.erase("emissiveFactor");
-    m.erase("extensions");
-  }
-  g["buffers"].insert(g["buffers"].begin(), json{{"byteLength", bin_bytes}});
-  for (auto& v : g["bufferViews"]) v["buffer"] = v["buffer"].get<int>() + 1;
-  std::string text = g.dump();
-  text.append((4 - text.size() % 4) % 4, ' ');
-  std::string glb = "glTF";
-  auto u32 = [&](uint32_t v) { glb.append(reinterpret_cast<const char*>(&v), 4); };
-  u32(2);
-  u32(static_cast<uint32_t>(28 + text.size() + bin_bytes));
-  u32(static_cast<uint32_t>(text.size()));
-  glb += "JSON" + text;
-  u32(bin_bytes);
-  glb.append("BIN\0", 4);
-  glb.append(bin_bytes, '\0');
-  return glb;
-}
-
 // Scenes wait for a check thread in a bounded queue: past it, 503 with Retry-After at once.
 TEST(Handler, FullCheckQueueAnswers503WithRetryAfter) {
   ServiceOptions o;
   o.check_threads = 1;
   o.max_checks = 1;
   Fixture f(o);
-  const std::string scene = dark_padded_glb(32u << 20);
+  const std::string scene = test::dark_glb_with_padding(cornell(), 32u << 20);
   Answers answers;
   for (int i = 0; i < 4; ++i) {
     Request r;

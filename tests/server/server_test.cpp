@@ -1,4 +1,6 @@
 // The real server binary on loopback, spoken to over real HTTP (a Beast client written here).
+#include "dark_glb.h"
+
 #include <boost/asio/connect.hpp>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/read_until.hpp>
@@ -627,35 +629,6 @@ TEST(Server, ManyConcurrentClientsAndStreams) {
   EXPECT_EQ(failures.load(), 0);
 }
 
-// The Cornell box with its light switched off, as a GLB whose BIN chunk is `bin_bytes` of zeros:
-// the server reads and checks all of it (container, JSON, buffers), then refuses it for having
-// no light (422), so nothing is stored.
-std::string dark_glb_with_padding(uint32_t bin_bytes) {
-  json g = json::parse(cornell());
-  for (auto& m : g["materials"]) {
-    m.erase("emissiveFactor");
-    m.erase("extensions");
-  }
-  // The BIN chunk is the buffer without a uri, and that buffer must come first.
-  g["buffers"].insert(g["buffers"].begin(), json{{"byteLength", bin_bytes}});
-  for (auto& v : g["bufferViews"]) v["buffer"] = v["buffer"].get<int>() + 1;
-  std::string text = g.dump();
-  text.append((4 - text.size() % 4) % 4, ' ');
-  bin_bytes += (4 - bin_bytes % 4) % 4;
-  std::string glb;
-  glb.reserve(28 + text.size() + bin_bytes);
-  auto u32 = [&](uint32_t v) { glb.append(reinterpret_cast<const char*>(&v), 4); };
-  glb += "glTF";
-  u32(2);
-  u32(static_cast<uint32_t>(28 + text.size() + bin_bytes));
-  u32(static_cast<uint32_t>(text.size()));
-  glb += "JSON" + text;
-  u32(bin_bytes);
-  glb.append("BIN\0", 4);
-  glb.append(bin_bytes, '\0');
-  return glb;
-}
-
 // Request handling never holds an I/O thread: while four clients wait for previews of a job with
 // long shots and a 200 MB scene arrives and is checked, /healthz answers each time within 100 ms.
 TEST(Server, HealthzAnswersWhilePreviewsWaitAndALargeSceneIsChecked) {
@@ -699,7 +672,7 @@ TEST(Server, HealthzAnswersWhilePreviewsWaitAndALargeSceneIsChecked) {
 
   std::atomic<bool> sent{false}, answered{false};
   Reply large;
-  std::thread poster([&, body = dark_glb_with_padding(200u << 20)]() mutable {
+  std::thread poster([&, body = hemibake::test::dark_glb_with_padding(cornell(), 200u << 20)]() mutable {
     try {
       net::io_context io;
       beast::tcp_stream stream(io);
