@@ -20,6 +20,9 @@ namespace http = beast::http;
 namespace net = boost::asio;
 using tcp = net::ip::tcp;
 
+// Beast reads at most this much per read, and only as much as its buffer has room for.
+constexpr size_t kReadChunk = 64 * 1024;
+
 std::chrono::steady_clock::duration seconds(double s) {
   return std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(s));
 }
@@ -36,7 +39,17 @@ class Session : public std::enable_shared_from_this<Session> {
     head_ = false;
     parser_.emplace();
     parser_->body_limit(options_.max_body_bytes);
-    stream_.expires_after(seconds(options_.read_timeout));
+    stream_.expires_after(seconds(options_.read_timeout));  // for the header and the body together
+    http::async_read_header(stream_, buffer_, *parser_, [self = shared_from_this()](beast::error_code ec, size_t) { self->on_header(ec); });
+  }
+
+  void on_header(beast::error_code header_ec) {
+    if (header_ec || parser_->is_done()) return on_read(header_ec);
+    // A large body is read 64 KB at a time, not in the few hundred bytes the buffer had room for
+    // after the header: for a 200 MB scene, 3 200 reads (and wake-ups of an I/O thread) instead of
+    // 400 000. Small bodies leave an idle connection's buffer small.
+    const auto length = parser_->content_length();
+    if (!length || *length > kReadChunk / 4) buffer_.reserve(kReadChunk);
     http::async_read(stream_, buffer_, *parser_, [self = shared_from_this()](beast::error_code ec, size_t) { self->on_read(ec); });
   }
 
