@@ -774,30 +774,30 @@ void Service::handle_async(Request req, Reply reply) {
                      : stopping());
     return;
   }
-  // A preview: taken in by the lookup pool, answered by the job's worker.
+  // The rest reads (or writes) the store, whose lock a large scene's write holds for a while: on the
+  // lookup pool.
+  auto on_lookups = [&](std::function<void()> work) {
+    if (!lookups_->post(std::move(work), [reply] { reply(stopping()); }))
+      reply(running_ ? unavailable("the server has too many requests waiting; retry in a moment", 1) : stopping());
+  };
+  // A preview: taken in there, answered by the job's worker.
   const std::string prefix = "/v1/jobs/", suffix = "/preview";
   if (req.method == "GET" && path.rfind(prefix, 0) == 0 && path.size() > prefix.size() + suffix.size() &&
       path.compare(path.size() - suffix.size(), suffix.size(), suffix) == 0 &&
       path.find('/', prefix.size()) == path.size() - suffix.size()) {
     const std::string id = path.substr(prefix.size(), path.size() - prefix.size() - suffix.size());
-    auto work = [this, req = std::move(req), id, reply] {
+    return on_lookups([this, req = std::move(req), id, reply] {
       try {
         preview(id, reply);
       } catch (const std::exception& e) {
         std::fprintf(stderr, "hemibake-server: %s %s failed: %s\n", req.method.c_str(), req.target.c_str(), e.what());
         reply(Response{500, {}, R"({"error":"internal error"})"});
       }
-    };
-    if (!lookups_->post(std::move(work), [reply] { reply(stopping()); }))
-      reply(running_ ? unavailable("the server has too many requests waiting; retry in a moment", 1) : stopping());
-    return;
+    });
   }
-  // The rest reads (or writes) the store, whose lock a large scene's write holds for a while.
-  auto work = [this, req = std::move(req), path, query = std::move(query), reply] {
+  on_lookups([this, req = std::move(req), path, query = std::move(query), reply] {
     answer(req, reply, [&] { return route(req, path, query); });
-  };
-  if (!lookups_->post(std::move(work), [reply] { reply(stopping()); }))
-    reply(running_ ? unavailable("the server has too many requests waiting; retry in a moment", 1) : stopping());
+  });
 }
 
 Response Service::handle(const Request& request) {
