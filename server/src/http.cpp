@@ -98,8 +98,8 @@ class Session : public std::enable_shared_from_this<Session> {
     // and the next request on this connection is read only after this one's answer is written.
     const std::string what = req.method + " " + req.target;
     try {
-      service_.handle_async(std::move(req), [self = shared_from_this()](Response r) {
-        net::post(self->stream_.get_executor(), [self, r = std::move(r)] { self->send(r); });
+      service_.handle_async(std::move(req), [self = shared_from_this(), strand = tracked()](Response r) {
+        net::post(strand, [self, r = std::move(r)] { self->send(r); });
       });
     } catch (const std::exception& e) {
       std::fprintf(stderr, "hemibake-server: %s failed: %s\n", what.c_str(), e.what());
@@ -136,10 +136,14 @@ class Session : public std::enable_shared_from_this<Session> {
   }
 
   void read_events(void (Session::*then)(EventBatch)) {
-    service_.events_async(job_, last_, [self = shared_from_this(), then](EventBatch b) {
-      net::post(self->stream_.get_executor(), [self, then, b = std::move(b)]() mutable { ((*self).*then)(std::move(b)); });
+    service_.events_async(job_, last_, [self = shared_from_this(), then, strand = tracked()](EventBatch b) {
+      net::post(strand, [self, then, b = std::move(b)]() mutable { ((*self).*then)(std::move(b)); });
     });
   }
+
+  // This session's strand, counted as work of the io_context while the copy lives: an answer the
+  // service still owes keeps the I/O threads running (at a stop, until the service has answered).
+  net::any_io_executor tracked() { return net::prefer(stream_.get_executor(), net::execution::outstanding_work.tracked); }
 
   void on_first_events(EventBatch batch) {
     if (batch.status == 404) {

@@ -417,6 +417,38 @@ TEST(Server, SigtermRequeuesTheRunningJob) {
   EXPECT_EQ(done["attempts"].get<int>(), 2);
 }
 
+// SIGTERM while clients wait for previews: each gets an answer (503 to ask again, or the preview if
+// a shot ended first), not a dropped connection.
+TEST(Server, SigtermAnswersWaitingPreviews) {
+  ServerProcess server(temp_dir("term-previews"), {"--workers", "1"});
+  // 2048² hemicubes: shots of seconds, so the previews are still waiting when the signal comes.
+  const Reply posted = request(server.port(), http::verb::post, "/v1/jobs?resolution=2048&reuse=false&convergence=0.00001", cornell(), kGltf);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = posted.js()["id"];
+  for (int i = 0; i < 200 && request(server.port(), http::verb::get, "/v1/jobs/" + id).js()["state"] != "running"; ++i)
+    std::this_thread::sleep_for(20ms);
+  std::vector<int> statuses(3, 0);
+  std::vector<std::thread> waiting;
+  for (size_t c = 0; c < statuses.size(); ++c) {
+    waiting.emplace_back([&, c] {
+      try {
+        statuses[c] = request(server.port(), http::verb::get, "/v1/jobs/" + id + "/preview").status;
+      } catch (const std::exception&) {
+        statuses[c] = -1;
+      }
+    });
+  }
+  std::this_thread::sleep_for(300ms);
+  server.stop(SIGTERM);
+  for (auto& t : waiting) t.join();
+  int stopped = 0;
+  for (int s : statuses) {
+    EXPECT_TRUE(s == 503 || s == 200) << s;
+    stopped += s == 503;
+  }
+  EXPECT_GE(stopped, 1);
+}
+
 // The hemibake command against the server: bake --server submits, follows and downloads; the
 // other subcommands report the server's errors with a non-zero exit status.
 TEST(Client, BakesOnTheServerAndReportsErrors) {
