@@ -26,7 +26,8 @@ Pool::~Pool() { stop(); }
 bool Pool::post(std::function<void()> work, std::function<void()> dropped) {
   {
     std::lock_guard lock(mutex_);
-    if (stopping_ || tasks_.size() >= max_waiting_) return false;
+    // A task an idle thread is about to take does not wait.
+    if (stopping_ || tasks_.size() >= max_waiting_ + idle_) return false;
     tasks_.push_back({std::move(work), std::move(dropped)});
   }
   ready_.notify_one();
@@ -35,7 +36,7 @@ bool Pool::post(std::function<void()> work, std::function<void()> dropped) {
 
 size_t Pool::waiting() {
   std::lock_guard lock(mutex_);
-  return tasks_.size();
+  return tasks_.size() > idle_ ? tasks_.size() - idle_ : 0;
 }
 
 void Pool::stop() {
@@ -62,7 +63,9 @@ void Pool::loop() {
     Task task;
     {
       std::unique_lock lock(mutex_);
+      ++idle_;
       ready_.wait(lock, [&] { return stopping_ || !tasks_.empty(); });
+      --idle_;
       if (tasks_.empty()) return;  // stopping, and nothing left that was taken before the stop
       task = std::move(tasks_.front());
       tasks_.pop_front();

@@ -32,7 +32,7 @@ class Pool {
   Pool& operator=(const Pool&) = delete;
 
   /// Runs `work` on a pool thread. Returns false, keeping neither function, when `max_waiting`
-  /// tasks wait already or the pool has stopped. A task the pool stops before it began gets
+  /// tasks wait for a busy thread already or the pool has stopped. A task the pool stops before it began gets
   /// `dropped` called instead (on the stopping thread). Neither may throw past the pool: an
   /// exception is logged and the thread goes on.
   bool post(std::function<void()> work, std::function<void()> dropped);
@@ -53,6 +53,7 @@ class Pool {
   std::mutex mutex_;
   std::condition_variable ready_;
   std::deque<Task> tasks_;
+  size_t idle_ = 0;  // threads waiting for a task
   bool stopping_ = false;
   std::vector<std::thread> threads_;
 };
