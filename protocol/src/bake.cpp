@@ -72,7 +72,7 @@ Solution solve_hemicube(const solver::Scene& scene, const JobSpec& spec, const B
         if (document != nullptr && hooks.preview && hooks.preview_wanted && hooks.preview_wanted()) {
           // The current state with the ambient term, so that it is displayable.
           auto written = write_baked_glb(*document, solver.mesh(true), spec.method, params, solver.stats(), spec.write);
-          hooks.preview(std::move(written.glb));
+          hooks.preview(std::move(written.glb), written.error);
         }
         tell(hooks, shooting_progress(p, params.convergence));
       },

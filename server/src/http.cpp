@@ -1,6 +1,7 @@
 #include "hemibake/server/http.h"
 
 #include <boost/asio/dispatch.hpp>
+#include <boost/asio/post.hpp>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/steady_timer.hpp>
 #include <boost/asio/strand.hpp>
@@ -19,6 +20,9 @@ namespace http = beast::http;
 namespace net = boost::asio;
 using tcp = net::ip::tcp;
 
+// Beast reads at most this much per read, and only as much as its buffer has room for.
+constexpr size_t kReadChunk = 64 * 1024;
+
 std::chrono::steady_clock::duration seconds(double s) {
   return std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(s));
 }
@@ -35,7 +39,17 @@ class Session : public std::enable_shared_from_this<Session> {
     head_ = false;
     parser_.emplace();
     parser_->body_limit(options_.max_body_bytes);
-    stream_.expires_after(seconds(options_.read_timeout));
+    stream_.expires_after(seconds(options_.read_timeout));  // for the header and the body together
+    http::async_read_header(stream_, buffer_, *parser_, [self = shared_from_this()](beast::error_code ec, size_t) { self->on_header(ec); });
+  }
+
+  void on_header(beast::error_code header_ec) {
+    if (header_ec || parser_->is_done()) return on_read(header_ec);
+    // A large body is read 64 KB at a time, not in the few hundred bytes the buffer had room for
+    // after the header: for a 200 MB scene, 3 200 reads (and wake-ups of an I/O thread) instead of
+    // 400 000. Small bodies leave an idle connection's buffer small.
+    const auto length = parser_->content_length();
+    if (!length || *length > kReadChunk / 4) buffer_.reserve(kReadChunk);
     http::async_read(stream_, buffer_, *parser_, [self = shared_from_this()](beast::error_code ec, size_t) { self->on_read(ec); });
   }
 
@@ -79,14 +93,18 @@ class Session : public std::enable_shared_from_this<Session> {
     req.body = std::move(msg.body());
     const std::string job = head_ ? std::string() : Service::events_job(req);
     if (!job.empty()) return start_events(req, job);
-    Response r;
+    // The service answers when it can (a scene checked, a preview made between two shots), from
+    // whichever thread; the answer comes back to this session's strand. No I/O thread waits for it,
+    // and the next request on this connection is read only after this one's answer is written.
+    const std::string what = req.method + " " + req.target;
     try {
-      r = service_.handle(req);
+      service_.handle_async(std::move(req), [self = shared_from_this(), strand = tracked()](Response r) {
+        net::post(strand, [self, r = std::move(r)] { self->send(r); });
+      });
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "hemibake-server: %s %s failed: %s\n", req.method.c_str(), req.target.c_str(), e.what());
-      r = Response{500, {}, R"({"error":"internal error"})"};
+      std::fprintf(stderr, "hemibake-server: %s failed: %s\n", what.c_str(), e.what());
+      send(Response{500, {}, R"({"error":"internal error"})"});
     }
-    send(r);
   }
 
   void send(const Response& r) {
@@ -108,28 +126,55 @@ class Session : public std::enable_shared_from_this<Session> {
 
   // Server-Sent Events: every event since Last-Event-ID, then new ones as they come, a heartbeat
   // comment when idle, and the end of the stream after the job's final event.
+  // The store is read on the service's lookup pool, never on an I/O thread: each read's answer
+  // comes back to this session's strand.
   void start_events(const Request& req, const std::string& id) {
     if (auto denied = service_.check_auth(req)) return send(*denied);
-    const auto rec = service_.store().get(id);
-    if (!rec) {
+    job_ = id;
+    if (auto it = req.headers.find("last-event-id"); it != req.headers.end()) last_ = std::strtoull(it->second.c_str(), nullptr, 10);
+    read_events(&Session::on_first_events);
+  }
+
+  void read_events(void (Session::*then)(EventBatch)) {
+    service_.events_async(job_, last_, [self = shared_from_this(), then, strand = tracked()](EventBatch b) {
+      net::post(strand, [self, then, b = std::move(b)]() mutable { ((*self).*then)(std::move(b)); });
+    });
+  }
+
+  // This session's strand, counted as work of the io_context while the copy lives: an answer the
+  // service still owes keeps the I/O threads running (at a stop, until the service has answered).
+  net::any_io_executor tracked() { return net::prefer(stream_.get_executor(), net::execution::outstanding_work.tracked); }
+
+  void on_first_events(EventBatch batch) {
+    if (batch.status == 404) {
       keep_alive_ = true;
       return send(Response{404, {}, R"({"error":"no such job"})"});
     }
+    if (batch.status != 200) return send(Response{503, {{"Retry-After", "5"}}, R"({"error":"the server is busy; retry later"})"});
     if (streams_.fetch_add(1) >= options_.max_streams) {
       streams_.fetch_sub(1);
       Response r{503, {{"Retry-After", "5"}}, R"({"error":"too many event streams; retry later"})"};
       return send(r);
     }
     counted_ = true;
-    job_ = id;
-    if (auto it = req.headers.find("last-event-id"); it != req.headers.end()) last_ = std::strtoull(it->second.c_str(), nullptr, 10);
     service_.count_response(200);
     out_ = std::make_shared<std::string>(
         "HTTP/1.1 200 OK\r\nServer: hemibake\r\nContent-Type: text/event-stream\r\nCache-Control: no-cache\r\n"
         "Connection: close\r\nX-Accel-Buffering: no\r\n\r\n");
+    append(*out_, batch);
     idle_ = std::chrono::steady_clock::now();
     watch_peer();
     write_events();
+  }
+
+  // The batch's events as SSE, after `out`; notes the last one sent and the end of the stream.
+  void append(std::string& out, const EventBatch& batch) {
+    for (const auto& e : batch.events) {
+      out += "id: " + std::to_string(e.seq) + "\nevent: " + e.type + "\ndata: " + e.data + "\n\n";
+      last_ = e.seq;
+    }
+    // No such job any more (expired): nothing will follow either.
+    if (batch.end || batch.status == 404) done_ = true;
   }
 
   // The client says nothing during a stream, so the end of its input means it went away: end the
@@ -161,16 +206,14 @@ class Session : public std::enable_shared_from_this<Session> {
 
   void poll_events() {
     if (gone_) return close();
+    read_events(&Session::on_events);
+  }
+
+  // A busy server's batch (503) has nothing: the stream asks again after the usual pause.
+  void on_events(EventBatch batch) {
+    if (gone_) return close();
     auto out = std::make_shared<std::string>();
-    const auto events = service_.store().events_after(job_id(), last_, 100);
-    for (const auto& e : events) {
-      *out += "id: " + std::to_string(e.seq) + "\nevent: " + e.type + "\ndata: " + e.data + "\n\n";
-      last_ = e.seq;
-    }
-    const auto rec = service_.store().get(job_id());
-    if (!rec || (finished(rec->state) && events.empty() && service_.store().events_after(job_id(), last_, 1).empty())) {
-      done_ = true;
-    }
+    append(*out, batch);
     const auto now = std::chrono::steady_clock::now();
     if (out->empty() && !done_) {
       if (now - idle_ < seconds(options_.heartbeat)) {
@@ -184,8 +227,6 @@ class Session : public std::enable_shared_from_this<Session> {
     out_ = out;
     write_events();
   }
-
-  const std::string& job_id() const { return job_; }
 
   void close() {
     if (counted_) {

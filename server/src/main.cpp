@@ -6,6 +6,7 @@
 #include <boost/asio/signal_set.hpp>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -29,6 +30,8 @@ void usage(FILE* out) {
       "  --max-body BYTES        largest scene accepted (default 268435456)\n"
       "  --max-queue N           queued jobs before 429 (default 100)\n"
       "  --max-streams N         concurrent event streams (default 64)\n"
+      "  --check-threads N       threads that load and check submitted scenes (default: half the cores)\n"
+      "  --max-checks N          submitted scenes waiting for a check thread before 503 (default 4)\n"
       "  --job-seconds S         time budget per job (default 3600)\n"
       "  --max-elements N        element budget per job (default 2000000)\n"
       "  --max-shot-cache-mb N   memory per job for replayed shots (default 256; caps the job's shot_cache_mb)\n"
@@ -52,7 +55,8 @@ int main(int argc, char** argv) {
       return 0;
     }
     static const char* const kOptions[] = {"--listen", "--data", "--workers", "--solver-threads", "--tokens", "--max-body",
-                                           "--max-queue", "--max-streams", "--job-seconds", "--max-elements",
+                                           "--max-queue", "--max-streams", "--check-threads", "--max-checks",
+                                           "--job-seconds", "--max-elements",
                                            "--max-shot-cache-mb", "--max-triangles", "--max-attempts", "--expire-hours"};
     if (std::find(std::begin(kOptions), std::end(kOptions), opt) == std::end(kOptions)) {
       std::fprintf(stderr, "hemibake-server: unknown option '%s' (try --help)\n", opt.c_str());
@@ -101,6 +105,8 @@ int main(int argc, char** argv) {
     else if (opt == "--max-body") so.max_body_bytes = ho.max_body_bytes = static_cast<uint64_t>(need_count(1e15));
     else if (opt == "--max-queue") so.max_queue = static_cast<size_t>(need_count(1e9));
     else if (opt == "--max-streams") ho.max_streams = static_cast<size_t>(need_count(1e6));
+    else if (opt == "--check-threads") so.check_threads = static_cast<unsigned>(need_count(1024));
+    else if (opt == "--max-checks") so.max_checks = static_cast<size_t>(need_count(1e6));
     else if (opt == "--job-seconds") so.job_seconds = need_num();
     else if (opt == "--max-elements") so.max_elements = static_cast<uint64_t>(need_count(1e12));
     else if (opt == "--max-shot-cache-mb") so.max_shot_cache_mb = static_cast<uint32_t>(std::min(need_num(), 1048576.0));
@@ -153,17 +159,24 @@ int main(int argc, char** argv) {
   // SIGTERM/SIGINT: stop accepting, stop the workers (running jobs go back to the queue), let the
   // responses in flight finish, then leave.
   boost::asio::signal_set signals(io, SIGINT, SIGTERM);
+  std::thread stopper;
   signals.async_wait([&](const boost::system::error_code&, int) {
     std::printf("hemibake-server: shutting down\n");
     std::fflush(stdout);
     http->stop();
-    service->stop();
-    io.stop();
+    // Stopping the service waits for each bake to reach the end of its shot: not on an I/O thread,
+    // which meanwhile writes the 503s the stop gives to what was waiting (previews, queued checks).
+    stopper = std::thread([&] {
+      service->stop();
+      std::this_thread::sleep_for(std::chrono::milliseconds(300));  // for those last answers
+      io.stop();
+    });
   });
   const unsigned n = std::max(2u, std::thread::hardware_concurrency());
   std::vector<std::thread> threads;
   for (unsigned i = 1; i < n; ++i) threads.emplace_back([&io] { io.run(); });
   io.run();
   for (auto& t : threads) t.join();
+  if (stopper.joinable()) stopper.join();
   return 0;
 }

@@ -5,6 +5,7 @@
 #include "hemibake/protocol/job.h"
 #include "hemibake/solver/solver.h"
 #include "openapi.h"
+#include "pool.h"
 
 #include <nlohmann/json.hpp>
 #include <openssl/evp.h>
@@ -12,7 +13,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
+#include <future>
 #include <set>
 #include <sstream>
 
@@ -39,6 +42,55 @@ Response error(int status, const std::string& message) {
   r.status = status;
   r.body = json{{"error", message}}.dump();
   return r;
+}
+
+// 503: the request was not begun (a pool is full, or the server is stopping); it may be sent again.
+Response unavailable(const std::string& message, int retry_after) {
+  Response r = error(503, message);
+  r.headers.emplace_back("Retry-After", std::to_string(retry_after));
+  return r;
+}
+
+Response stopping() { return unavailable("the server is stopping; retry in a moment", 5); }
+
+// How long a preview waits for the worker's next shot, and for a claimed job to be registered.
+constexpr auto kPreviewWait = std::chrono::seconds(30);
+constexpr auto kRegisterWait = std::chrono::seconds(5);
+// The lookup pool: store reads and small writes. Its threads mostly wait for the store's lock, so
+// a few are enough; its queue holds requests, not scenes, so it may be long.
+constexpr unsigned kLookupThreads = 2;
+constexpr size_t kMaxLookups = 1024;
+
+Response preview_missed() {
+  Response r = error(409, "the job finished (or is between long shots) before a preview was made; ask again or fetch the result");
+  r.headers.emplace_back("Retry-After", "1");
+  return r;
+}
+
+Response no_preview_in_phase() {
+  Response r = error(409, "no preview in this phase: hr has no solution until it has linked and gathered, and a reference job "
+                          "has none while it traces paths; follow its events and fetch the result");
+  r.headers.emplace_back("Retry-After", "5");
+  return r;
+}
+
+Response not_running(const std::optional<JobRecord>& rec) {
+  Response r = error(409, std::string("the job is ") + (rec ? to_string(rec->state) : "unknown") +
+                              "; previews exist while it runs (a finished job has its result)");
+  if (rec && rec->state == JobState::kQueued) r.headers.emplace_back("Retry-After", "5");
+  return r;
+}
+
+// Calls `make` and replies with its response; the unexpected becomes 500 and a log line.
+void answer(const Request& req, const Reply& reply, const std::function<Response()>& make) {
+  Response r;
+  try {
+    r = make();
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "hemibake-server: %s %s failed: %s\n", req.method.c_str(), req.target.c_str(), e.what());
+    r = Response{500, {}, R"({"error":"internal error"})"};
+  }
+  reply(std::move(r));
 }
 
 Response not_allowed(const std::string& allow) {
@@ -144,6 +196,8 @@ std::map<std::string, std::string> parse_query(const std::string& query) {
   return out;
 }
 
+Service::Service(const ServiceOptions& o) : options_(o) {}
+
 std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::string& err) {
   std::unique_ptr<Service> s(new Service(options));
   s->store_ = Store::open(options.data_dir, err);
@@ -151,7 +205,13 @@ std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::stri
   // An accepted job is never lost: what a crash left running runs again (up to max_attempts).
   s->store_->recover(options.max_attempts);
   s->store_->expire(options.expire_seconds);
+  // Checking a scene is CPU work of up to seconds: half the cores, leaving the rest to the bakes.
+  const unsigned checkers = options.check_threads != 0 ? options.check_threads
+                                                       : std::max(1u, std::thread::hardware_concurrency() / 2);
+  s->checks_ = std::make_unique<Pool>("check", checkers, options.max_checks, kBackgroundNice);
+  s->lookups_ = std::make_unique<Pool>("lookup", kLookupThreads, kMaxLookups);
   s->running_ = true;
+  s->clock_ = std::thread([p = s.get()] { p->clock_loop(); });
   const unsigned n = options.workers != 0 ? options.workers : std::max(1u, std::thread::hardware_concurrency());
   for (unsigned i = 0; i < n; ++i) s->workers_.emplace_back([p = s.get()] { p->worker_loop(); });
   return s;
@@ -160,15 +220,69 @@ std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::stri
 Service::~Service() { stop(); }
 
 void Service::stop() {
+  std::vector<Reply> waiting;
   {
     std::lock_guard lock(mutex_);
     if (!running_) return;
     running_ = false;
-    for (auto& [id, a] : active_) a.token->cancel();
+    for (auto& [id, a] : active_) {
+      a.token->cancel();
+      for (auto& w : a.waits) waiting.push_back(std::move(w.reply));
+      a.waits.clear();
+    }
+    for (auto& [id, waits] : unregistered_)
+      for (auto& w : waits) waiting.push_back(std::move(w.reply));
+    unregistered_.clear();
   }
+  for (auto& reply : waiting) reply(stopping());
   wake_.notify_all();
+  clock_wake_.notify_all();
+  if (clock_.joinable()) clock_.join();
+  // Requests not begun are answered 503; those being answered finish (a preview asked for now is
+  // refused, as running_ is false).
+  checks_->stop();
+  lookups_->stop();
   for (auto& w : workers_) w.join();
   workers_.clear();
+}
+
+// Answers the previews whose time is up: one thread for all of them, asleep until the earliest.
+void Service::clock_loop() {
+  std::unique_lock lock(mutex_);
+  while (running_) {
+    const auto now = std::chrono::steady_clock::now();
+    auto next = std::chrono::steady_clock::time_point::max();
+    std::vector<std::pair<Reply, Response>> due;
+    auto sweep = [&](std::vector<PreviewWait>& waits, const std::function<Response()>& timeout) {
+      for (auto it = waits.begin(); it != waits.end();) {
+        if (it->until <= now) {
+          due.emplace_back(std::move(it->reply), timeout());
+          it = waits.erase(it);
+        } else {
+          next = std::min(next, it->until);
+          ++it;
+        }
+      }
+    };
+    for (auto& [id, a] : active_) sweep(a.waits, preview_missed);
+    // Not registered in time: the job is taken to have ended (its state was read as running).
+    for (auto it = unregistered_.begin(); it != unregistered_.end();) {
+      sweep(it->second, [] {
+        JobRecord running;
+        running.state = JobState::kRunning;
+        return not_running(running);
+      });
+      it = it->second.empty() ? unregistered_.erase(it) : std::next(it);
+    }
+    if (!due.empty()) {
+      lock.unlock();
+      for (auto& [reply, response] : due) reply(std::move(response));
+      lock.lock();
+      continue;
+    }
+    if (next == std::chrono::steady_clock::time_point::max()) clock_wake_.wait(lock);
+    else clock_wake_.wait_until(lock, next);
+  }
 }
 
 void Service::count_response(int status) {
@@ -177,6 +291,7 @@ void Service::count_response(int status) {
 }
 
 void Service::worker_loop() {
+  lower_thread_priority(kBackgroundNice);  // a bake never delays a request's answer
   while (running_) {
     std::string id, scene, params;
     if (!store_->claim(id, scene, params)) {
@@ -196,25 +311,14 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
   const auto t0 = std::chrono::steady_clock::now();
   // Registered from the start: a cancellation or a preview request may come while it loads.
   solver::CancelToken token;
-  {
-    std::lock_guard lock(mutex_);
-    if (!running_) {
-      store_->requeue(id);
-      return;
-    }
-    active_[id].token = &token;
+  if (!register_job(id, &token)) {
+    store_->requeue(id);
+    return;
   }
-  preview_ready_.notify_all();  // a preview asked for between the claim and this registration
   struct Unregister {
     Service* s;
     const std::string& id;
-    ~Unregister() {
-      {
-        std::lock_guard lock(s->mutex_);
-        s->active_.erase(id);
-      }
-      s->preview_ready_.notify_all();
-    }
+    ~Unregister() { s->unregister_job(id); }
   } unregister{this, id};
   if (const auto rec = store_->get(id); rec && rec->state == JobState::kCancelled) {
     // Cancelled between the claim and the registration, when no token could be reached.
@@ -261,26 +365,9 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
     store_->set_progress(id, text);
     store_->add_event(id, "progress", text);
   };
-  hooks.previews_possible = [&](bool on) {
-    std::lock_guard lock(mutex_);
-    if (auto it = active_.find(id); it != active_.end()) it->second.previews = on;
-    preview_ready_.notify_all();
-  };
-  hooks.preview_wanted = [&] {
-    std::lock_guard lock(mutex_);
-    auto it = active_.find(id);
-    if (it == active_.end() || !it->second.preview_wanted) return false;
-    it->second.preview_wanted = false;
-    return true;
-  };
-  hooks.preview = [&](std::vector<uint8_t> glb) {
-    std::lock_guard lock(mutex_);
-    if (auto it = active_.find(id); it != active_.end()) {
-      it->second.preview.assign(glb.begin(), glb.end());
-      ++it->second.preview_serial;
-    }
-    preview_ready_.notify_all();
-  };
+  hooks.previews_possible = [&](bool on) { set_previews(id, on); };
+  hooks.preview_wanted = [&] { return take_preview_request(id); };
+  hooks.preview = [&](std::vector<uint8_t> glb, const std::string& error) { give_preview(id, glb, error); };
   auto baked = protocol::bake(*loaded.document, spec, hooks);
   const solver::Stats& st = baked.solution.stats;
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -452,6 +539,17 @@ Response Service::metrics() {
     m << "hemibake_jobs{state=\"" << to_string(s) << "\"} " << store_->count(s) << "\n";
   m << "# HELP hemibake_queue_depth Jobs waiting for a worker.\n# TYPE hemibake_queue_depth gauge\n";
   m << "hemibake_queue_depth " << store_->count(JobState::kQueued) << "\n";
+  m << "# HELP hemibake_checks_waiting Submitted scenes waiting for a check thread.\n# TYPE hemibake_checks_waiting gauge\n";
+  m << "hemibake_checks_waiting " << checks_->waiting() << "\n";
+  {
+    std::lock_guard lock(mutex_);
+    size_t previews = 0;
+    for (const auto& [id, a] : active_) previews += a.waits.size();
+    for (const auto& [id, waits] : unregistered_) previews += waits.size();
+    m << "# HELP hemibake_previews_waiting Preview requests waiting for their job's next shot.\n"
+         "# TYPE hemibake_previews_waiting gauge\n";
+    m << "hemibake_previews_waiting " << previews << "\n";
+  }
   std::lock_guard lock(metrics_mutex_);
   m << "# HELP hemibake_bake_seconds Time to bake a job.\n# TYPE hemibake_bake_seconds histogram\n";
   uint64_t cum = 0;
@@ -473,72 +571,202 @@ Response Service::metrics() {
   return r;
 }
 
-// The running job's current state as GLB, made by its worker between two shots.
-Response Service::preview(const std::string& id) {
+// The running job's current state as GLB, made by its worker between two shots. Nothing waits
+// here: the request becomes an entry that the worker completes after its next shot, or the clock
+// when the time is up.
+void Service::preview(const std::string& id, const Reply& reply) {
   const auto state = store_->get(id);
+  if (!state) return reply(error(404, "no job " + id));
   std::unique_lock lock(mutex_);
+  if (!running_) {
+    lock.unlock();
+    return reply(stopping());
+  }
+  const auto now = std::chrono::steady_clock::now();
   auto it = active_.find(id);
-  if (it == active_.end() && state && state->state == JobState::kRunning) {
-    // Claimed by a worker that has not registered it yet: wait a moment for it.
-    preview_ready_.wait_for(lock, std::chrono::seconds(5), [&] { return active_.count(id) != 0; });
-    it = active_.find(id);
+  if (it == active_.end() && state->state == JobState::kRunning) {
+    // Claimed by a worker that has not registered it yet: it waits a moment for that.
+    unregistered_[id].push_back({now + kRegisterWait, reply});
+    lock.unlock();
+    clock_wake_.notify_one();
+    return;
   }
   if (it != active_.end() && !it->second.previews) {
     lock.unlock();
-    Response r = error(409, "no preview in this phase: hr has no solution until it has linked and gathered, and a reference job "
-                            "has none while it traces paths; follow its events and fetch the result");
-    r.headers.emplace_back("Retry-After", "5");
-    return r;
+    return reply(no_preview_in_phase());
   }
-  if (it == active_.end() || !state || state->state != JobState::kRunning) {
+  if (it == active_.end() || state->state != JobState::kRunning) {
     lock.unlock();
-    const auto& rec = state;
-    Response r = error(409, std::string("the job is ") + (rec ? to_string(rec->state) : "unknown") +
-                                "; previews exist while it runs (a finished job has its result)");
-    if (rec && rec->state == JobState::kQueued) r.headers.emplace_back("Retry-After", "5");
-    return r;
+    return reply(not_running(state));
   }
-  const uint64_t serial = it->second.preview_serial;
+  it->second.waits.push_back({now + kPreviewWait, reply});
   it->second.preview_wanted = true;
-  const bool made = preview_ready_.wait_for(lock, std::chrono::seconds(30), [&] {
-    auto a = active_.find(id);
-    return a == active_.end() || a->second.preview_serial != serial || !a->second.previews;
-  });
-  auto a = active_.find(id);
-  if (!made || a == active_.end() || a->second.preview.empty()) {
-    lock.unlock();
-    Response r = error(409, "the job finished (or is between long shots) before a preview was made; ask again or fetch the result");
-    r.headers.emplace_back("Retry-After", "1");
-    return r;
-  }
-  Response r;
-  r.body = a->second.preview;
-  r.content_type = "model/gltf-binary";
-  r.headers.emplace_back("Cache-Control", "no-store");
-  return r;
+  lock.unlock();
+  clock_wake_.notify_one();
 }
 
-Response Service::handle(const Request& req) {
-  if (auto denied = check_auth(req)) return *denied;
-  const size_t q = req.target.find('?');
-  const std::string path = req.target.substr(0, q);
-  const std::string query = q == std::string::npos ? "" : req.target.substr(q + 1);
+bool Service::register_job(const std::string& id, solver::CancelToken* token) {
+  {
+    std::lock_guard lock(mutex_);
+    if (!running_) return false;
+    Active& a = active_[id];
+    a.token = token;
+    // Previews asked for between the claim and now: from here on they wait for a shot.
+    if (auto u = unregistered_.find(id); u != unregistered_.end()) {
+      const auto until = std::chrono::steady_clock::now() + kPreviewWait;
+      for (auto& w : u->second) a.waits.push_back({until, std::move(w.reply)});
+      unregistered_.erase(u);
+      a.preview_wanted = !a.waits.empty();
+    }
+  }
+  clock_wake_.notify_one();
+  return true;
+}
+
+void Service::unregister_job(const std::string& id) {
+  std::vector<PreviewWait> waits;
+  {
+    std::lock_guard lock(mutex_);
+    if (auto it = active_.find(id); it != active_.end()) {
+      waits = std::move(it->second.waits);
+      active_.erase(it);
+    }
+  }
+  for (auto& w : waits) w.reply(preview_missed());
+}
+
+// Off while no displayable solution exists (hr, reference tracing): who waits is told so.
+void Service::set_previews(const std::string& id, bool on) {
+  std::vector<PreviewWait> waits;
+  {
+    std::lock_guard lock(mutex_);
+    auto it = active_.find(id);
+    if (it == active_.end()) return;
+    it->second.previews = on;
+    if (!on) {
+      waits = std::move(it->second.waits);
+      it->second.waits.clear();
+      it->second.preview_wanted = false;
+    }
+  }
+  for (auto& w : waits) w.reply(no_preview_in_phase());
+}
+
+bool Service::take_preview_request(const std::string& id) {
+  std::lock_guard lock(mutex_);
+  auto it = active_.find(id);
+  if (it == active_.end() || !it->second.preview_wanted) return false;
+  it->second.preview_wanted = false;
+  return true;
+}
+
+// Every preview waiting gets this one, also those asked for while it was written (it is at most
+// one shot older than they are).
+void Service::give_preview(const std::string& id, const std::vector<uint8_t>& glb, const std::string& failure) {
+  std::vector<PreviewWait> waits;
+  {
+    std::lock_guard lock(mutex_);
+    auto it = active_.find(id);
+    if (it == active_.end()) return;
+    waits = std::move(it->second.waits);
+    it->second.waits.clear();
+    it->second.preview_wanted = false;
+  }
+  if (waits.empty()) return;
+  Response r;
+  if (glb.empty()) {
+    std::fprintf(stderr, "hemibake-server: the preview of %s could not be written: %s\n", id.c_str(), failure.c_str());
+    r = error(500, "the preview could not be written: " + failure);
+  } else {
+    r.body.assign(glb.begin(), glb.end());
+    r.content_type = "model/gltf-binary";
+    r.headers.emplace_back("Cache-Control", "no-store");
+  }
+  for (auto& w : waits) w.reply(r);
+}
+
+// What never waits, answered on the caller's (I/O) thread; nullopt for the rest.
+std::optional<Response> Service::answer_at_once(const Request& req, const std::string& path) const {
+  if (auto denied = check_auth(req)) return denied;
   const bool get = req.method == "GET";
   if ((path == "/healthz" || path == "/readyz" || path == "/metrics" || path == "/openapi.json") && !get) return not_allowed("GET, HEAD");
-  if (path == "/healthz") {
-    Response r;
-    r.body = R"({"status":"ok"})";
-    return r;
-  }
+  if (path == "/healthz") return Response{200, {}, R"({"status":"ok"})"};
   if (path == "/readyz") return running_ ? Response{200, {}, R"({"status":"ready"})"} : error(503, "not ready");
-  if (path == "/metrics") return metrics();
-  if (path == "/openapi.json") {
-    Response r;
-    r.body = kOpenApi;
-    return r;
+  if (path == "/openapi.json") return Response{200, {}, kOpenApi};
+  return std::nullopt;
+}
+
+void Service::handle_async(Request req, Reply reply) {
+  const size_t q = req.target.find('?');
+  const std::string path = req.target.substr(0, q);
+  std::string query = q == std::string::npos ? "" : req.target.substr(q + 1);
+  if (auto now = answer_at_once(req, path)) return reply(std::move(*now));
+  if (path == "/v1/jobs" && req.method == "POST") {
+    // Loading and checking a scene is seconds of CPU for a large one: on the check pool, bounded.
+    const size_t limit = checks_->max_waiting();
+    auto work = [this, req = std::move(req), query = std::move(query), reply] {
+      answer(req, reply, [&] { return submit(req, query); });
+    };
+    if (!checks_->post(std::move(work), [reply] { reply(stopping()); }))
+      reply(running_ ? unavailable("the server has " + std::to_string(limit) + " scenes waiting to be checked; retry in a moment", 5)
+                     : stopping());
+    return;
   }
+  // The rest reads (or writes) the store, whose lock a large scene's write holds for a while: on the
+  // lookup pool.
+  auto on_lookups = [&](std::function<void()> work) {
+    if (!lookups_->post(std::move(work), [reply] { reply(stopping()); }))
+      reply(running_ ? unavailable("the server has too many requests waiting; retry in a moment", 1) : stopping());
+  };
+  // A preview: taken in there, answered by the job's worker.
+  const std::string prefix = "/v1/jobs/", suffix = "/preview";
+  if (req.method == "GET" && path.rfind(prefix, 0) == 0 && path.size() > prefix.size() + suffix.size() &&
+      path.compare(path.size() - suffix.size(), suffix.size(), suffix) == 0 &&
+      path.find('/', prefix.size()) == path.size() - suffix.size()) {
+    const std::string id = path.substr(prefix.size(), path.size() - prefix.size() - suffix.size());
+    return on_lookups([this, req = std::move(req), id, reply] {
+      try {
+        preview(id, reply);
+      } catch (const std::exception& e) {
+        std::fprintf(stderr, "hemibake-server: %s %s failed: %s\n", req.method.c_str(), req.target.c_str(), e.what());
+        reply(Response{500, {}, R"({"error":"internal error"})"});
+      }
+    });
+  }
+  on_lookups([this, req = std::move(req), path, query = std::move(query), reply] {
+    answer(req, reply, [&] { return route(req, path, query); });
+  });
+}
+
+Response Service::handle(const Request& request) {
+  auto done = std::make_shared<std::promise<Response>>();
+  auto answered = done->get_future();
+  handle_async(request, [done](Response r) { done->set_value(std::move(r)); });
+  return answered.get();
+}
+
+void Service::events_async(const std::string& id, uint64_t after, std::function<void(EventBatch)> reply) {
+  auto work = [this, id, after, reply] {
+    EventBatch b;
+    try {
+      b.events = store_->events_after(id, after, 100);
+      const auto rec = store_->get(id);
+      // Finished, and no event came between the read above and the record's: the stream ends.
+      if (!rec) b.status = 404;
+      else b.end = finished(rec->state) && b.events.empty() && store_->events_after(id, after, 1).empty();
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "hemibake-server: reading the events of %s failed: %s\n", id.c_str(), e.what());
+      b = EventBatch{503, {}, false};
+    }
+    reply(std::move(b));
+  };
+  if (!lookups_->post(std::move(work), [reply] { reply(EventBatch{503, {}, false}); })) reply(EventBatch{503, {}, false});
+}
+
+// The requests that read or write the store (not submissions, not previews), on the lookup pool.
+Response Service::route(const Request& req, const std::string& path, const std::string& query) {
+  if (path == "/metrics") return metrics();
   if (path == "/v1/jobs") {
-    if (req.method == "POST") return submit(req, query);
     if (req.method != "GET") return not_allowed("GET, HEAD, POST");
     const auto args = parse_query(query);
     std::optional<JobState> state;
@@ -612,7 +840,6 @@ Response Service::handle(const Request& req) {
       r.headers.emplace_back("Content-Disposition", "attachment; filename=\"" + id + ".glb\"");
       return r;
     }
-    if (sub == "preview" && req.method == "GET") return preview(id);
     if (sub == "result" || sub == "preview" || sub == "events") return not_allowed("GET");  // events: GET is the session's
     return error(404, "no such resource: " + path);
   }

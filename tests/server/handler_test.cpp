@@ -1,14 +1,22 @@
 // The request handler as a function of the request: no sockets, a store in a temporary folder.
 #include "hemibake/server/service.h"
 
+#include "dark_glb.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
 #include <sstream>
 #include <thread>
 #include <unistd.h>
+#include <vector>
 
 namespace hemibake::server {
 namespace {
@@ -150,6 +158,114 @@ TEST(Handler, SecondServiceOnTheSameDataDirectoryIsRefused) {
   f.service.reset();
   error.clear();
   EXPECT_TRUE(Service::start(o, error)) << error;
+}
+
+// Threads of this process.
+size_t thread_count() {
+  size_t n = 0;
+  for ([[maybe_unused]] const auto& e : std::filesystem::directory_iterator("/proc/self/task")) ++n;
+  return n;
+}
+
+// Responses given through handle_async, gathered for a test to wait on.
+struct Answers {
+  std::mutex mutex;
+  std::condition_variable changed;
+  std::vector<Response> got;
+  Reply reply() {
+    return [this](Response r) {
+      std::lock_guard lock(mutex);
+      got.push_back(std::move(r));
+      changed.notify_all();
+    };
+  }
+  bool wait_for(size_t n, std::chrono::seconds limit) {
+    std::unique_lock lock(mutex);
+    return changed.wait_for(lock, limit, [&] { return got.size() >= n; });
+  }
+};
+
+Request get(const std::string& target) {
+  Request r;
+  r.method = "GET";
+  r.target = target;
+  return r;
+}
+
+// A job whose shots take a few tenths of a second each (1024² hemicubes, none replayed), running.
+std::string start_slow_job(Fixture& f) {
+  const Response posted = f.call("POST", "/v1/jobs?resolution=1024&reuse=false&convergence=0.00001", cornell(),
+                                 {{"content-type", "model/gltf+json"}});
+  EXPECT_EQ(posted.status, 202) << posted.body;
+  const std::string id = json::parse(posted.body)["id"];
+  for (int i = 0; i < 200 && json::parse(f.call("GET", "/v1/jobs/" + id).body)["state"] != "running"; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  EXPECT_EQ(json::parse(f.call("GET", "/v1/jobs/" + id).body)["state"], "running");
+  return id;
+}
+
+// Previews asked for wait as entries, not threads: 32 of them add no thread, and the worker's next
+// shot answers them all with a GLB.
+TEST(Handler, WaitingPreviewsHoldNoThreadAndOneShotAnswersThemAll) {
+  Fixture f;
+  const std::string id = start_slow_job(f);
+  const size_t before = thread_count();
+  Answers answers;
+  for (int i = 0; i < 32; ++i) f.service->handle_async(get("/v1/jobs/" + id + "/preview"), answers.reply());
+  EXPECT_EQ(thread_count(), before);
+  ASSERT_TRUE(answers.wait_for(32, std::chrono::seconds(60)));
+  for (const Response& r : answers.got) {
+    EXPECT_EQ(r.status, 200) << r.body;
+    EXPECT_EQ(r.body.substr(0, 4), "glTF");
+  }
+  f.call("DELETE", "/v1/jobs/" + id);
+}
+
+// Stopping the service answers every preview still waiting (503, to be asked again), and a
+// request after the stop is answered at once.
+TEST(Handler, StopAnswersWaitingPreviews) {
+  Fixture f;
+  const std::string id = start_slow_job(f);
+  Answers answers;
+  for (int i = 0; i < 8; ++i) f.service->handle_async(get("/v1/jobs/" + id + "/preview"), answers.reply());
+  f.service->stop();
+  ASSERT_TRUE(answers.wait_for(8, std::chrono::seconds(10)));
+  for (const Response& r : answers.got) EXPECT_TRUE(r.status == 503 || r.status == 200) << r.status << " " << r.body;
+  const Response after = f.call("GET", "/v1/jobs/" + id + "/preview");
+  EXPECT_EQ(after.status, 503) << after.body;
+}
+
+// Scenes wait for a check thread in a bounded queue: past it, 503 with Retry-After at once.
+TEST(Handler, FullCheckQueueAnswers503WithRetryAfter) {
+  ServiceOptions o;
+  o.check_threads = 1;
+  o.max_checks = 1;
+  Fixture f(o);
+  const std::string scene = test::dark_glb_with_padding(cornell(), 32u << 20);
+  Answers answers;
+  for (int i = 0; i < 4; ++i) {
+    Request r;
+    r.method = "POST";
+    r.target = "/v1/jobs";
+    r.headers = {{"content-type", "model/gltf-binary"}};
+    r.body = scene;
+    f.service->handle_async(std::move(r), answers.reply());
+  }
+  ASSERT_TRUE(answers.wait_for(4, std::chrono::seconds(120)));
+  int checked = 0, refused = 0;
+  for (const Response& r : answers.got) {
+    if (r.status == 422) ++checked;
+    if (r.status == 503) {
+      ++refused;
+      EXPECT_NE(json::parse(r.body)["error"].get<std::string>().find("waiting to be checked"), std::string::npos) << r.body;
+      ASSERT_EQ(r.headers.size(), 1u);
+      EXPECT_EQ(r.headers[0].first, "Retry-After");
+    }
+  }
+  // One being checked, one waiting; the other two refused.
+  EXPECT_GE(checked, 1);
+  EXPECT_GE(refused, 1);
+  EXPECT_EQ(checked + refused, 4);
 }
 
 TEST(Handler, QueryStringsDecode) {

@@ -23,8 +23,9 @@ struct BakeHooks {
   std::function<void(const JobProgress&)> progress;
   /// Asked between shots: whether a preview of the current state is wanted now.
   std::function<bool()> preview_wanted;
-  /// A preview: the unconverged state with the ambient term, as a baked GLB (bake() only).
-  std::function<void(std::vector<uint8_t> glb)> preview;
+  /// A preview: the unconverged state with the ambient term, as a baked GLB, or the writer's
+  /// error (bake() only).
+  std::function<void(std::vector<uint8_t> glb, const std::string& error)> preview;
   /// Called with false when the bake enters a phase without a displayable state (hr throughout, a
   /// reference while it traces), so that preview requests can be answered at once.
   std::function<void(bool possible)> previews_possible;

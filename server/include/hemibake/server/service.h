@@ -1,12 +1,14 @@
 // The baking service: requests in, jobs queued in the store, a worker pool that bakes them.
-// handle() is a function of the request and the store's state; it does no socket I/O, so it is
-// tested without a network.
+// handle_async() is a function of the request and the store's state; it does no socket I/O, so it
+// is tested without a network (through handle(), which waits for it).
 #pragma once
 
 #include "hemibake/server/store.h"
 
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -22,6 +24,8 @@ class CancelToken;
 
 namespace hemibake::server {
 
+class Pool;
+
 struct ServiceOptions {
   std::string data_dir = "data";
   unsigned workers = 0;             ///< bake threads; 0 = number of cores
@@ -33,6 +37,9 @@ struct ServiceOptions {
   uint64_t max_elements = 2'000'000;  ///< per-job element budget (caps the parameter)
   uint32_t max_shot_cache_mb = 256;   ///< per-job memory for replayed shots (caps the parameter)
   uint64_t max_triangles = 2'000'000;
+  unsigned check_threads = 0;       ///< threads that load and check submitted scenes; 0 = half the cores (at least 1)
+  size_t max_checks = 4;            ///< submitted scenes waiting for a check thread before 503 (each
+                                    ///< holds its body, up to max_body_bytes, in memory)
   double expire_seconds = 7 * 24 * 3600.0;  ///< finished jobs and results are deleted after this
   std::vector<std::string> tokens;  ///< bearer tokens; empty: no authentication
 };
@@ -51,14 +58,34 @@ struct Response {
   std::string content_type = "application/json";
 };
 
+/// Takes a request's response. Called exactly once, from any thread (the caller's, a pool's, a
+/// worker's); it must not block: hand the response to the connection's own executor.
+using Reply = std::function<void(Response)>;
+
+/// The next part of an event stream.
+struct EventBatch {
+  int status = 200;           ///< 404: no such job; 503: the server is busy or stopping (ask again)
+  std::vector<Event> events;  ///< after the sequence number asked for, oldest first, at most 100
+  bool end = false;           ///< the job has finished and no event follows these
+};
+
 class Service {
  public:
   /// Opens the store in options.data_dir, re-queues jobs a crash left running, starts the workers.
   static std::unique_ptr<Service> start(const ServiceOptions& options, std::string& error);
   ~Service();
 
-  /// Answers one request (everything but event streams).
+  /// Answers one request (everything but event streams) through `reply`, without ever blocking
+  /// the caller: what cannot wait (health, readiness, the API description, refusals) at once; a
+  /// submitted scene from a bounded pool of check threads (503 and Retry-After when it is full);
+  /// a preview when the job's worker makes one between two shots (no thread waits for it); the
+  /// rest, which reads the store, from a small lookup pool.
+  void handle_async(Request request, Reply reply);
+  /// handle_async, waited for: for tests and tools without an event loop.
   Response handle(const Request& request);
+  /// For event streams: the events of job `id` after sequence number `after`, read on the lookup
+  /// pool and given to `reply` (which, like a Reply, must not block).
+  void events_async(const std::string& id, uint64_t after, std::function<void(EventBatch)> reply);
 
   /// For event streams: the job id if `request` is GET /v1/jobs/{id}/events, else empty.
   static std::string events_job(const Request& request);
@@ -66,19 +93,29 @@ class Service {
   std::optional<Response> check_auth(const Request& request) const;
 
   Store& store() { return *store_; }
-  /// Stops the workers; jobs they were running go back to the queue.
+  /// Stops the workers; jobs they were running go back to the queue. Previews asked for and
+  /// requests not yet begun are answered 503; requests being answered finish first.
   void stop();
   bool ready() const { return running_.load(); }
   void count_response(int status);
 
  private:
-  explicit Service(const ServiceOptions& o) : options_(o) {}
+  explicit Service(const ServiceOptions& o);
   void worker_loop();
+  void clock_loop();
   void bake(const std::string& id, const std::string& scene, const std::string& params);
+  std::optional<Response> answer_at_once(const Request& request, const std::string& path) const;
+  Response route(const Request& request, const std::string& path, const std::string& query);
   Response submit(const Request& request, const std::string& query);
   Response job_json(const JobRecord& r, int status);
   Response metrics();
-  Response preview(const std::string& id);
+  void preview(const std::string& id, const Reply& reply);
+  // The running job's side of previews (called by its worker).
+  bool register_job(const std::string& id, solver::CancelToken* token);
+  void unregister_job(const std::string& id);
+  void set_previews(const std::string& id, bool on);
+  bool take_preview_request(const std::string& id);
+  void give_preview(const std::string& id, const std::vector<uint8_t>& glb, const std::string& error);
 
   ServiceOptions options_;
   std::unique_ptr<Store> store_;
@@ -86,16 +123,26 @@ class Service {
   std::atomic<bool> running_{false};
   std::mutex mutex_;
   std::condition_variable wake_;
+  // A preview asked for: answered by the job's worker after its next shot, or by the clock at
+  // `until`. Entries, not sleeping threads: any number of clients wait at no cost.
+  struct PreviewWait {
+    std::chrono::steady_clock::time_point until;
+    Reply reply;
+  };
   // A running job: its cancellation token, and previews asked for and made between its shots.
   struct Active {
     solver::CancelToken* token = nullptr;
     bool previews = true;  // false while no displayable solution exists (hr, reference tracing)
     bool preview_wanted = false;
-    uint64_t preview_serial = 0;
-    std::string preview;  // GLB
+    std::vector<PreviewWait> waits;
   };
   std::map<std::string, Active> active_;
-  std::condition_variable preview_ready_;
+  // Previews of jobs claimed by a worker that has not registered them yet.
+  std::map<std::string, std::vector<PreviewWait>> unregistered_;
+  std::condition_variable clock_wake_;  // a new deadline, or the stop
+  std::thread clock_;                   // answers previews whose time is up
+  std::unique_ptr<Pool> checks_;        // loads and checks submitted scenes
+  std::unique_ptr<Pool> lookups_;       // requests that read or write the store
   std::atomic<double> last_expiry_{0.0};
   // Metrics.
   std::mutex metrics_mutex_;
