@@ -1,4 +1,5 @@
-// The API description served at /openapi.json.
+// The API description served at /openapi.json; the job parameters are added to POST /v1/jobs from
+// protocol::param_table() when it is served, so they cannot drift from what the parser accepts.
 #pragma once
 
 namespace hemibake::server {
@@ -35,7 +36,7 @@ inline constexpr const char* kOpenApi = R"json({
     "/v1/jobs": {
       "post": {
         "summary": "Submit a scene to bake",
-        "description": "The scene as the body (model/gltf-binary or model/gltf+json, all data embedded), or multipart/form-data with a 'scene' file part and an optional 'params' JSON part. Bake parameters as query parameters with the command line's names: method (aa, classical, hr: hierarchical radiosity, reference: the aa mesh with path-traced vertex radiosity), resolution, feps, aeps, beps, convergence, max_shots, max_elements, reuse, cluster_size, shot_cache_mb (capped by the server), rays (hr), samples (reference), draco, position_bits, texcoord_bits, draco_speed, exposure. An identical scene and parameters as a finished job are answered from the store (200, X-Hemibake-Cache: hit).",
+        "description": "The scene as the body (model/gltf-binary or model/gltf+json, all data embedded), or multipart/form-data with a 'scene' file part and an optional 'params' JSON part. Bake parameters as query parameters (or the 'params' part's members), listed below with their defaults and limits; the command line takes the same with dashes (--max-shots). The server sets threads itself and caps max_elements and shot_cache_mb. An identical scene and parameters as a finished job are answered from the store (200, X-Hemibake-Cache: hit).",
         "parameters": [{"name": "Idempotency-Key", "in": "header", "schema": {"type": "string", "maxLength": 200}}],
         "requestBody": {"required": true, "content": {
           "model/gltf-binary": {"schema": {"type": "string", "format": "binary"}},

@@ -37,6 +37,17 @@ std::string sha256_hex(const std::string& data) {
   return out;
 }
 
+// The API description with the job parameters from their table, made once.
+const std::string& openapi_document() {
+  static const std::string text = [] {
+    json doc = json::parse(kOpenApi);
+    auto& parameters = doc["paths"]["/v1/jobs"]["post"]["parameters"];
+    for (const auto& p : json::parse(protocol::params_openapi_json())) parameters.push_back(p);
+    return doc.dump();
+  }();
+  return text;
+}
+
 Response error(int status, const std::string& message) {
   Response r;
   r.status = status;
@@ -692,7 +703,7 @@ std::optional<Response> Service::answer_at_once(const Request& req, const std::s
   if ((path == "/healthz" || path == "/readyz" || path == "/metrics" || path == "/openapi.json") && !get) return not_allowed("GET, HEAD");
   if (path == "/healthz") return Response{200, {}, R"({"status":"ok"})"};
   if (path == "/readyz") return running_ ? Response{200, {}, R"({"status":"ready"})"} : error(503, "not ready");
-  if (path == "/openapi.json") return Response{200, {}, kOpenApi};
+  if (path == "/openapi.json") return Response{200, {}, openapi_document()};
   return std::nullopt;
 }
 

@@ -57,6 +57,32 @@ std::string cornell() {
   return s.str();
 }
 
+// The API description names every job parameter with its limits, and the server refuses each whole
+// number just past the maximum it gives, naming the parameter.
+TEST(Handler, ApiDescriptionGivesTheLimitsTheServerEnforces) {
+  Fixture f;
+  const json doc = json::parse(f.call("GET", "/openapi.json").body);
+  std::vector<json> params;
+  for (const auto& p : doc["paths"]["/v1/jobs"]["post"]["parameters"])
+    if (p["in"] == "query") params.push_back(p);
+  ASSERT_GE(params.size(), 20u);
+  const std::string scene = cornell();
+  const std::map<std::string, std::string> gltf = {{"content-type", "model/gltf+json"}};
+  for (const auto& p : params) {
+    const std::string name = p["name"];
+    const json& schema = p["schema"];
+    if (schema["type"] != "integer") continue;
+    // max_shots=0 and the like are valid requests that bake nothing useful: only ask the parser.
+    const uint64_t max = schema["maximum"];
+    const Response past = f.call("POST", "/v1/jobs?" + name + "=" + std::to_string(max + 1), scene, gltf);
+    EXPECT_EQ(past.status, 400) << name;
+    EXPECT_NE(past.body.find(name), std::string::npos) << past.body;
+  }
+  const Response method = f.call("POST", "/v1/jobs?method=ray", scene, gltf);
+  EXPECT_EQ(method.status, 400);
+  EXPECT_NE(method.body.find("aa, classical, hr or reference"), std::string::npos) << method.body;
+}
+
 TEST(Handler, AnswersWithoutANetwork) {
   Fixture f;
   EXPECT_EQ(f.call("GET", "/healthz").status, 200);
