@@ -6,12 +6,16 @@
 
 namespace hemibake::solver {
 
+// The vertex halfway along edge (a, b), made once: the elements on both sides of the edge share
+// it, so a finer neighbour's vertex lies on a coarser element's edge, not off it.
 uint32_t Solver::Impl::midpoint(uint32_t a, uint32_t b) {
   auto [it, fresh] = midpoints.try_emplace(edge_key(a, b), static_cast<uint32_t>(vpos.size()));
   if (fresh) vpos.push_back(0.5 * (vpos[a] + vpos[b]));
   return it->second;
 }
 
+// Appends an element to every per-element array (the scratch ones too, so that no shot has to
+// check their sizes).
 uint32_t Solver::Impl::add_element(uint32_t patch, uint32_t parent,
                                    const std::array<uint32_t, 4>& corners, const glm::dvec3& b,
                                    const glm::dvec3& unshot) {
@@ -46,6 +50,7 @@ uint32_t Solver::Impl::add_element(uint32_t patch, uint32_t parent,
   return id;
 }
 
+// Splits leaf e into four consecutive children, in child_corners' order.
 void Solver::Impl::split(uint32_t e) {
   HEMIBAKE_DCHECK(e < e_child.size() && e_child[e] == kNone);  // only leaves split
   const std::array<uint32_t, 4> c = e_corner[e];
@@ -71,6 +76,7 @@ void Solver::Impl::split(uint32_t e) {
   ++stats.splits;
 }
 
+// The progress figures read between shots.
 void Solver::Impl::update_unshot_total() {
   double total = 0.0;
   for (double u : p_unshot) total += u;
@@ -81,8 +87,9 @@ void Solver::Impl::update_unshot_total() {
   stats.elements = leaves.size();
 }
 
+// Split elements (now inner nodes) are replaced by their leaves, in place of the parent: the list
+// keeps its order, and with it the order of everything summed or projected from it.
 void Solver::Impl::replace_split(std::vector<uint32_t>& list) const {
-  // Split elements (now inner nodes) are replaced by their children, in place of the parent.
   bool any = false;
   for (uint32_t e : list) any = any || e_child[e] != kNone;
   if (!any) return;
@@ -93,6 +100,8 @@ void Solver::Impl::replace_split(std::vector<uint32_t>& list) const {
   for (uint32_t e : list) HEMIBAKE_DCHECK(e_child[e] == kNone);
 }
 
+// Per-receiver and per-vertex scratch of a shot, grown after splits and new vertices; vmin and vmax
+// start empty (refine resets the entries it touched).
 void Solver::Impl::grow_scratch() {
   shot_b.resize(e_patch.size());
   f_recv.resize(e_patch.size());

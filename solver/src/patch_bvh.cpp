@@ -7,6 +7,7 @@
 
 namespace hemibake::solver {
 
+// Per patch its bounding box, and the tree over them.
 void Solver::Impl::build_patch_bvh() {
   p_lo.resize(patches.size());
   p_hi.resize(patches.size());

@@ -9,6 +9,8 @@
 
 namespace hemibake::solver {
 
+// F(piece -> element) for each element, summed over its fragments: covered area times the pixel's
+// delta form factor, with (e_ff) and without (e_ff_open) the pixel's transmission.
 void Solver::Impl::sum_form_factors(std::span<const uint32_t> elements) {
   const auto& dff = cube->delta_form_factors();
   pool.parallel_for(elements.size(), [&](size_t b, size_t e, size_t) {
@@ -28,6 +30,8 @@ void Solver::Impl::sum_form_factors(std::span<const uint32_t> elements) {
   });
 }
 
+// Each chunk of elements projects into a fragment list of its own; the lists are joined in chunk
+// order, so fragments (and ties in depth) come in the same order with any number of threads.
 void Solver::Impl::project(std::span<const uint32_t> elements) {
   const auto t0 = Clock::now();
   ++stats.projections;
@@ -83,6 +87,8 @@ void Solver::Impl::project(std::span<const uint32_t> elements) {
   stats.seconds_projecting += seconds_since(t0);
 }
 
+// The children of split `parents` take their fragments from their parent's pixels and
+// transmissions (no other element is projected again), and their form factors from those.
 void Solver::Impl::project_children(const std::vector<uint32_t>& parents) {
   const auto t0 = Clock::now();
   const size_t n = parents.size();

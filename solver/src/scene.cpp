@@ -206,9 +206,15 @@ std::string validate(const Scene& scene) {
 }
 
 namespace detail {
+namespace {
 
-PreparedScene prepare(const Scene& scene) {
-  PreparedScene out;
+// Corners of a patch: the ids of their points.
+using PointIds = std::vector<std::array<uint32_t, 4>>;
+// Per edge (its two point ids as a key), the patches that have it.
+using EdgePatches = std::unordered_map<uint64_t, std::vector<uint32_t>>;
+
+// Normals, areas, total area and the bounding box's diagonal.
+void measure(const Scene& scene, PreparedScene& out) {
   const size_t n = scene.patches.size();
   out.normal.resize(n);
   out.area.resize(n);
@@ -225,10 +231,13 @@ PreparedScene prepare(const Scene& scene) {
     }
   }
   out.diagonal = glm::length(hi - lo);
+}
 
-  // Corners with bitwise equal positions are one point; edges between such points are shared.
+// Corners with bitwise equal positions are one point; edges between such points are shared.
+PointIds point_ids(const Scene& scene) {
+  const size_t n = scene.patches.size();
   std::unordered_map<glm::dvec3, uint32_t, PositionHash> point_id;
-  std::vector<std::array<uint32_t, 4>> point_of(n);
+  PointIds point_of(n);
   for (size_t i = 0; i < n; ++i) {
     const Patch& p = scene.patches[i];
     for (uint32_t c = 0; c < p.corner_count; ++c) {
@@ -238,6 +247,25 @@ PreparedScene prepare(const Scene& scene) {
       point_of[i][c] = point_id.try_emplace(key, static_cast<uint32_t>(point_id.size())).first->second;
     }
   }
+  return point_of;
+}
+
+EdgePatches patches_by_edge(const Scene& scene, const PointIds& point_of) {
+  EdgePatches edge_patches;
+  for (size_t i = 0; i < scene.patches.size(); ++i) {
+    const uint32_t cc = scene.patches[i].corner_count;
+    for (uint32_t c = 0; c < cc; ++c) {
+      uint32_t a = point_of[i][c], b = point_of[i][(c + 1) % cc];
+      if (a > b) std::swap(a, b);
+      edge_patches[(static_cast<uint64_t>(a) << 32) | b].push_back(static_cast<uint32_t>(i));
+    }
+  }
+  return edge_patches;
+}
+
+// Smoothing groups, occlusion groups and the occlusion groups' adjacency.
+void find_groups(const Scene& scene, const EdgePatches& edge_patches, PreparedScene& out) {
+  const size_t n = scene.patches.size();
   UnionFind occl(n), smooth(n);
   std::vector<std::pair<uint32_t, uint32_t>> neighbours;
   auto coplanar = [&](uint32_t a, uint32_t b) {
@@ -250,15 +278,6 @@ PreparedScene prepare(const Scene& scene) {
     return true;
   };
   // Patches sharing a whole edge (same two points) may share vertices: one smooth surface.
-  std::unordered_map<uint64_t, std::vector<uint32_t>> edge_patches;
-  for (size_t i = 0; i < n; ++i) {
-    const uint32_t cc = scene.patches[i].corner_count;
-    for (uint32_t c = 0; c < cc; ++c) {
-      uint32_t a = point_of[i][c], b = point_of[i][(c + 1) % cc];
-      if (a > b) std::swap(a, b);
-      edge_patches[(static_cast<uint64_t>(a) << 32) | b].push_back(static_cast<uint32_t>(i));
-    }
-  }
   for (const auto& [key, list] : edge_patches) {
     for (size_t x = 0; x < list.size(); ++x) {
       for (size_t y = x + 1; y < list.size(); ++y) {
@@ -283,65 +302,69 @@ PreparedScene prepare(const Scene& scene) {
   }
   for (const auto& [a, b] : neighbours) out.adjacency.add(out.occlusion_group[a], out.occlusion_group[b]);
   out.adjacency.finish();
+}
 
-  // Backs that need no projection (PreparedScene::back_hidden). Twins: the same points, facing
-  // the other way (sorted point ids, kNone-padded, are the key).
-  out.back_hidden.assign(n, 0);
-  {
-    struct KeyHash {
-      size_t operator()(const std::array<uint32_t, 4>& k) const {
-        uint64_t h = 0;
-        for (uint32_t v : k) h = (h ^ v) * 0x100000001b3ull;
-        return static_cast<size_t>(h);
-      }
-    };
-    std::unordered_map<std::array<uint32_t, 4>, std::vector<uint32_t>, KeyHash> by_points;
-    for (size_t i = 0; i < n; ++i) {
-      std::array<uint32_t, 4> key{kNone, kNone, kNone, kNone};
-      std::copy_n(point_of[i].begin(), scene.patches[i].corner_count, key.begin());
-      std::sort(key.begin(), key.end());
-      by_points[key].push_back(static_cast<uint32_t>(i));
+// Backs that need no projection (PreparedScene::back_hidden), first kind. Twins: the same points,
+// facing the other way (sorted point ids, kNone-padded, are the key).
+void hide_twin_backs(const Scene& scene, const PointIds& point_of, PreparedScene& out) {
+  struct KeyHash {
+    size_t operator()(const std::array<uint32_t, 4>& k) const {
+      uint64_t h = 0;
+      for (uint32_t v : k) h = (h ^ v) * 0x100000001b3ull;
+      return static_cast<size_t>(h);
     }
-    for (const auto& [key, list] : by_points)
-      for (size_t x = 0; x < list.size(); ++x)
-        for (size_t y = x + 1; y < list.size(); ++y)
-          if (glm::dot(out.normal[list[x]], out.normal[list[y]]) < 0.0) out.back_hidden[list[x]] = out.back_hidden[list[y]] = 1;
+  };
+  std::unordered_map<std::array<uint32_t, 4>, std::vector<uint32_t>, KeyHash> by_points;
+  for (size_t i = 0; i < scene.patches.size(); ++i) {
+    std::array<uint32_t, 4> key{kNone, kNone, kNone, kNone};
+    std::copy_n(point_of[i].begin(), scene.patches[i].corner_count, key.begin());
+    std::sort(key.begin(), key.end());
+    by_points[key].push_back(static_cast<uint32_t>(i));
   }
-  // Outward-facing solids: the signed volume of an edge-connected set of patches (divergence
-  // theorem, sum of (c - o) . n A / 3, o the set's box centre) is positive when its normals point
-  // away from what it encloses; an open box (a block with no bottom) still comes out positive.
-  {
-    UnionFind part(n);
-    for (const auto& [key, list] : edge_patches)
-      for (size_t x = 1; x < list.size(); ++x) part.unite(list[0], list[x]);
-    std::vector<glm::dvec3> box_lo(n, glm::dvec3(std::numeric_limits<double>::max())),
-        box_hi(n, glm::dvec3(std::numeric_limits<double>::lowest()));
-    for (uint32_t i = 0; i < n; ++i) {
-      const Patch& p = scene.patches[i];
-      const uint32_t r = part.find(i);
-      for (uint32_t c = 0; c < p.corner_count; ++c) {
-        box_lo[r] = glm::min(box_lo[r], p.corners[c]);
-        box_hi[r] = glm::max(box_hi[r], p.corners[c]);
-      }
-    }
-    std::vector<double> volume(n, 0.0);
-    for (uint32_t i = 0; i < n; ++i) {
-      const Patch& p = scene.patches[i];
-      const uint32_t r = part.find(i);
-      glm::dvec3 c(0.0);
-      for (uint32_t k = 0; k < p.corner_count; ++k) c += p.corners[k];
-      c /= static_cast<double>(p.corner_count);
-      volume[r] += glm::dot(c - 0.5 * (box_lo[r] + box_hi[r]), out.normal[i]) * out.area[i] / 3.0;
-    }
-    const double tiny = 1e-9 * out.diagonal * out.diagonal * out.diagonal;
-    for (uint32_t i = 0; i < n; ++i)
-      if (volume[part.find(i)] > tiny) out.back_hidden[i] = 1;
-  }
+  for (const auto& [key, list] : by_points)
+    for (size_t x = 0; x < list.size(); ++x)
+      for (size_t y = x + 1; y < list.size(); ++y)
+        if (glm::dot(out.normal[list[x]], out.normal[list[y]]) < 0.0) out.back_hidden[list[x]] = out.back_hidden[list[y]] = 1;
+}
 
-  // Solver vertices: one per (point, smoothing group), so radiosity is averaged within a surface.
+// Second kind: outward-facing solids. The signed volume of an edge-connected set of patches
+// (divergence theorem, sum of (c - o) . n A / 3, o the set's box centre) is positive when its
+// normals point away from what it encloses; an open box (a block with no bottom) still comes out
+// positive.
+void hide_solid_backs(const Scene& scene, const EdgePatches& edge_patches, PreparedScene& out) {
+  const size_t n = scene.patches.size();
+  UnionFind part(n);
+  for (const auto& [key, list] : edge_patches)
+    for (size_t x = 1; x < list.size(); ++x) part.unite(list[0], list[x]);
+  std::vector<glm::dvec3> box_lo(n, glm::dvec3(std::numeric_limits<double>::max())),
+      box_hi(n, glm::dvec3(std::numeric_limits<double>::lowest()));
+  for (uint32_t i = 0; i < n; ++i) {
+    const Patch& p = scene.patches[i];
+    const uint32_t r = part.find(i);
+    for (uint32_t c = 0; c < p.corner_count; ++c) {
+      box_lo[r] = glm::min(box_lo[r], p.corners[c]);
+      box_hi[r] = glm::max(box_hi[r], p.corners[c]);
+    }
+  }
+  std::vector<double> volume(n, 0.0);
+  for (uint32_t i = 0; i < n; ++i) {
+    const Patch& p = scene.patches[i];
+    const uint32_t r = part.find(i);
+    glm::dvec3 c(0.0);
+    for (uint32_t k = 0; k < p.corner_count; ++k) c += p.corners[k];
+    c /= static_cast<double>(p.corner_count);
+    volume[r] += glm::dot(c - 0.5 * (box_lo[r] + box_hi[r]), out.normal[i]) * out.area[i] / 3.0;
+  }
+  const double tiny = 1e-9 * out.diagonal * out.diagonal * out.diagonal;
+  for (uint32_t i = 0; i < n; ++i)
+    if (volume[part.find(i)] > tiny) out.back_hidden[i] = 1;
+}
+
+// Solver vertices: one per (point, smoothing group), so radiosity is averaged within a surface.
+void make_vertices(const Scene& scene, const PointIds& point_of, PreparedScene& out) {
   std::unordered_map<uint64_t, uint32_t> vertex_id;
-  out.corner_vertex.resize(n);
-  for (size_t i = 0; i < n; ++i) {
+  out.corner_vertex.resize(scene.patches.size());
+  for (size_t i = 0; i < scene.patches.size(); ++i) {
     const Patch& p = scene.patches[i];
     for (uint32_t c = 0; c < 4; ++c) {
       if (c >= p.corner_count) {
@@ -354,6 +377,20 @@ PreparedScene prepare(const Scene& scene) {
       out.corner_vertex[i][c] = it->second;
     }
   }
+}
+
+}  // namespace
+
+PreparedScene prepare(const Scene& scene) {
+  PreparedScene out;
+  measure(scene, out);
+  const PointIds point_of = point_ids(scene);
+  const EdgePatches edge_patches = patches_by_edge(scene, point_of);
+  find_groups(scene, edge_patches, out);
+  out.back_hidden.assign(scene.patches.size(), 0);
+  hide_twin_backs(scene, point_of, out);
+  hide_solid_backs(scene, edge_patches, out);
+  make_vertices(scene, point_of, out);
   return out;
 }
 

@@ -15,6 +15,9 @@ constexpr int kMaxCutLevels = 6;
 
 }  // namespace
 
+// Shoots a piece of patch p (an element of its quadtree, or a geometric piece of a leaf) to
+// `receivers`; the receivers too close for its hemicube go on to its quarters, down to
+// kMaxShooterDepth levels, each quarter's unshot radiosity its own where the tree has it.
 void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers,
                               bool whole_scene) {
   const uint32_t n = patches[p].corner_count;
@@ -59,6 +62,8 @@ void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<u
   }
 }
 
+// Shoots cluster node c to `receivers` as one piece along its mean normal; `depth` counts the
+// halvings from the unit's root.
 void Solver::Impl::shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bool whole_scene, int depth) {
   if (receivers.empty()) return;
   const ClusterNode& node = c_nodes[c];
@@ -108,11 +113,11 @@ void Solver::Impl::shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bo
   }
 }
 
+// The patch shoots from pieces no wider than shooter_limit (a leaf wider than that is cut
+// geometrically; its pieces share its unshot radiosity); each piece refines further for the
+// receivers near it (shoot_node).
 void Solver::Impl::shoot_patch(uint32_t p, const std::vector<uint32_t>& receivers, bool whole_scene) {
   const uint32_t n = patches[p].corner_count;
-  // The patch shoots from pieces no wider than shooter_limit (a leaf wider than that is cut
-  // geometrically; its pieces share its unshot radiosity); each piece refines further for the
-  // receivers near it (shoot_node).
   std::vector<ShooterNode> stack, tops;
   Corners root{};
   corners_of(p_root[p], root);

@@ -21,6 +21,12 @@
 //      other element is looked at again) until nothing splits.
 //   4. Southwell step: every receiver gains rho * dB * F(element -> shooter), with
 //      F(element -> shooter) = F(shooter -> element) * A_shooter / A_element (capped at 1).
+//
+// This file picks the shooter (step) and holds the public API. shooters.cpp cuts a shooter into
+// pieces (1); shoot_piece.cpp shoots one piece in stages, with shaft.cpp (what may hide the
+// receivers) and projection.cpp (2), refine.cpp (3) and shot_cache.cpp (records for replays);
+// near_field.cpp decides which receivers are too close to a piece for its hemicube.
+// element_tree.cpp, patch_bvh.cpp and clusters.cpp hold what they walk; mesh_export.cpp the result.
 #include "solver_impl.h"
 
 #include <glm/common.hpp>
@@ -72,6 +78,8 @@ Solver::Impl::Impl(const Scene& scene, const Params& p)
   gather_chunks.resize(chunks);
 }
 
+// Element e takes rho dB F of a shot: radiosity and unshot radiosity alike, and the unshot power of
+// its patch and unit, which pick the next shooter.
 void Solver::Impl::receive(uint32_t e, const glm::dvec3& dB, double f) {
   // Light goes to leaves only, and only adds: unshot power and radiosity stay non-negative.
   HEMIBAKE_DCHECK(e < e_child.size() && e_child[e] == kNone);
@@ -85,6 +93,8 @@ void Solver::Impl::receive(uint32_t e, const glm::dvec3& dB, double f) {
   u_unshot[p_unit[q]] += channel_sum(gain) * e_area[e];
 }
 
+// One Southwell step: the unit with the most unshot power shoots it all, from its record when a
+// replay is exact, else afresh.
 bool Solver::Impl::step() {
   if (done) return false;
   if (stats.unshot_fraction < params.convergence || emitted_power <= 0.0) {

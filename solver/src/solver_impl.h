@@ -1,6 +1,6 @@
-// The solver's shared state: Solver::Impl, whose members are spread over the files named for
-// what they hold (element_tree, patch_bvh, clusters, projection, near_field, shooters, shoot_piece,
-// shot_cache, mesh_export, solver). Private to solver/src.
+// The solver's shared state: Solver::Impl, its thresholds and its helpers. The member functions
+// live in the files named for what they hold (the list is in solver.cpp); the declarations below
+// are grouped by file. Private to solver/src.
 #pragma once
 
 #include "hemibake/solver/solver.h"
@@ -25,6 +25,7 @@
 
 namespace hemibake::solver {
 
+// The polygon helpers (geometry.h), unqualified in the Impl's files.
 using detail::channel_sum;
 using detail::child_corners;
 using detail::Corners;
