@@ -67,7 +67,8 @@ bool finite(const glm::dmat4& m) {
 
 bool finite(const glm::dvec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 
-// A transform that turns the front side of triangles to the back (glTF 2.0, section 3.7.4).
+// glTF makes a transform with a negative determinant reverse the winding rule: such a node's
+// triangles are clockwise on their front side.
 bool mirrors(const glm::dmat4& world) { return glm::determinant(glm::dmat3(world)) < 0.0; }
 
 // ---- Parse and checks ----

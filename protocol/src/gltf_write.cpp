@@ -113,48 +113,93 @@ glm::dmat4 world_to_node(const glm::dmat4& world) {
   return out;
 }
 
-}  // namespace
 
-WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, Method method,
-                            const solver::Params& params, const solver::Stats& stats, const WriteOptions& options) {
-  WriteResult result;
-  const tinygltf::Model& in = doc.model;
-  const solver::Scene& scene = doc.scene;
+// Every element refines a patch of this document's scene.
+bool mesh_belongs(const SceneDocument& doc, const solver::Mesh& mesh) {
+  for (const auto& el : mesh.elements)
+    if (el.patch >= doc.sources.size()) return false;
+  return true;
+}
+
+// The 95th percentile (by area) of the light on surfaces that do not emit maps to 0.9: emitters
+// are far brighter than what they light, and would leave the rest dark.
+double automatic_exposure(const SceneDocument& doc, const solver::Mesh& mesh) {
+  std::vector<std::pair<double, double>> light;  // (light, area)
+  double total = 0.0;
   for (const auto& el : mesh.elements) {
-    if (el.patch >= doc.sources.size()) {
-      result.error = "the mesh does not belong to this scene";
-      return result;
-    }
+    if (mean3(doc.scene.patches[el.patch].emission) > 0.0) continue;
+    light.emplace_back(mean3(light_of(el.radiosity, doc.sources[el.patch].base)), el.area);
+    total += el.area;
   }
-
-  // Exposure: the 95th percentile (by area) of the light on surfaces that do not emit maps to 0.9.
-  double exposure = options.exposure;
-  if (!(exposure > 0.0)) {
-    std::vector<std::pair<double, double>> light;  // (light, area)
-    double total = 0.0;
-    for (const auto& el : mesh.elements) {
-      if (mean3(scene.patches[el.patch].emission) > 0.0) continue;
-      light.emplace_back(mean3(light_of(el.radiosity, doc.sources[el.patch].base)), el.area);
-      total += el.area;
-    }
-    std::sort(light.begin(), light.end());
-    double acc = 0.0, p95 = 0.0;
-    for (const auto& [l, a] : light) {
-      acc += a;
-      p95 = l;
-      if (acc >= 0.95 * total) break;
-    }
-    exposure = p95 > 0.0 ? 0.9 / p95 : 1.0;
+  std::sort(light.begin(), light.end());
+  double acc = 0.0, p95 = 0.0;
+  for (const auto& [l, a] : light) {
+    acc += a;
+    p95 = l;
+    if (acc >= 0.95 * total) break;
   }
-  result.exposure = exposure;
+  return p95 > 0.0 ? 0.9 / p95 : 1.0;
+}
 
-  // The elements of each output primitive: (node, primitive, back side).
-  std::map<std::tuple<uint32_t, uint32_t, bool>, std::vector<uint32_t>> groups;
+// The elements of each output primitive, by (node, primitive, back side), in that order.
+using Groups = std::map<std::tuple<uint32_t, uint32_t, bool>, std::vector<uint32_t>>;
+
+Groups group_elements(const SceneDocument& doc, const solver::Mesh& mesh) {
+  Groups groups;
   for (uint32_t i = 0; i < mesh.elements.size(); ++i) {
     const PatchSource& s = doc.sources[mesh.elements[i].patch];
     groups[{s.node, s.primitive, s.back}].push_back(i);
   }
+  return groups;
+}
 
+// Unlit shading shows the base colour alone: emission (its light is in COLOR_0 now), normal,
+// occlusion and metal-roughness textures and the PBR extensions (specular, IOR, ...) go. The
+// base colour texture reads TEXCOORD_0, the only UV set written (its set in the input). Both sides
+// of a double-sided material are baked as separate primitives, so none is double-sided.
+void make_unlit(tinygltf::Material& mat) {
+  mat.extensions.clear();
+  mat.extensions["KHR_materials_unlit"] = Value(Value::Object());
+  mat.emissiveFactor = {0.0, 0.0, 0.0};
+  mat.emissiveTexture = tinygltf::TextureInfo();
+  mat.normalTexture = tinygltf::NormalTextureInfo();
+  mat.occlusionTexture = tinygltf::OcclusionTextureInfo();
+  mat.pbrMetallicRoughness.metallicRoughnessTexture = tinygltf::TextureInfo();
+  mat.doubleSided = false;
+  tinygltf::TextureInfo& base = mat.pbrMetallicRoughness.baseColorTexture;
+  base.texCoord = 0;
+  tinygltf::ExtensionMap kept;
+  if (auto it = base.extensions.find("KHR_texture_transform"); it != base.extensions.end() && it->second.IsObject()) {
+    Value::Object t = it->second.Get<Value::Object>();
+    t.erase("texCoord");
+    kept["KHR_texture_transform"] = Value(t);
+  }
+  base.extensions = std::move(kept);
+}
+
+// Images keep their encoded bytes, now inside the GLB; one whose bytes were not kept becomes white.
+void embed_images(const SceneDocument& doc, tinygltf::Model& out) {
+  out.images = doc.model.images;
+  for (size_t i = 0; i < out.images.size(); ++i) {
+    tinygltf::Image& img = out.images[i];
+    std::vector<uint8_t> bytes = i < doc.image_bytes.size() ? doc.image_bytes[i] : std::vector<uint8_t>{};
+    std::string mime = i < doc.image_mime.size() ? doc.image_mime[i] : std::string();
+    if (bytes.empty() || (mime != "image/png" && mime != "image/jpeg")) {
+      bytes = white_png();
+      mime = "image/png";
+    }
+    img.image.clear();
+    img.uri.clear();
+    img.width = img.height = img.component = img.bits = -1;
+    img.bufferView = add_view(out, bytes.data(), bytes.size());
+    img.mimeType = mime;
+  }
+}
+
+// The input's scenes, nodes (without their meshes), cameras, textures and materials (unlit), and
+// its images in the single buffer.
+tinygltf::Model copy_structure(const SceneDocument& doc) {
+  const tinygltf::Model& in = doc.model;
   tinygltf::Model out;
   out.asset.version = "2.0";
   out.asset.generator = "hemibake";
@@ -177,223 +222,193 @@ WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, 
   for (auto& x : out.cameras) x.extensions.clear();
   for (auto& x : out.samplers) x.extensions.clear();
   for (auto& x : out.textures) x.extensions.clear();
-  // Materials: shown unlit, so that base colour x COLOR_0 is exactly the baked light. Both sides
-  // of a double-sided material are baked as separate primitives, so none is double-sided.
+  // Shown unlit, so that base colour x COLOR_0 is exactly the baked light.
   out.materials = in.materials;
-  // Unlit shading shows the base colour alone: emission (its light is in COLOR_0 now), normal,
-  // occlusion and metal-roughness textures and the PBR extensions (specular, IOR, ...) go. The
-  // base colour texture reads TEXCOORD_0, the only UV set written (its set in the input).
-  for (auto& mat : out.materials) {
-    mat.extensions.clear();
+  for (auto& mat : out.materials) make_unlit(mat);
+  embed_images(doc, out);
+  return out;
+}
+
+// Texture coordinates at a world point of a patch: linear over each source triangle, a triangle
+// patch's own, or for a quad the half (0, 1, 3) or (1, 2, 3) that holds the point.
+glm::dvec2 patch_uv(const solver::Patch& patch, const PatchSource& src, const glm::dvec3& world) {
+  const auto& c = patch.corners;
+  auto interpolate = [&](int i0, int i1, int i2, glm::dvec2& out_uv) {
+    const glm::dvec3 e0 = c[i1] - c[i0], e1 = c[i2] - c[i0], d = world - c[i0];
+    const double d00 = glm::dot(e0, e0), d01 = glm::dot(e0, e1), d11 = glm::dot(e1, e1);
+    const double d20 = glm::dot(d, e0), d21 = glm::dot(d, e1);
+    const double den = d00 * d11 - d01 * d01;
+    const double v = den != 0.0 ? (d11 * d20 - d01 * d21) / den : 0.0;
+    const double w = den != 0.0 ? (d00 * d21 - d01 * d20) / den : 0.0;
+    out_uv = (1.0 - v - w) * src.uv[i0] + v * src.uv[i1] + w * src.uv[i2];
+    return std::min({1.0 - v - w, v, w});  // inside the triangle when not negative
+  };
+  glm::dvec2 uv(0.0);
+  if (patch.corner_count == 3) {
+    interpolate(0, 1, 2, uv);
+  } else {
+    glm::dvec2 other;
+    if (interpolate(0, 1, 3, uv) < interpolate(1, 2, 3, other)) uv = other;
+  }
+  return uv;
+}
+
+// The vertices of one output primitive: one per (solver vertex, texture coordinate), so UV seams
+// stay seams, in the node's frame, with COLOR_0 and _RADIOSITY.
+struct VertexWriter {
+  const SceneDocument& doc;
+  glm::dmat4 to_local;
+  double exposure = 1.0;
+  bool has_uv = false;
+  PrimitiveData data;
+  std::unordered_map<uint64_t, std::vector<std::pair<glm::dvec2, uint32_t>>> vertex_of;  // by key
+
+  // The vertex at world point `world` with radiosity `b` on patch `patch`; `key` is the solver
+  // vertex (points with one key are one vertex unless their texture coordinates differ).
+  uint32_t add(const glm::dvec3& world, const glm::dvec3& b, uint32_t patch, uint64_t key) {
+    const PatchSource& src = doc.sources[patch];
+    const glm::dvec2 uv = has_uv ? patch_uv(doc.scene.patches[patch], src, world) : glm::dvec2(0.0);
+    auto& list = vertex_of[key];
+    for (const auto& [u, idx] : list)
+      if (glm::length(u - uv) <= 1e-7) return idx;
+    const uint32_t idx = static_cast<uint32_t>(data.vertex_count());
+    list.emplace_back(uv, idx);
+    const glm::dvec3 local(to_local * glm::dvec4(world, 1.0));
+    for (int k = 0; k < 3; ++k) data.positions.push_back(static_cast<float>(local[k]));
+    if (has_uv) {
+      data.texcoords.push_back(static_cast<float>(uv.x));
+      data.texcoords.push_back(static_cast<float>(uv.y));
+    }
+    const glm::dvec3 light = glm::clamp(exposure * light_of(b, src.base), 0.0, 1.0);
+    for (int k = 0; k < 3; ++k) {
+      data.colors.push_back(static_cast<uint16_t>(std::lround(light[k] * 65535.0)));
+      data.radiosity.push_back(static_cast<float>(b[k]));
+    }
+    return idx;
+  }
+};
+
+// The triangles of one output primitive: an element without hanging vertices is one triangle;
+// one with them on its edges is a fan from its centre, which keeps the mesh crack-free without
+// thin triangles along the edges.
+PrimitiveData primitive_triangles(const SceneDocument& doc, const solver::Mesh& mesh, const std::vector<uint32_t>& elements,
+                                  uint32_t node, double exposure) {
+  VertexWriter writer{doc, world_to_node(doc.node_world[node]), exposure,
+                      doc.sources[mesh.elements[elements[0]].patch].has_uv, {}, {}};
+  PrimitiveData& data = writer.data;
+  uint64_t extra_key = 1ull << 63;  // element centres are never shared
+  for (uint32_t ei : elements) {
+    const auto& el = mesh.elements[ei];
+    const uint32_t nb = el.boundary_end - el.boundary_begin;
+    std::vector<uint32_t> loop(nb);
+    for (uint32_t k = 0; k < nb; ++k) {
+      const uint32_t v = mesh.boundary[el.boundary_begin + k];
+      loop[k] = writer.add(mesh.positions[v], mesh.radiosity[v], el.patch, v);
+    }
+    if (nb == 3) {
+      data.indices.insert(data.indices.end(), {loop[0], loop[1], loop[2]});
+      continue;
+    }
+    glm::dvec3 centre(0.0), b(0.0);
+    for (uint32_t k = 0; k < nb; ++k) {
+      centre += mesh.positions[mesh.boundary[el.boundary_begin + k]];
+      b += mesh.radiosity[mesh.boundary[el.boundary_begin + k]];
+    }
+    const uint32_t c = writer.add(centre / static_cast<double>(nb), b / static_cast<double>(nb), el.patch, extra_key++);
+    for (uint32_t k = 0; k < nb; ++k) data.indices.insert(data.indices.end(), {c, loop[k], loop[(k + 1) % nb]});
+  }
+  // Elements run counter-clockwise in world space; under a mirroring node transform glTF reverses
+  // the winding rule, so the triangles are written the other way round.
+  if (glm::determinant(glm::dmat3(doc.node_world[node])) < 0.0)
+    for (size_t t = 0; t + 2 < data.indices.size(); t += 3) std::swap(data.indices[t + 1], data.indices[t + 2]);
+  return std::move(writer.data);
+}
+
+// `material`, or an unlit default material made on first use (a primitive without one shows the
+// glTF default material, white).
+int output_material(int material, tinygltf::Model& out, int& default_material) {
+  if (material >= 0) return material;
+  if (default_material < 0) {
+    tinygltf::Material mat;
+    mat.name = "hemibake default";
     mat.extensions["KHR_materials_unlit"] = Value(Value::Object());
-    mat.emissiveFactor = {0.0, 0.0, 0.0};
-    mat.emissiveTexture = tinygltf::TextureInfo();
-    mat.normalTexture = tinygltf::NormalTextureInfo();
-    mat.occlusionTexture = tinygltf::OcclusionTextureInfo();
-    mat.pbrMetallicRoughness.metallicRoughnessTexture = tinygltf::TextureInfo();
-    mat.doubleSided = false;
-    tinygltf::TextureInfo& base = mat.pbrMetallicRoughness.baseColorTexture;
-    base.texCoord = 0;
-    tinygltf::ExtensionMap kept;
-    if (auto it = base.extensions.find("KHR_texture_transform"); it != base.extensions.end() && it->second.IsObject()) {
-      Value::Object t = it->second.Get<Value::Object>();
-      t.erase("texCoord");
-      kept["KHR_texture_transform"] = Value(t);
-    }
-    base.extensions = std::move(kept);
+    out.materials.push_back(mat);
+    default_material = static_cast<int>(out.materials.size()) - 1;
   }
-  int default_material = -1;
-  // Images keep their encoded bytes, now inside the GLB.
-  out.images = in.images;
-  for (size_t i = 0; i < out.images.size(); ++i) {
-    tinygltf::Image& img = out.images[i];
-    std::vector<uint8_t> bytes = i < doc.image_bytes.size() ? doc.image_bytes[i] : std::vector<uint8_t>{};
-    std::string mime = i < doc.image_mime.size() ? doc.image_mime[i] : std::string();
-    if (bytes.empty() || (mime != "image/png" && mime != "image/jpeg")) {
-      bytes = white_png();
-      mime = "image/png";
-    }
-    img.image.clear();
-    img.uri.clear();
-    img.width = img.height = img.component = img.bits = -1;
-    img.bufferView = add_view(out, bytes.data(), bytes.size());
-    img.mimeType = mime;
+  return default_material;
+}
+
+// KHR_draco_mesh_compression: one bufferView of Draco data, and fallback accessors without a
+// bufferView that describe the decoded data (Draco may reorder vertices).
+std::string add_draco_attributes(const PrimitiveData& data, const WriteOptions& options, tinygltf::Model& out,
+                                 tinygltf::Primitive& prim) {
+  DracoSettings ds;
+  ds.position_bits = options.position_bits;
+  ds.texcoord_bits = options.texcoord_bits;
+  ds.encode_speed = options.encode_speed;
+  ds.decode_speed = options.decode_speed;
+  DracoEncoded enc;
+  if (std::string e = draco_encode(data, ds, enc); !e.empty()) return e;
+  const PrimitiveData& d = enc.decoded;
+  const int view = add_view(out, enc.bytes.data(), enc.bytes.size());
+  std::vector<double> lo, hi;
+  position_bounds(d.positions, lo, hi);
+  const size_t n = d.vertex_count();
+  prim.attributes["POSITION"] = add_accessor(out, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, n, false, lo, hi);
+  Value::Object attrs;
+  attrs["POSITION"] = Value(enc.position_id);
+  if (enc.texcoord_id >= 0) {
+    prim.attributes["TEXCOORD_0"] = add_accessor(out, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC2, n);
+    attrs["TEXCOORD_0"] = Value(enc.texcoord_id);
   }
+  prim.attributes["COLOR_0"] = add_accessor(out, -1, TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT, TINYGLTF_TYPE_VEC3, n, true);
+  attrs["COLOR_0"] = Value(enc.color_id);
+  prim.attributes["_RADIOSITY"] = add_accessor(out, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, n);
+  attrs["_RADIOSITY"] = Value(enc.radiosity_id);
+  prim.indices = add_accessor(out, -1, n <= 65535 ? TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT : TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT,
+                              TINYGLTF_TYPE_SCALAR, d.indices.size());
+  Value::Object ext;
+  ext["bufferView"] = Value(view);
+  ext["attributes"] = Value(attrs);
+  prim.extensions["KHR_draco_mesh_compression"] = Value(ext);
+  return {};
+}
 
-  bool used_draco = false;
-  std::map<uint32_t, int> node_mesh;  // node -> new mesh
-  for (const auto& [key, elements] : groups) {
-    const auto [node_index, prim_index, back] = key;
-    const tinygltf::Node& node = in.nodes[node_index];
-    const tinygltf::Primitive& in_prim = in.meshes[node.mesh].primitives[prim_index];
-    const glm::dmat4 to_local = world_to_node(doc.node_world[node_index]);
-
-    // Vertices: one per (solver vertex, texture coordinate), so UV seams stay seams.
-    PrimitiveData data;
-    bool has_uv = doc.sources[mesh.elements[elements[0]].patch].has_uv;
-    std::unordered_map<uint64_t, std::vector<std::pair<glm::dvec2, uint32_t>>> vertex_of;
-    auto add_vertex = [&](const glm::dvec3& world, const glm::dvec3& b, uint32_t patch, uint64_t key_id) {
-      const PatchSource& src = doc.sources[patch];
-      const auto& c = scene.patches[patch].corners;
-      glm::dvec2 uv(0.0);
-      if (has_uv) {
-        // Texture coordinates are linear over each source triangle: a triangle patch's own, or
-        // for a quad the half (0, 1, 3) or (1, 2, 3) that holds the point.
-        auto interpolate = [&](int i0, int i1, int i2, glm::dvec2& out_uv) {
-          const glm::dvec3 e0 = c[i1] - c[i0], e1 = c[i2] - c[i0], d = world - c[i0];
-          const double d00 = glm::dot(e0, e0), d01 = glm::dot(e0, e1), d11 = glm::dot(e1, e1);
-          const double d20 = glm::dot(d, e0), d21 = glm::dot(d, e1);
-          const double den = d00 * d11 - d01 * d01;
-          const double v = den != 0.0 ? (d11 * d20 - d01 * d21) / den : 0.0;
-          const double w = den != 0.0 ? (d00 * d21 - d01 * d20) / den : 0.0;
-          out_uv = (1.0 - v - w) * src.uv[i0] + v * src.uv[i1] + w * src.uv[i2];
-          return std::min({1.0 - v - w, v, w});
-        };
-        if (scene.patches[patch].corner_count == 3) {
-          interpolate(0, 1, 2, uv);
-        } else {
-          glm::dvec2 other;
-          if (interpolate(0, 1, 3, uv) < interpolate(1, 2, 3, other)) uv = other;
-        }
-      }
-      auto& list = vertex_of[key_id];
-      for (const auto& [u, idx] : list)
-        if (glm::length(u - uv) <= 1e-7) return idx;
-      const uint32_t idx = static_cast<uint32_t>(data.vertex_count());
-      list.emplace_back(uv, idx);
-      const glm::dvec3 local(to_local * glm::dvec4(world, 1.0));
-      for (int k = 0; k < 3; ++k) data.positions.push_back(static_cast<float>(local[k]));
-      if (has_uv) {
-        data.texcoords.push_back(static_cast<float>(uv.x));
-        data.texcoords.push_back(static_cast<float>(uv.y));
-      }
-      const glm::dvec3 light = glm::clamp(exposure * light_of(b, src.base), 0.0, 1.0);
-      for (int k = 0; k < 3; ++k) {
-        data.colors.push_back(static_cast<uint16_t>(std::lround(light[k] * 65535.0)));
-        data.radiosity.push_back(static_cast<float>(b[k]));
-      }
-      return idx;
-    };
-    uint64_t extra_key = 1ull << 63;  // element centres are never shared
-    for (uint32_t ei : elements) {
-      const auto& el = mesh.elements[ei];
-      const uint32_t nb = el.boundary_end - el.boundary_begin;
-      std::vector<uint32_t> loop(nb);
-      for (uint32_t k = 0; k < nb; ++k) {
-        const uint32_t v = mesh.boundary[el.boundary_begin + k];
-        loop[k] = add_vertex(mesh.positions[v], mesh.radiosity[v], el.patch, v);
-      }
-      if (nb == 3) {
-        data.indices.insert(data.indices.end(), {loop[0], loop[1], loop[2]});
-        continue;
-      }
-      // Hanging vertices on its edges: a fan from the element's centre keeps the mesh crack-free
-      // without thin triangles along the edges.
-      glm::dvec3 centre(0.0), b(0.0);
-      for (uint32_t k = 0; k < nb; ++k) {
-        centre += mesh.positions[mesh.boundary[el.boundary_begin + k]];
-        b += mesh.radiosity[mesh.boundary[el.boundary_begin + k]];
-      }
-      const uint32_t c = add_vertex(centre / static_cast<double>(nb), b / static_cast<double>(nb), el.patch, extra_key++);
-      for (uint32_t k = 0; k < nb; ++k) data.indices.insert(data.indices.end(), {c, loop[k], loop[(k + 1) % nb]});
-    }
-
-    // Elements run counter-clockwise in world space; under a mirroring node transform glTF reverses
-    // the winding rule, so the triangles are written the other way round.
-    if (glm::determinant(glm::dmat3(doc.node_world[node_index])) < 0.0)
-      for (size_t t = 0; t + 2 < data.indices.size(); t += 3) std::swap(data.indices[t + 1], data.indices[t + 2]);
-    tinygltf::Primitive prim;
-    prim.mode = TINYGLTF_MODE_TRIANGLES;
-    prim.material = in_prim.material;
-    if (prim.material < 0) {
-      if (default_material < 0) {
-        tinygltf::Material mat;
-        mat.name = "hemibake default";
-        mat.extensions["KHR_materials_unlit"] = Value(Value::Object());
-        out.materials.push_back(mat);
-        default_material = static_cast<int>(out.materials.size()) - 1;
-      }
-      prim.material = default_material;
-    }
-    const bool small = data.vertex_count() <= 65535;
-    if (options.draco) {
-      DracoSettings ds;
-      ds.position_bits = options.position_bits;
-      ds.texcoord_bits = options.texcoord_bits;
-      ds.encode_speed = options.encode_speed;
-      ds.decode_speed = options.decode_speed;
-      DracoEncoded enc;
-      if (std::string e = draco_encode(data, ds, enc); !e.empty()) {
-        result.error = e;
-        return result;
-      }
-      used_draco = true;
-      const PrimitiveData& d = enc.decoded;
-      const int view = add_view(out, enc.bytes.data(), enc.bytes.size());
-      std::vector<double> lo, hi;
-      position_bounds(d.positions, lo, hi);
-      const size_t n = d.vertex_count();
-      prim.attributes["POSITION"] = add_accessor(out, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, n, false, lo, hi);
-      Value::Object attrs;
-      attrs["POSITION"] = Value(enc.position_id);
-      if (enc.texcoord_id >= 0) {
-        prim.attributes["TEXCOORD_0"] = add_accessor(out, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC2, n);
-        attrs["TEXCOORD_0"] = Value(enc.texcoord_id);
-      }
-      prim.attributes["COLOR_0"] = add_accessor(out, -1, TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT, TINYGLTF_TYPE_VEC3, n, true);
-      attrs["COLOR_0"] = Value(enc.color_id);
-      prim.attributes["_RADIOSITY"] = add_accessor(out, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, n);
-      attrs["_RADIOSITY"] = Value(enc.radiosity_id);
-      prim.indices = add_accessor(out, -1,
-                                  n <= 65535 ? TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT : TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT,
-                                  TINYGLTF_TYPE_SCALAR, d.indices.size());
-      Value::Object ext;
-      ext["bufferView"] = Value(view);
-      ext["attributes"] = Value(attrs);
-      prim.extensions["KHR_draco_mesh_compression"] = Value(ext);
-    } else {
-      const size_t n = data.vertex_count();
-      std::vector<double> lo, hi;
-      position_bounds(data.positions, lo, hi);
-      prim.attributes["POSITION"] = add_accessor(
-          out, add_view(out, data.positions.data(), data.positions.size() * 4, TINYGLTF_TARGET_ARRAY_BUFFER),
-          TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, n, false, lo, hi);
-      if (!data.texcoords.empty())
-        prim.attributes["TEXCOORD_0"] = add_accessor(
-            out, add_view(out, data.texcoords.data(), data.texcoords.size() * 4, TINYGLTF_TARGET_ARRAY_BUFFER),
-            TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC2, n);
-      // Vertex attribute elements must start on 4-byte boundaries: three shorts take a stride of 8.
-      std::vector<uint16_t> colors(n * 4, 0);
-      for (size_t i = 0; i < n; ++i)
-        for (int k = 0; k < 3; ++k) colors[i * 4 + k] = data.colors[i * 3 + k];
-      prim.attributes["COLOR_0"] = add_accessor(
-          out, add_view(out, colors.data(), colors.size() * 2, TINYGLTF_TARGET_ARRAY_BUFFER, 8),
-          TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT, TINYGLTF_TYPE_VEC3, n, true);
-      prim.attributes["_RADIOSITY"] = add_accessor(
-          out, add_view(out, data.radiosity.data(), data.radiosity.size() * 4, TINYGLTF_TARGET_ARRAY_BUFFER),
-          TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, n);
-      if (small) {
-        std::vector<uint16_t> idx(data.indices.begin(), data.indices.end());
-        prim.indices = add_accessor(out, add_view(out, idx.data(), idx.size() * 2, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER),
-                                    TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT, TINYGLTF_TYPE_SCALAR, idx.size());
-      } else {
-        prim.indices = add_accessor(
-            out, add_view(out, data.indices.data(), data.indices.size() * 4, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER),
-            TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT, TINYGLTF_TYPE_SCALAR, data.indices.size());
-      }
-    }
-    auto [it, fresh] = node_mesh.try_emplace(node_index, static_cast<int>(out.meshes.size()));
-    if (fresh) {
-      tinygltf::Mesh m;
-      m.name = in.meshes[node.mesh].name;
-      out.meshes.push_back(m);
-      out.nodes[node_index].mesh = it->second;
-    }
-    out.meshes[it->second].primitives.push_back(prim);
+// Plain accessors, each on a bufferView of its own.
+void add_plain_attributes(const PrimitiveData& data, tinygltf::Model& out, tinygltf::Primitive& prim) {
+  const size_t n = data.vertex_count();
+  std::vector<double> lo, hi;
+  position_bounds(data.positions, lo, hi);
+  prim.attributes["POSITION"] = add_accessor(
+      out, add_view(out, data.positions.data(), data.positions.size() * 4, TINYGLTF_TARGET_ARRAY_BUFFER),
+      TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, n, false, lo, hi);
+  if (!data.texcoords.empty())
+    prim.attributes["TEXCOORD_0"] = add_accessor(
+        out, add_view(out, data.texcoords.data(), data.texcoords.size() * 4, TINYGLTF_TARGET_ARRAY_BUFFER),
+        TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC2, n);
+  // Vertex attribute elements must start on 4-byte boundaries: three shorts take a stride of 8.
+  std::vector<uint16_t> colors(n * 4, 0);
+  for (size_t i = 0; i < n; ++i)
+    for (int k = 0; k < 3; ++k) colors[i * 4 + k] = data.colors[i * 3 + k];
+  prim.attributes["COLOR_0"] = add_accessor(
+      out, add_view(out, colors.data(), colors.size() * 2, TINYGLTF_TARGET_ARRAY_BUFFER, 8),
+      TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT, TINYGLTF_TYPE_VEC3, n, true);
+  prim.attributes["_RADIOSITY"] = add_accessor(
+      out, add_view(out, data.radiosity.data(), data.radiosity.size() * 4, TINYGLTF_TARGET_ARRAY_BUFFER),
+      TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, n);
+  if (n <= 65535) {
+    std::vector<uint16_t> idx(data.indices.begin(), data.indices.end());
+    prim.indices = add_accessor(out, add_view(out, idx.data(), idx.size() * 2, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER),
+                                TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT, TINYGLTF_TYPE_SCALAR, idx.size());
+  } else {
+    prim.indices = add_accessor(
+        out, add_view(out, data.indices.data(), data.indices.size() * 4, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER),
+        TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT, TINYGLTF_TYPE_SCALAR, data.indices.size());
   }
-  out.buffers[0].data.resize((out.buffers[0].data.size() + 3) & ~size_t{3}, 0);
+}
 
-  // Extensions: what the copied materials and textures use, and ours.
+// Extensions: what the copied materials and textures use, and ours.
+void declare_extensions(const tinygltf::Model& in, bool used_draco, tinygltf::Model& out) {
   for (const std::string& e : in.extensionsUsed)
     if (e == "KHR_texture_transform") out.extensionsUsed.push_back(e);
   out.extensionsUsed.push_back("KHR_materials_unlit");
@@ -403,8 +418,10 @@ WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, 
   }
   for (const std::string& e : in.extensionsRequired)
     if (e == "KHR_texture_transform") out.extensionsRequired.push_back(e);
+}
 
-  // How it was made.
+// How it was made: asset.extras.hemibake.
+Value bake_record(Method method, const solver::Params& params, const solver::Stats& stats, double exposure) {
   Value::Object p;
   p["method"] = Value(std::string(to_string(method)));
   p["resolution"] = Value(static_cast<int>(params.resolution));
@@ -426,7 +443,51 @@ WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, 
   h["statistics"] = Value(s);
   Value::Object extras;
   extras["hemibake"] = Value(h);
-  out.asset.extras = Value(extras);
+  return Value(extras);
+}
+
+}  // namespace
+
+WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, Method method, const solver::Params& params,
+                            const solver::Stats& stats, const WriteOptions& options) {
+  WriteResult result;
+  if (!mesh_belongs(doc, mesh)) {
+    result.error = "the mesh does not belong to this scene";
+    return result;
+  }
+  result.exposure = options.exposure > 0.0 ? options.exposure : automatic_exposure(doc, mesh);
+  tinygltf::Model out = copy_structure(doc);
+  int default_material = -1;
+  bool used_draco = false;
+  std::map<uint32_t, int> node_mesh;  // node -> new mesh
+  for (const auto& [key, elements] : group_elements(doc, mesh)) {
+    const auto [node_index, prim_index, back] = key;
+    const tinygltf::Node& node = doc.model.nodes[node_index];
+    const PrimitiveData data = primitive_triangles(doc, mesh, elements, node_index, result.exposure);
+    tinygltf::Primitive prim;
+    prim.mode = TINYGLTF_MODE_TRIANGLES;
+    prim.material = output_material(doc.model.meshes[node.mesh].primitives[prim_index].material, out, default_material);
+    if (options.draco) {
+      if (std::string e = add_draco_attributes(data, options, out, prim); !e.empty()) {
+        result.error = e;
+        return result;
+      }
+      used_draco = true;
+    } else {
+      add_plain_attributes(data, out, prim);
+    }
+    auto [it, fresh] = node_mesh.try_emplace(node_index, static_cast<int>(out.meshes.size()));
+    if (fresh) {
+      tinygltf::Mesh m;
+      m.name = doc.model.meshes[node.mesh].name;
+      out.meshes.push_back(m);
+      out.nodes[node_index].mesh = it->second;
+    }
+    out.meshes[it->second].primitives.push_back(prim);
+  }
+  out.buffers[0].data.resize((out.buffers[0].data.size() + 3) & ~size_t{3}, 0);
+  declare_extensions(doc.model, used_draco, out);
+  out.asset.extras = bake_record(method, params, stats, result.exposure);
 
   std::ostringstream stream;
   tinygltf::TinyGLTF writer;

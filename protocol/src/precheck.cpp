@@ -123,49 +123,44 @@ std::string check_uri(const json& v, const std::string& what, bool allow_externa
   return {};
 }
 
-}  // namespace
-
-std::string precheck_gltf(std::span<const uint8_t> bytes, bool allow_external, PrecheckResult& out) {
-  std::string_view text;
-  std::span<const uint8_t> bin;
-  const bool glb = bytes.size() >= 4 && std::memcmp(bytes.data(), "glTF", 4) == 0;
-  if (glb) {
-    if (bytes.size() < 20) return "the GLB file is truncated (no JSON chunk)";
-    const uint32_t version = u32(bytes.data() + 4), length = u32(bytes.data() + 8);
-    if (version != 2) return "the GLB container is version " + std::to_string(version) + "; only version 2 exists";
-    if (length != bytes.size())
-      return "the GLB header says " + std::to_string(length) + " bytes but the file has " + std::to_string(bytes.size());
-    const uint32_t json_len = u32(bytes.data() + 12), json_type = u32(bytes.data() + 16);
-    if (json_type != 0x4E4F534Au) return "the GLB's first chunk is not JSON";
-    if (json_len > bytes.size() - 20) return "the GLB's JSON chunk runs past the end of the file";
-    text = std::string_view(reinterpret_cast<const char*>(bytes.data() + 20), json_len);
-    const size_t bin_at = 20 + static_cast<size_t>(json_len);
-    if (bin_at < bytes.size()) {
-      if (bytes.size() - bin_at < 8) return "the GLB's second chunk is truncated";
-      const uint32_t bin_len = u32(bytes.data() + bin_at), bin_type = u32(bytes.data() + bin_at + 4);
-      if (bin_len > bytes.size() - bin_at - 8) return "the GLB's BIN chunk runs past the end of the file";
-      if (bin_type == 0x004E4942u) bin = bytes.subspan(bin_at + 8, bin_len);
-    }
-  } else {
+// The JSON text of a GLB (glTF 2.0, section 4.4) and its BIN chunk, if any; or the whole file as
+// JSON. Every length is checked against the file: tinygltf reads the BIN chunk up to 8 bytes past
+// the end.
+std::string split_container(std::span<const uint8_t> bytes, bool glb, std::string_view& text,
+                            std::span<const uint8_t>& bin) {
+  if (!glb) {
     text = std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+    return {};
   }
-  if (nesting_depth(text) > kMaxDepth) return "the JSON is nested more than " + std::to_string(kMaxDepth) + " levels deep";
-  const json j = json::parse(text.begin(), text.end(), nullptr, false);
-  if (j.is_discarded()) return "the JSON cannot be parsed";
-  if (!j.is_object()) return "the JSON is not an object";
+  if (bytes.size() < 20) return "the GLB file is truncated (no JSON chunk)";
+  const uint32_t version = u32(bytes.data() + 4), length = u32(bytes.data() + 8);
+  if (version != 2) return "the GLB container is version " + std::to_string(version) + "; only version 2 exists";
+  if (length != bytes.size())
+    return "the GLB header says " + std::to_string(length) + " bytes but the file has " + std::to_string(bytes.size());
+  const uint32_t json_len = u32(bytes.data() + 12), json_type = u32(bytes.data() + 16);
+  if (json_type != 0x4E4F534Au) return "the GLB's first chunk is not JSON";
+  if (json_len > bytes.size() - 20) return "the GLB's JSON chunk runs past the end of the file";
+  text = std::string_view(reinterpret_cast<const char*>(bytes.data() + 20), json_len);
+  const size_t bin_at = 20 + static_cast<size_t>(json_len);
+  if (bin_at >= bytes.size()) return {};
+  if (bytes.size() - bin_at < 8) return "the GLB's second chunk is truncated";
+  const uint32_t bin_len = u32(bytes.data() + bin_at), bin_type = u32(bytes.data() + bin_at + 4);
+  if (bin_len > bytes.size() - bin_at - 8) return "the GLB's BIN chunk runs past the end of the file";
+  if (bin_type == 0x004E4942u) bin = bytes.subspan(bin_at + 8, bin_len);
+  return {};
+}
 
-  Checker c{j, {}};
-  for (const char* a : {"nodes", "meshes", "accessors", "bufferViews", "buffers", "scenes", "images", "materials",
-                        "textures", "samplers", "cameras", "skins", "animations"})
-    if (!c.array_of_objects(a)) return shorten(c.error);
-  const size_t nodes = c.count("nodes"), meshes = c.count("meshes"), accessors = c.count("accessors");
-  const size_t views = c.count("bufferViews"), buffers = c.count("buffers"), images = c.count("images");
-  const size_t materials = c.count("materials"), textures = c.count("textures");
+// How many of each top-level object there are (the arrays are checked to hold objects first).
+struct Counts {
+  size_t nodes, meshes, accessors, views, buffers, images, materials, textures, scenes;
+};
 
-  // Buffers: external files only where allowed; declared sizes.
-  std::vector<uint64_t> buffer_length(buffers, 0);
-  for (size_t i = 0; i < buffers; ++i) {
-    const json& b = j["buffers"][i];
+// Buffers: external files only where allowed; declared sizes, which bufferViews are checked against.
+std::string check_buffers(Checker& c, bool glb, std::span<const uint8_t> bin, bool allow_external, const Counts& n,
+                          std::vector<uint64_t>& buffer_length) {
+  buffer_length.assign(n.buffers, 0);
+  for (size_t i = 0; i < n.buffers; ++i) {
+    const json& b = c.j["buffers"][i];
     const std::string what = "buffer " + std::to_string(i);
     if (!c.non_negative(b, "byteLength", what)) return shorten(c.error);
     buffer_length[i] = b.value("byteLength", uint64_t{0});
@@ -177,18 +172,26 @@ std::string precheck_gltf(std::span<const uint8_t> bytes, bool allow_external, P
       return what + " declares " + std::to_string(buffer_length[i]) + " bytes but the BIN chunk has " + std::to_string(bin.size());
     }
   }
-  for (size_t i = 0; i < images; ++i) {
-    const json& im = j["images"][i];
+  return {};
+}
+
+std::string check_images(Checker& c, bool allow_external, const Counts& n) {
+  for (size_t i = 0; i < n.images; ++i) {
+    const json& im = c.j["images"][i];
     const std::string what = "image " + std::to_string(i);
-    if (!c.index(im, "bufferView", views, what, "bufferView")) return shorten(c.error);
+    if (!c.index(im, "bufferView", n.views, what, "bufferView")) return shorten(c.error);
     if (im.contains("uri"))
       if (std::string e = check_uri(im["uri"], what, allow_external); !e.empty()) return e;
   }
-  for (size_t i = 0; i < views; ++i) {
-    const json& v = j["bufferViews"][i];
+  return {};
+}
+
+std::string check_buffer_views(Checker& c, const Counts& n, const std::vector<uint64_t>& buffer_length) {
+  for (size_t i = 0; i < n.views; ++i) {
+    const json& v = c.j["bufferViews"][i];
     const std::string what = "bufferView " + std::to_string(i);
     if (!v.contains("buffer")) return what + " has no buffer";
-    if (!c.index(v, "buffer", buffers, what, "buffer") || !c.non_negative(v, "byteOffset", what) ||
+    if (!c.index(v, "buffer", n.buffers, what, "buffer") || !c.non_negative(v, "byteOffset", what) ||
         !c.non_negative(v, "byteLength", what) || !c.non_negative(v, "byteStride", what))
       return shorten(c.error);
     const uint64_t off = v.value("byteOffset", uint64_t{0}), len = v.value("byteLength", uint64_t{0});
@@ -197,131 +200,194 @@ std::string precheck_gltf(std::span<const uint8_t> bytes, bool allow_external, P
       return what + " (offset " + std::to_string(off) + ", length " + std::to_string(len) + ") lies outside buffer " +
              std::to_string(v["buffer"].get<size_t>()) + " (" + std::to_string(blen) + " bytes)";
   }
-  for (size_t i = 0; i < accessors; ++i) {
-    const json& a = j["accessors"][i];
+  return {};
+}
+
+// tinygltf reads a sparse accessor's numbers as int: larger ones would wrap.
+std::string check_sparse(Checker& c, const json& sp, const std::string& what, const Counts& n) {
+  const std::string sw = what + ".sparse";
+  if (!sp.is_object() || !sp.contains("indices") || !sp.contains("values") || !sp["indices"].is_object() ||
+      !sp["values"].is_object())
+    return sw + " needs indices and values objects";
+  if (!c.non_negative(sp, "count", sw) || !c.index(sp["indices"], "bufferView", n.views, sw + ".indices", "bufferView") ||
+      !c.non_negative(sp["indices"], "byteOffset", sw + ".indices") ||
+      !c.index(sp["values"], "bufferView", n.views, sw + ".values", "bufferView") ||
+      !c.non_negative(sp["values"], "byteOffset", sw + ".values"))
+    return shorten(c.error);
+  for (const json* v : {&sp, &sp["indices"], &sp["values"]})
+    for (const char* key : {"count", "byteOffset"})
+      if (v->contains(key) && (*v)[key].get<uint64_t>() > 0x7fffffffu) return sw + " has a count or byteOffset too large";
+  return {};
+}
+
+std::string check_accessors(Checker& c, const Counts& n) {
+  for (size_t i = 0; i < n.accessors; ++i) {
+    const json& a = c.j["accessors"][i];
     const std::string what = "accessor " + std::to_string(i);
-    if (!c.index(a, "bufferView", views, what, "bufferView") || !c.non_negative(a, "byteOffset", what) ||
+    if (!c.index(a, "bufferView", n.views, what, "bufferView") || !c.non_negative(a, "byteOffset", what) ||
         !c.non_negative(a, "count", what))
       return shorten(c.error);
-    if (a.contains("sparse")) {
-      // tinygltf reads these as int: larger numbers would wrap.
-      const json& sp = a["sparse"];
-      const std::string sw = what + ".sparse";
-      if (!sp.is_object() || !sp.contains("indices") || !sp.contains("values") || !sp["indices"].is_object() ||
-          !sp["values"].is_object())
-        return sw + " needs indices and values objects";
-      if (!c.non_negative(sp, "count", sw) || !c.index(sp["indices"], "bufferView", views, sw + ".indices", "bufferView") ||
-          !c.non_negative(sp["indices"], "byteOffset", sw + ".indices") ||
-          !c.index(sp["values"], "bufferView", views, sw + ".values", "bufferView") ||
-          !c.non_negative(sp["values"], "byteOffset", sw + ".values"))
-        return shorten(c.error);
-      for (const json* v : {&sp, &sp["indices"], &sp["values"]})
-        for (const char* key : {"count", "byteOffset"})
-          if (v->contains(key) && (*v)[key].get<uint64_t>() > 0x7fffffffu) return sw + " has a count or byteOffset too large";
-    }
+    if (a.contains("sparse"))
+      if (std::string e = check_sparse(c, a["sparse"], what, n); !e.empty()) return e;
   }
-  for (size_t i = 0; i < textures; ++i)
-    if (!c.index(j["textures"][i], "source", images, "texture " + std::to_string(i), "image")) return shorten(c.error);
+  return {};
+}
 
-  // Meshes, and Draco data checked by decoding it here (tinygltf's decoding trusts the indices).
-  for (size_t m = 0; m < meshes; ++m) {
-    const json& mesh = j["meshes"][m];
+std::string check_textures(Checker& c, const Counts& n) {
+  for (size_t i = 0; i < n.textures; ++i)
+    if (!c.index(c.j["textures"][i], "source", n.images, "texture " + std::to_string(i), "image")) return shorten(c.error);
+  return {};
+}
+
+// A primitive's KHR_draco_mesh_compression, checked by decoding it here (tinygltf's decoding
+// trusts the indices). Only GLB BIN data can be decoded here; data-URI buffers are checked by
+// tinygltf's own base64 decoding first and by the ranges above.
+std::string check_draco(Checker& c, const json& prim, const std::string& what, bool glb, std::span<const uint8_t> bin,
+                        const Counts& n, PrecheckResult& out) {
+  const json& d = prim["extensions"]["KHR_draco_mesh_compression"];
+  const std::string dwhat = what + " KHR_draco_mesh_compression";
+  if (!d.is_object() || !d.contains("bufferView") || !d.contains("attributes") || !d["attributes"].is_object())
+    return dwhat + " needs a bufferView and attributes";
+  if (!c.index(d, "bufferView", n.views, dwhat, "bufferView")) return shorten(c.error);
+  if (!prim.contains("attributes")) return dwhat + ": the primitive has no attributes";
+  std::vector<uint32_t> ids;
+  for (const auto& [name, v] : d["attributes"].items()) {
+    if (!Checker::whole(v) || v.get<uint64_t>() > 1000000)
+      return dwhat + " attribute " + shorten(name) + " must be a Draco attribute id";
+    if (!prim["attributes"].contains(name)) return dwhat + " attribute " + shorten(name) + " is not an attribute of the primitive";
+    ids.push_back(v.get<uint32_t>());
+  }
+  const json& view = c.j["bufferViews"][d["bufferView"].get<size_t>()];
+  if (!(glb && view["buffer"].get<size_t>() == 0 && !c.j["buffers"][0].contains("uri"))) {
+    out.unchecked_draco = true;
+    return {};
+  }
+  const uint64_t off = view.value("byteOffset", uint64_t{0}), len = view.value("byteLength", uint64_t{0});
+  draco::DecoderBuffer buffer;
+  buffer.Init(reinterpret_cast<const char*>(bin.data() + off), len);
+  draco::Decoder decoder;
+  auto decoded = decoder.DecodeMeshFromBuffer(&buffer);
+  if (!decoded.ok()) return dwhat + ": the Draco data cannot be decoded (" + shorten(decoded.status().error_msg()) + ")";
+  for (uint32_t id : ids)
+    if (decoded.value()->GetAttributeByUniqueId(id) == nullptr)
+      return dwhat + ": Draco attribute id " + std::to_string(id) + " is not in the compressed data";
+  return {};
+}
+
+std::string check_primitive(Checker& c, const json& prim, const std::string& what, bool glb, std::span<const uint8_t> bin,
+                            const Counts& n, PrecheckResult& out) {
+  if (!prim.is_object()) return what + " must be an object";
+  if (!c.index(prim, "indices", n.accessors, what, "accessor") || !c.index(prim, "material", n.materials, what, "material") ||
+      !c.non_negative(prim, "mode", what))
+    return shorten(c.error);
+  if (prim.contains("attributes")) {
+    if (!prim["attributes"].is_object()) return what + ".attributes must be an object";
+    for (const auto& [name, v] : prim["attributes"].items())
+      if (!Checker::whole(v) || v.get<uint64_t>() >= n.accessors)
+        return what + " attribute " + shorten(name) + " refers to accessor " + shorten(v.dump()) + ", which does not exist";
+  }
+  if (!prim.contains("extensions") || !prim["extensions"].is_object() ||
+      !prim["extensions"].contains("KHR_draco_mesh_compression"))
+    return {};
+  return check_draco(c, prim, what, glb, bin, n, out);
+}
+
+std::string check_meshes(Checker& c, bool glb, std::span<const uint8_t> bin, const Counts& n, PrecheckResult& out) {
+  for (size_t m = 0; m < n.meshes; ++m) {
+    const json& mesh = c.j["meshes"][m];
     if (!mesh.contains("primitives") || !mesh["primitives"].is_array()) return "mesh " + std::to_string(m) + " has no primitives array";
     for (size_t p = 0; p < mesh["primitives"].size(); ++p) {
-      const json& prim = mesh["primitives"][p];
       const std::string what = "mesh " + std::to_string(m) + " primitive " + std::to_string(p);
-      if (!prim.is_object()) return what + " must be an object";
-      if (!c.index(prim, "indices", accessors, what, "accessor") || !c.index(prim, "material", materials, what, "material") ||
-          !c.non_negative(prim, "mode", what))
-        return shorten(c.error);
-      if (prim.contains("attributes")) {
-        if (!prim["attributes"].is_object()) return what + ".attributes must be an object";
-        for (const auto& [name, v] : prim["attributes"].items())
-          if (!Checker::whole(v) || v.get<uint64_t>() >= accessors)
-            return what + " attribute " + shorten(name) + " refers to accessor " + shorten(v.dump()) + ", which does not exist";
-      }
-      if (!prim.contains("extensions") || !prim["extensions"].is_object() ||
-          !prim["extensions"].contains("KHR_draco_mesh_compression"))
-        continue;
-      const json& d = prim["extensions"]["KHR_draco_mesh_compression"];
-      const std::string dwhat = what + " KHR_draco_mesh_compression";
-      if (!d.is_object() || !d.contains("bufferView") || !d.contains("attributes") || !d["attributes"].is_object())
-        return dwhat + " needs a bufferView and attributes";
-      if (!c.index(d, "bufferView", views, dwhat, "bufferView")) return shorten(c.error);
-      if (!prim.contains("attributes")) return dwhat + ": the primitive has no attributes";
-      std::vector<uint32_t> ids;
-      for (const auto& [name, v] : d["attributes"].items()) {
-        if (!Checker::whole(v) || v.get<uint64_t>() > 1000000)
-          return dwhat + " attribute " + shorten(name) + " must be a Draco attribute id";
-        if (!prim["attributes"].contains(name)) return dwhat + " attribute " + shorten(name) + " is not an attribute of the primitive";
-        ids.push_back(v.get<uint32_t>());
-      }
-      // Only GLB BIN data can be decoded here; data-URI buffers are checked by tinygltf's own
-      // base64 decoding first and by the ranges above.
-      const json& view = j["bufferViews"][d["bufferView"].get<size_t>()];
-      if (!(glb && view["buffer"].get<size_t>() == 0 && !j["buffers"][0].contains("uri"))) {
-        out.unchecked_draco = true;
-        continue;
-      }
-      const uint64_t off = view.value("byteOffset", uint64_t{0}), len = view.value("byteLength", uint64_t{0});
-      draco::DecoderBuffer buffer;
-      buffer.Init(reinterpret_cast<const char*>(bin.data() + off), len);
-      draco::Decoder decoder;
-      auto decoded = decoder.DecodeMeshFromBuffer(&buffer);
-      if (!decoded.ok()) return dwhat + ": the Draco data cannot be decoded (" + shorten(decoded.status().error_msg()) + ")";
-      for (uint32_t id : ids)
-        if (decoded.value()->GetAttributeByUniqueId(id) == nullptr)
-          return dwhat + ": Draco attribute id " + std::to_string(id) + " is not in the compressed data";
+      if (std::string e = check_primitive(c, mesh["primitives"][p], what, glb, bin, n, out); !e.empty()) return e;
     }
   }
+  return {};
+}
 
-  // Scenes and the node graph: valid references, no cycles anywhere (not just in the scene used).
-  for (size_t i = 0; i < nodes; ++i) {
-    const json& n = j["nodes"][i];
+std::string check_nodes(Checker& c, const Counts& n) {
+  for (size_t i = 0; i < n.nodes; ++i) {
+    const json& node = c.j["nodes"][i];
     const std::string what = "node " + std::to_string(i);
-    if (!c.index(n, "mesh", meshes, what, "mesh")) return shorten(c.error);
-    if (n.contains("children")) {
-      if (!n["children"].is_array()) return what + ".children must be an array";
-      for (const json& ch : n["children"])
-        if (!Checker::whole(ch) || ch.get<uint64_t>() >= nodes)
-          return what + " has child " + shorten(ch.dump()) + ", which is not an existing node";
-    }
+    if (!c.index(node, "mesh", n.meshes, what, "mesh")) return shorten(c.error);
+    if (!node.contains("children")) continue;
+    if (!node["children"].is_array()) return what + ".children must be an array";
+    for (const json& ch : node["children"])
+      if (!Checker::whole(ch) || ch.get<uint64_t>() >= n.nodes)
+        return what + " has child " + shorten(ch.dump()) + ", which is not an existing node";
   }
-  {
-    // Iterative depth-first search with colours: 0 unvisited, 1 on the path, 2 done.
-    std::vector<uint8_t> colour(nodes, 0);
-    for (size_t start = 0; start < nodes; ++start) {
-      if (colour[start]) continue;
-      std::vector<std::pair<size_t, size_t>> stack{{start, 0}};
-      colour[start] = 1;
-      while (!stack.empty()) {
-        auto& [n, k] = stack.back();
-        const json& ch = j["nodes"][n].contains("children") ? j["nodes"][n]["children"] : json::array();
-        if (k < ch.size()) {
-          const size_t next = ch[k++].get<size_t>();
-          if (colour[next] == 1) return "node " + std::to_string(next) + " is its own ancestor (the node hierarchy has a cycle)";
-          if (colour[next] == 0) {
-            colour[next] = 1;
-            stack.emplace_back(next, 0);
-          }
-        } else {
-          colour[n] = 2;
-          stack.pop_back();
-        }
+  return {};
+}
+
+// No cycles anywhere in the node graph, not just in the scene used: an iterative depth-first
+// search with colours (0 unvisited, 1 on the path, 2 done).
+std::string check_cycles(const json& j, size_t nodes) {
+  std::vector<uint8_t> colour(nodes, 0);
+  for (size_t start = 0; start < nodes; ++start) {
+    if (colour[start]) continue;
+    std::vector<std::pair<size_t, size_t>> stack{{start, 0}};
+    colour[start] = 1;
+    while (!stack.empty()) {
+      auto& [n, k] = stack.back();
+      const json& ch = j["nodes"][n].contains("children") ? j["nodes"][n]["children"] : json::array();
+      if (k >= ch.size()) {
+        colour[n] = 2;
+        stack.pop_back();
+        continue;
+      }
+      const size_t next = ch[k++].get<size_t>();
+      if (colour[next] == 1) return "node " + std::to_string(next) + " is its own ancestor (the node hierarchy has a cycle)";
+      if (colour[next] == 0) {
+        colour[next] = 1;
+        stack.emplace_back(next, 0);
       }
     }
   }
-  for (size_t s = 0; s < c.count("scenes"); ++s) {
+  return {};
+}
+
+std::string check_scenes(const json& j, const Counts& n) {
+  for (size_t s = 0; s < n.scenes; ++s) {
     const json& sc = j["scenes"][s];
     if (!sc.contains("nodes")) continue;
     if (!sc["nodes"].is_array()) return "scene " + std::to_string(s) + ".nodes must be an array";
-    for (const json& n : sc["nodes"])
-      if (!Checker::whole(n) || n.get<uint64_t>() >= nodes)
-        return "scene " + std::to_string(s) + " refers to node " + shorten(n.dump()) + ", which does not exist";
+    for (const json& node : sc["nodes"])
+      if (!Checker::whole(node) || node.get<uint64_t>() >= n.nodes)
+        return "scene " + std::to_string(s) + " refers to node " + shorten(node.dump()) + ", which does not exist";
   }
-  if (j.contains("scene") && (!Checker::whole(j["scene"]) || j["scene"].get<uint64_t>() >= c.count("scenes")))
+  if (j.contains("scene") && (!Checker::whole(j["scene"]) || j["scene"].get<uint64_t>() >= n.scenes))
     return "the default scene " + shorten(j["scene"].dump()) + " does not exist";
   return {};
+}
+
+}  // namespace
+
+std::string precheck_gltf(std::span<const uint8_t> bytes, bool allow_external, PrecheckResult& out) {
+  const bool glb = bytes.size() >= 4 && std::memcmp(bytes.data(), "glTF", 4) == 0;
+  std::string_view text;
+  std::span<const uint8_t> bin;
+  if (std::string e = split_container(bytes, glb, text, bin); !e.empty()) return e;
+  if (nesting_depth(text) > kMaxDepth) return "the JSON is nested more than " + std::to_string(kMaxDepth) + " levels deep";
+  const json j = json::parse(text.begin(), text.end(), nullptr, false);
+  if (j.is_discarded()) return "the JSON cannot be parsed";
+  if (!j.is_object()) return "the JSON is not an object";
+
+  Checker c{j, {}};
+  for (const char* a : {"nodes", "meshes", "accessors", "bufferViews", "buffers", "scenes", "images", "materials",
+                        "textures", "samplers", "cameras", "skins", "animations"})
+    if (!c.array_of_objects(a)) return shorten(c.error);
+  const Counts n{c.count("nodes"),   c.count("meshes"), c.count("accessors"), c.count("bufferViews"), c.count("buffers"),
+                 c.count("images"), c.count("materials"), c.count("textures"), c.count("scenes")};
+  std::vector<uint64_t> buffer_length;
+  // In the order of references: what a check reads has been checked before it.
+  if (std::string e = check_buffers(c, glb, bin, allow_external, n, buffer_length); !e.empty()) return e;
+  if (std::string e = check_images(c, allow_external, n); !e.empty()) return e;
+  if (std::string e = check_buffer_views(c, n, buffer_length); !e.empty()) return e;
+  if (std::string e = check_accessors(c, n); !e.empty()) return e;
+  if (std::string e = check_textures(c, n); !e.empty()) return e;
+  if (std::string e = check_meshes(c, glb, bin, n, out); !e.empty()) return e;
+  if (std::string e = check_nodes(c, n); !e.empty()) return e;
+  if (std::string e = check_cycles(j, n.nodes); !e.empty()) return e;
+  return check_scenes(j, n);
 }
 
 }  // namespace hemibake::protocol
