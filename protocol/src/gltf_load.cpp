@@ -303,7 +303,14 @@ std::string read_texcoords(const tinygltf::Model& m, const tinygltf::Primitive& 
   if (uv.components != 2 || uv.count != v.count)
     return "accessor " + std::to_string(it->second) + " (" + name + " of " + where + ") must be VEC2 with one element per vertex";
   uvs.resize(v.used.size());
-  for (size_t k = 0; k < v.used.size(); ++k) uvs[k] = glm::dvec2(read_component(uv, v.used[k], 0), read_component(uv, v.used[k], 1));
+  for (size_t k = 0; k < v.used.size(); ++k) {
+    uvs[k] = glm::dvec2(read_component(uv, v.used[k], 0), read_component(uv, v.used[k], 1));
+    // A NaN or infinite coordinate has no texel to average, and Draco's quantization of the
+    // output's TEXCOORD_0 crashed on one.
+    if (!std::isfinite(uvs[k].x) || !std::isfinite(uvs[k].y))
+      return "accessor " + std::to_string(it->second) + " (" + name + " of " + where + ") has a non-finite value at element " +
+             std::to_string(v.used[k]);
+  }
   return {};
 }
 

@@ -30,6 +30,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <cstring>
 #include <string>
 #include <vector>
@@ -957,6 +958,24 @@ TEST(TexcoordFeature, OutputUvsInterpolateTheInputUvsOverSubdividedElements) {
       ASSERT_NEAR(p.uv[i].x, p.positions[i].x / 2.0, tol) << "vertex " << i;
       ASSERT_NEAR(p.uv[i].y, p.positions[i].z / 2.0, tol) << "vertex " << i;
     }
+  }
+}
+
+// A texture coordinate that is not a finite number is refused with the accessor that holds it (the
+// Draco encoder crashed on such a file, exported from Blender and damaged), plain or Draco alike.
+TEST(TexcoordFeature, NonFiniteTexcoordsAreRefusedByAccessor) {
+  for (const double bad : {std::nan(""), std::numeric_limits<double>::infinity()}) {
+    Doc d;
+    const int floor_mat = d.material(plain_material(V(0.6)));
+    const int lamp = d.material(lamp_material(V(4.0)));
+    const std::vector<V> corners = {V(0, 0, 0), V(0, 0, 2), V(2, 0, 2), V(2, 0, 0)};
+    const std::vector<UV> uv = {UV(0, 0), UV(0, 1), UV(bad, 1), UV(1, 0)};
+    d.quad_node(corners, floor_mat, {{"name", "floor"}}, uv);
+    d.quad_node(rect(0.6, 1.4, 0.6, 1.4, 0.3, false), lamp, {{"name", "lamp"}});
+    const LoadResult r = load_gltf_memory(d.gltf_bytes(), ".");
+    EXPECT_FALSE(r.document);
+    EXPECT_NE(r.error.find("TEXCOORD_0"), std::string::npos) << r.error;
+    EXPECT_NE(r.error.find("non-finite value at element 2"), std::string::npos) << r.error;
   }
 }
 
