@@ -48,6 +48,20 @@ const std::string& openapi_document() {
   return text;
 }
 
+// `text` as an HTTP quoted-string (RFC 9110, section 5.6.4) for a header value. The text comes from
+// the uploaded file (material names in warnings): a CR or LF copied through would end the header and
+// let the file add headers or a whole response, so control characters and bytes outside ASCII
+// become '?', and quotes and backslashes are escaped.
+std::string quoted_string(const std::string& text) {
+  std::string out = "\"";
+  for (const char ch : text) {
+    const auto c = static_cast<unsigned char>(ch);
+    if (c == '"' || c == '\\') out += '\\';
+    out += c < 0x20 || c >= 0x7f ? '?' : ch;
+  }
+  return out + "\"";
+}
+
 Response error(int status, const std::string& message) {
   Response r;
   r.status = status;
@@ -526,7 +540,11 @@ Response Service::submit(const Request& req, const std::string& query) {
   const auto key_it = req.headers.find("idempotency-key");
   const std::string idem = key_it == req.headers.end() ? "" : key_it->second;
   if (idem.size() > 200) return error(400, "the Idempotency-Key is longer than 200 characters");
-  if (idem.empty() && store_->count(JobState::kQueued) >= options_.max_queue) {
+  // A retry of an accepted submission gets its job even when the queue has filled since; any other
+  // submission counts against the queue, with a key or without (a fresh key per request used to
+  // skip the limit).
+  const bool retry = !idem.empty() && store_->find_idempotent(idem).has_value();
+  if (!retry && store_->count(JobState::kQueued) >= options_.max_queue) {
     Response r = error(429, "the queue is full (" + std::to_string(options_.max_queue) + " jobs); retry later");
     r.headers.emplace_back("Retry-After", "30");
     return r;
@@ -539,7 +557,7 @@ Response Service::submit(const Request& req, const std::string& query) {
   if (!rec) return error(500, "the job could not be read back");
   Response r = job_json(*rec, existed ? 200 : 202);
   r.headers.emplace_back("Location", "/v1/jobs/" + id);
-  for (const auto& w : loaded.warnings) r.headers.emplace_back("Warning", "199 hemibake \"" + w + "\"");
+  for (const auto& w : loaded.warnings) r.headers.emplace_back("Warning", "199 hemibake " + quoted_string(w));
   return r;
 }
 

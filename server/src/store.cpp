@@ -201,6 +201,14 @@ std::string Store::create(const std::string& scene, const std::string& content_t
   return id;
 }
 
+std::optional<std::string> Store::find_idempotent(const std::string& idempotency_key) {
+  std::lock_guard lock(mutex_);
+  Stmt s(db_, "SELECT id FROM jobs WHERE idempotency_key = ?");
+  s.text(1, idempotency_key);
+  if (s.row()) return s.col_text(0);
+  return std::nullopt;
+}
+
 std::optional<std::string> Store::find_cached(const std::string& cache_key) {
   std::lock_guard lock(mutex_);
   Stmt s(db_, "SELECT id FROM jobs WHERE cache_key = ? AND state = 'succeeded' ORDER BY finished DESC LIMIT 1");

@@ -306,7 +306,49 @@ TEST(Server, QueueLimitAnswers429WithRetryAfter) {
     }
   }
   EXPECT_GE(refused, 2);
+  // A fresh Idempotency-Key per request is no way past the limit (it used to be: with a limit of 2,
+  // 20 jobs with distinct keys were accepted); a retry of an accepted one still gets its job.
+  int refused_with_keys = 0;
+  std::string first_key;
+  for (int i = 0; i < 5; ++i) {
+    const std::string key = "key-" + std::to_string(i);
+    const Reply r = request(server.port(), http::verb::post,
+                            "/v1/jobs?convergence=0.000001&aeps=0.00002&max_shots=" + std::to_string(200000 + i), cornell(),
+                            {{"Content-Type", "model/gltf+json"}, {"Idempotency-Key", key}});
+    if (r.status == 429) {
+      ++refused_with_keys;
+    } else {
+      ASSERT_EQ(r.status, 202) << r.body;
+      ids.push_back(r.js()["id"]);
+      if (first_key.empty()) first_key = key;
+    }
+  }
+  EXPECT_GE(refused_with_keys, 3);
+  if (!first_key.empty()) {
+    const Reply again = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.3", cornell(),
+                                {{"Content-Type", "model/gltf+json"}, {"Idempotency-Key", first_key}});
+    EXPECT_EQ(again.status, 200) << again.body;
+  }
   for (const auto& id : ids) request(server.port(), http::verb::delete_, "/v1/jobs/" + id);
+}
+
+// A material name is copied into a Warning header as a quoted string: a name with CR LF cannot add
+// a header (a crafted file used to set a cookie this way).
+TEST(Server, WarningHeadersCannotBeSplitByMaterialNames) {
+  ServerProcess server(temp_dir("split"), {"--workers", "1"});
+  json scene = json::parse(cornell());
+  ASSERT_TRUE(scene.contains("materials"));
+  scene["materials"][0]["name"] = "wall\r\nSet-Cookie: stolen=1\r\n\r\nHTTP/1.1 200 OK";
+  scene["materials"][0]["alphaMode"] = "BLEND";  // baked opaque, with a warning naming the material
+  const Reply r = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.3", scene.dump(), kGltf);
+  ASSERT_EQ(r.status, 202) << r.body;
+  EXPECT_EQ(r.headers.count("set-cookie"), 0u);
+  ASSERT_TRUE(r.headers.count("warning"));
+  const std::string w = r.headers.at("warning");
+  EXPECT_EQ(w.find('\r'), std::string::npos);
+  EXPECT_EQ(w.find('\n'), std::string::npos);
+  EXPECT_NE(w.find("Set-Cookie: stolen=1"), std::string::npos) << w;  // kept, as text inside the quotes
+  request(server.port(), http::verb::delete_, "/v1/jobs/" + r.js()["id"].get<std::string>());
 }
 
 // An accepted job is never lost: SIGKILL while it runs, start again on the same data directory,

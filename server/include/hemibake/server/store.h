@@ -52,6 +52,8 @@ class Store {
   /// that already has this idempotency key (then `existed` is set).
   std::string create(const std::string& scene, const std::string& content_type, const std::string& params,
                      const std::string& cache_key, const std::string& idempotency_key, bool& existed);
+  /// The job that holds this idempotency key, if any.
+  std::optional<std::string> find_idempotent(const std::string& idempotency_key);
   /// The newest succeeded job with this cache key, if any.
   std::optional<std::string> find_cached(const std::string& cache_key);
   std::optional<JobRecord> get(const std::string& id);
