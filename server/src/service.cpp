@@ -24,6 +24,11 @@ namespace {
 
 using nlohmann::json;
 
+// Text from requests (ids, parameter names, content types quoted in messages) may be invalid
+// UTF-8, which json::dump refuses with an exception, and the request was answered 500. Such bytes
+// become U+FFFD instead.
+constexpr auto kReplaceInvalid = json::error_handler_t::replace;
+
 std::string sha256_hex(const std::string& data) {
   unsigned char digest[EVP_MAX_MD_SIZE];
   unsigned int len = 0;
@@ -43,7 +48,7 @@ const std::string& openapi_document() {
     json doc = json::parse(kOpenApi);
     auto& parameters = doc["paths"]["/v1/jobs"]["post"]["parameters"];
     for (const auto& p : json::parse(protocol::params_openapi_json())) parameters.push_back(p);
-    return doc.dump();
+    return doc.dump(-1, ' ', false, kReplaceInvalid);
   }();
   return text;
 }
@@ -65,7 +70,7 @@ std::string quoted_string(const std::string& text) {
 Response error(int status, const std::string& message) {
   Response r;
   r.status = status;
-  r.body = json{{"error", message}}.dump();
+  r.body = json{{"error", message}}.dump(-1, ' ', false, kReplaceInvalid);
   return r;
 }
 
@@ -347,14 +352,14 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
   } unregister{this, id};
   if (const auto rec = store_->get(id); rec && rec->state == JobState::kCancelled) {
     // Cancelled between the claim and the registration, when no token could be reached.
-    store_->add_event(id, "state", json{{"state", "cancelled"}}.dump());
+    store_->add_event(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
     return;
   }
-  store_->add_event(id, "state", json{{"state", "running"}}.dump());
+  store_->add_event(id, "state", json{{"state", "running"}}.dump(-1, ' ', false, kReplaceInvalid));
   protocol::JobSpec spec;
   if (std::string e = protocol::parse_params_json(params, spec); !e.empty()) {
     store_->fail(id, e);
-    store_->add_event(id, "state", json{{"state", "failed"}, {"error", e}}.dump());
+    store_->add_event(id, "state", json{{"state", "failed"}, {"error", e}}.dump(-1, ' ', false, kReplaceInvalid));
     return;
   }
   spec.params.threads = options_.solver_threads;
@@ -368,7 +373,7 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
       std::span(reinterpret_cast<const uint8_t*>(scene.data()), scene.size()), "", limits);
   if (!loaded.document) {
     store_->fail(id, loaded.error);
-    store_->add_event(id, "state", json{{"state", "failed"}, {"error", loaded.error}}.dump());
+    store_->add_event(id, "state", json{{"state", "failed"}, {"error", loaded.error}}.dump(-1, ' ', false, kReplaceInvalid));
     return;
   }
   bool over_budget = false;
@@ -400,22 +405,22 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
     if (over_budget) {
       const std::string e = "the bake exceeded its time budget of " + std::to_string(options_.job_seconds) + " s";
       store_->fail(id, e);
-      store_->add_event(id, "state", json{{"state", "failed"}, {"error", e}}.dump());
+      store_->add_event(id, "state", json{{"state", "failed"}, {"error", e}}.dump(-1, ' ', false, kReplaceInvalid));
     } else if (!running_) {
       store_->requeue(id);  // shutting down: the job runs again after the restart
     } else {
-      store_->add_event(id, "state", json{{"state", "cancelled"}}.dump());
+      store_->add_event(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
     }
     return;
   }
   if (!baked.error.empty()) {
     store_->fail(id, baked.error);
-    store_->add_event(id, "state", json{{"state", "failed"}, {"error", baked.error}}.dump());
+    store_->add_event(id, "state", json{{"state", "failed"}, {"error", baked.error}}.dump(-1, ' ', false, kReplaceInvalid));
     return;
   }
   const std::string glb(baked.glb.begin(), baked.glb.end());
   store_->succeed(id, glb, "\"" + sha256_hex(glb) + "\"");
-  store_->add_event(id, "state", json{{"state", "succeeded"}}.dump());
+  store_->add_event(id, "state", json{{"state", "succeeded"}}.dump(-1, ' ', false, kReplaceInvalid));
   std::lock_guard lock(metrics_mutex_);
   ++bakes_;
   bake_seconds_sum_ += seconds;
@@ -470,7 +475,7 @@ Response Service::job_json(const JobRecord& r, int status) {
   if (r.state == JobState::kSucceeded) j["result_bytes"] = r.result_bytes;
   Response resp;
   resp.status = status;
-  resp.body = j.dump();
+  resp.body = j.dump(-1, ' ', false, kReplaceInvalid);
   return resp;
 }
 
@@ -505,7 +510,7 @@ Response Service::submit(const Request& req, const std::string& query) {
       const json j = json::parse(p->second.second, nullptr, false);
       if (j.is_discarded() || !j.is_object()) return error(400, "the 'params' part must be a JSON object");
       for (const auto& [k, v] : j.items())
-        if (!values.count(k)) values[k] = v.is_string() ? v.get<std::string>() : v.dump();
+        if (!values.count(k)) values[k] = v.is_string() ? v.get<std::string>() : v.dump(-1, ' ', false, kReplaceInvalid);
     }
   } else if (media == "model/gltf-binary" || media == "model/gltf+json" || media == "application/octet-stream") {
     scene = req.body;
@@ -820,7 +825,7 @@ Response Service::route(const Request& req, const std::string& path, const std::
     if (jobs.size() == limit) body["next"] = "/v1/jobs?limit=" + std::to_string(limit) + "&after=" + jobs.back().id +
                                              (state ? std::string("&state=") + to_string(*state) : "");
     Response r;
-    r.body = body.dump();
+    r.body = body.dump(-1, ' ', false, kReplaceInvalid);
     return r;
   }
   const std::string prefix = "/v1/jobs/";
@@ -841,7 +846,7 @@ Response Service::route(const Request& req, const std::string& path, const std::
           std::lock_guard lock(mutex_);
           if (auto it = active_.find(id); it != active_.end()) it->second.token->cancel();
         }
-        if (rec->state == JobState::kQueued) store_->add_event(id, "state", json{{"state", "cancelled"}}.dump());
+        if (rec->state == JobState::kQueued) store_->add_event(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
         return job_json(*store_->get(id), 200);
       }
       return not_allowed("GET, HEAD, DELETE");

@@ -297,6 +297,21 @@ TEST(Handler, FullCheckQueueAnswers503WithRetryAfter) {
   EXPECT_EQ(checked + refused, 4);
 }
 
+// Bytes that are not UTF-8 in a path, a query or a Content-Type are named in a JSON error with the
+// status the request deserves (each was a 500: the JSON writer threw on them).
+TEST(Handler, InvalidUtf8InARequestGetsItsProperStatus) {
+  Fixture f;
+  const Response path = f.call("GET", "/v1/jobs/\xff\xfe");
+  EXPECT_EQ(path.status, 404);
+  EXPECT_TRUE(json::parse(path.body, nullptr, false).is_object()) << path.body;
+  const Response query = f.call("POST", "/v1/jobs?\xff=1", cornell(), {{"content-type", "model/gltf+json"}});
+  EXPECT_EQ(query.status, 400);
+  EXPECT_TRUE(json::parse(query.body, nullptr, false).is_object()) << query.body;
+  const Response type = f.call("POST", "/v1/jobs", cornell(), {{"content-type", "text/\xc3\x28"}});
+  EXPECT_EQ(type.status, 415);
+  EXPECT_TRUE(json::parse(type.body, nullptr, false).is_object()) << type.body;
+}
+
 TEST(Handler, QueryStringsDecode) {
   const auto q = parse_query("a=1&b=x%20y&c=&d&e=%2F%2f+z");
   EXPECT_EQ(q.at("a"), "1");
