@@ -182,11 +182,9 @@ std::string Store::create(const std::string& scene, const std::string& content_t
   std::lock_guard lock(mutex_);
   existed = false;
   if (!idempotency_key.empty()) {
-    Stmt s(db_, "SELECT id FROM jobs WHERE idempotency_key = ?");
-    s.text(1, idempotency_key);
-    if (s.row()) {
+    if (auto id = idempotent_locked(idempotency_key)) {
       existed = true;
-      return s.col_text(0);
+      return *id;
     }
   }
   const std::string id = new_id();
@@ -201,12 +199,16 @@ std::string Store::create(const std::string& scene, const std::string& content_t
   return id;
 }
 
-std::optional<std::string> Store::find_idempotent(const std::string& idempotency_key) {
-  std::lock_guard lock(mutex_);
+std::optional<std::string> Store::idempotent_locked(const std::string& idempotency_key) {
   Stmt s(db_, "SELECT id FROM jobs WHERE idempotency_key = ?");
   s.text(1, idempotency_key);
   if (s.row()) return s.col_text(0);
   return std::nullopt;
+}
+
+std::optional<std::string> Store::find_idempotent(const std::string& idempotency_key) {
+  std::lock_guard lock(mutex_);
+  return idempotent_locked(idempotency_key);
 }
 
 std::optional<std::string> Store::find_cached(const std::string& cache_key) {

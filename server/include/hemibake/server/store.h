@@ -80,6 +80,8 @@ class Store {
 
  private:
   Store(sqlite3* db, int lock_fd) : db_(db), lock_fd_(lock_fd) {}
+  /// find_idempotent's query, for callers that hold mutex_.
+  std::optional<std::string> idempotent_locked(const std::string& idempotency_key);
   sqlite3* db_;
   int lock_fd_;  ///< flock'ed: one server per data directory
   std::mutex mutex_;
