@@ -9,21 +9,50 @@
 #include <glm/geometric.hpp>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <numbers>
 #include <random>
 #include <thread>
 
 namespace hemibake::baselines {
 
+namespace {
+
+// twin[p] = the patch with p's corners facing the other way, or p when there is none.
+void find_twins(const solver::Scene& scene, const std::vector<glm::dvec3>& normal, std::vector<uint32_t>& twin) {
+  std::map<std::vector<double>, std::vector<uint32_t>> by_corners;
+  for (uint32_t p = 0; p < scene.patches.size(); ++p) {
+    const auto& patch = scene.patches[p];
+    std::vector<std::array<double, 3>> c;
+    for (uint32_t k = 0; k < patch.corner_count; ++k) c.push_back({patch.corners[k].x, patch.corners[k].y, patch.corners[k].z});
+    std::sort(c.begin(), c.end());
+    std::vector<double> key;
+    for (const auto& v : c) key.insert(key.end(), v.begin(), v.end());
+    by_corners[key].push_back(p);
+  }
+  twin.resize(scene.patches.size());
+  for (uint32_t p = 0; p < twin.size(); ++p) twin[p] = p;
+  for (const auto& [key, list] : by_corners)
+    for (uint32_t a : list)
+      for (uint32_t b : list)
+        if (glm::dot(normal[a], normal[b]) < 0.0) twin[a] = b;
+}
+
+}  // namespace
+
 struct Reference::Impl {
   RTCDevice device = nullptr;
   RTCScene scene = nullptr;
   std::vector<uint32_t> tri_patch;  // triangle -> patch
   std::vector<glm::dvec3> normal;   // per patch
+  // A double-sided surface is two patches on the same corners facing apart; a ray meets both at
+  // one distance and Embree may report either. twin[q] is q's other side (or q itself).
+  std::vector<uint32_t> twin;
   const solver::Scene* input = nullptr;
   double eps = 1e-6;
   // Emitting triangles: corners, patch, and the cumulative distribution of their emitted power.
@@ -68,6 +97,7 @@ Reference::Reference(const solver::Scene& scene) : impl_(std::make_unique<Impl>(
     s.normal.push_back(glm::normalize(n));
   }
   s.eps = 1e-5 * glm::length(hi - lo);
+  find_twins(scene, s.normal, s.twin);
   RTCGeometry geom = rtcNewGeometry(s.device, RTC_GEOMETRY_TYPE_TRIANGLE);
   auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
                                                          3 * sizeof(float), vertices.size() / 3));
@@ -157,7 +187,8 @@ ReferencePoint Reference::radiosity_at(uint32_t patch, const glm::dvec3& x0, uin
       rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
       rtcIntersect1(s.scene, &ctx, &rh);
       if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) break;  // escaped
-      const uint32_t q = s.tri_patch[rh.hit.primID];
+      uint32_t q = s.tri_patch[rh.hit.primID];
+      if (glm::dot(s.normal[q], d) >= 0.0) q = s.twin[q];
       const glm::dvec3 nq = s.normal[q];
       if (glm::dot(nq, d) >= 0.0) break;  // the back of a one-sided surface: black
       const auto& pq = s.input->patches[q];

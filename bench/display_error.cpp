@@ -1,0 +1,181 @@
+#include "display_error.h"
+
+#include "hemibake/baselines/reference.h"
+
+#include <glm/geometric.hpp>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <random>
+#include <thread>
+
+namespace hemibake::bench {
+namespace {
+
+double channel_sum(const glm::dvec3& v) { return v.x + v.y + v.z; }
+
+// Runs fn(i) for i in [0, n) on `threads` threads (0 = all cores).
+template <typename Fn>
+void parallel(size_t n, uint32_t threads, Fn&& fn) {
+  const uint32_t count = threads != 0 ? threads : std::max(1u, std::thread::hardware_concurrency());
+  std::atomic<size_t> next{0};
+  std::vector<std::thread> pool;
+  for (uint32_t t = 0; t < count; ++t)
+    pool.emplace_back([&] {
+      for (size_t i; (i = next.fetch_add(1)) < n;) fn(i);
+    });
+  for (auto& th : pool) th.join();
+}
+
+// A uniformly distributed point on a patch (a quad as its two triangles 0-1-2 and 0-2-3).
+glm::dvec3 point_on(const solver::Patch& p, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  auto tri_area = [&](int a, int b, int c) {
+    return 0.5 * glm::length(glm::cross(p.corners[b] - p.corners[a], p.corners[c] - p.corners[a]));
+  };
+  int b = 1, c = 2;
+  if (p.corner_count == 4) {
+    const double a0 = tri_area(0, 1, 2), a1 = tri_area(0, 2, 3);
+    if (uni(rng) * (a0 + a1) >= a0) b = 2, c = 3;
+  }
+  double u = uni(rng), v = uni(rng);
+  if (u + v > 1.0) u = 1.0 - u, v = 1.0 - v;
+  return p.corners[0] + u * (p.corners[b] - p.corners[0]) + v * (p.corners[c] - p.corners[0]);
+}
+
+double patch_area(const solver::Patch& p) {
+  double a = 0.0;
+  for (uint32_t k = 1; k + 1 < p.corner_count; ++k)
+    a += 0.5 * glm::length(glm::cross(p.corners[k] - p.corners[0], p.corners[k + 1] - p.corners[0]));
+  return a;
+}
+
+}  // namespace
+
+std::vector<SurfacePoint> reference_points(const solver::Scene& scene, const ReferenceOptions& options) {
+  std::vector<double> cdf;
+  std::vector<uint32_t> candidates;
+  double total = 0.0;
+  for (uint32_t i = 0; i < scene.patches.size(); ++i) {
+    const auto& p = scene.patches[i];
+    if (channel_sum(p.emission) > 0.0) continue;
+    total += patch_area(p);
+    cdf.push_back(total);
+    candidates.push_back(i);
+  }
+  std::vector<SurfacePoint> points;
+  if (candidates.empty()) return points;
+  std::mt19937_64 rng(options.seed);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  for (uint32_t k = 0; k < options.points; ++k) {
+    const size_t c = std::min<size_t>(std::lower_bound(cdf.begin(), cdf.end(), uni(rng) * total) - cdf.begin(),
+                                      candidates.size() - 1);
+    SurfacePoint sp;
+    sp.patch = candidates[c];
+    const auto& p = scene.patches[sp.patch];
+    sp.position = point_on(p, rng);
+    sp.normal = glm::normalize(glm::cross(p.corners[1] - p.corners[0], p.corners[2] - p.corners[0]));
+    points.push_back(sp);
+  }
+
+  // A first pass gives every point a value; the floor for dark points is 5 % of their mean.
+  const baselines::Reference reference(scene);
+  constexpr uint32_t kBatch = 512;
+  std::vector<glm::dvec3> sum(points.size(), glm::dvec3(0.0));
+  std::vector<double> var_sum(points.size(), 0.0);  // of the batch means' channel sums
+  auto trace = [&](size_t i) {
+    const uint64_t batch = points[i].samples / kBatch;
+    const auto r = reference.radiosity_at(points[i].patch, points[i].position, kBatch,
+                                          options.seed * 0x9e3779b97f4a7c15ull + i * 65537 + batch);
+    sum[i] += r.radiosity;
+    var_sum[i] += glm::dot(r.std_error, r.std_error);
+    points[i].samples += kBatch;
+    const double batches = static_cast<double>(points[i].samples / kBatch);
+    points[i].reference = sum[i] / batches;
+    points[i].std_error = std::sqrt(var_sum[i]) / batches;
+  };
+  parallel(points.size(), options.threads, trace);
+  double mean = 0.0;
+  for (const auto& p : points) mean += channel_sum(p.reference) / static_cast<double>(points.size());
+  const double floor = 0.05 * mean;
+  parallel(points.size(), options.threads, [&](size_t i) {
+    while (points[i].samples < options.max_samples &&
+           points[i].std_error > options.max_std_error * std::max(channel_sum(points[i].reference), floor))
+      trace(i);
+  });
+  return points;
+}
+
+bool displayed_value(const solver::Mesh& baked, const glm::dvec3& x, const glm::dvec3& normal, glm::dvec3& out) {
+  // The triangle containing x on the side facing `normal`, nearest to x's plane.
+  double best = std::numeric_limits<double>::max();
+  bool found = false;
+  auto consider = [&](uint32_t a, uint32_t b, uint32_t c) {
+    const glm::dvec3 &pa = baked.positions[a], &pb = baked.positions[b], &pc = baked.positions[c];
+    const glm::dvec3 n = glm::cross(pb - pa, pc - pa);
+    const double n2 = glm::dot(n, n);
+    if (n2 <= 0.0) return;
+    const double len = std::sqrt(n2);
+    if (glm::dot(n, normal) < 0.99 * len) return;
+    const double dist = std::abs(glm::dot(x - pa, n)) / len;
+    const double size = std::max({glm::length(pb - pa), glm::length(pc - pa), glm::length(pc - pb)});
+    if (dist > 1e-3 * size + 1e-9 || dist >= best) return;
+    // Barycentric coordinates of x projected onto the plane.
+    const glm::dvec3 q = x - pa;
+    const double wb = glm::dot(glm::cross(q, pc - pa), n) / n2;
+    const double wc = glm::dot(glm::cross(pb - pa, q), n) / n2;
+    const double wa = 1.0 - wb - wc;
+    constexpr double kSlack = -1e-7;
+    if (wa < kSlack || wb < kSlack || wc < kSlack) return;
+    best = dist;
+    found = true;
+    out = wa * baked.radiosity[a] + wb * baked.radiosity[b] + wc * baked.radiosity[c];
+  };
+  for (const auto& el : baked.elements) {
+    const uint32_t nb = el.boundary_end - el.boundary_begin;
+    if (nb == 3 || nb == 0) {
+      consider(el.corners[0], el.corners[1], el.corners[2]);
+      continue;
+    }
+    // A loop with hanging vertices: a fan from its first vertex covers the (convex) element.
+    const uint32_t* loop = baked.boundary.data() + el.boundary_begin;
+    for (uint32_t k = 1; k + 1 < nb; ++k) consider(loop[0], loop[k], loop[k + 1]);
+  }
+  return found;
+}
+
+DisplayError displayed_error(const std::vector<SurfacePoint>& points, const solver::Mesh& baked) {
+  DisplayError out;
+  if (points.empty()) return out;
+  double mean = 0.0;
+  for (const auto& p : points) mean += channel_sum(p.reference) / static_cast<double>(points.size());
+  const double floor = 0.05 * mean;
+  out.errors.assign(points.size(), 0.0);
+  std::vector<glm::dvec3> shown(points.size(), glm::dvec3(0.0));
+  std::vector<uint8_t> hit(points.size(), 0);
+  parallel(points.size(), 0, [&](size_t i) { hit[i] = displayed_value(baked, points[i].position, points[i].normal, shown[i]); });
+  double bake_sum = 0.0, ref_sum = 0.0;
+  for (size_t i = 0; i < points.size(); ++i) {
+    const double ref = channel_sum(points[i].reference), denom = std::max(ref, floor);
+    out.worst_std_error = std::max(out.worst_std_error, points[i].std_error / denom);
+    ref_sum += ref;
+    if (!hit[i]) {
+      ++out.missed;
+      out.errors[i] = 1.0;
+      continue;
+    }
+    bake_sum += channel_sum(shown[i]);
+    out.errors[i] = std::abs(channel_sum(shown[i]) - ref) / denom;
+  }
+  std::vector<double> sorted = out.errors;
+  std::sort(sorted.begin(), sorted.end());
+  auto quantile = [&](double q) { return sorted[std::min(sorted.size() - 1, static_cast<size_t>(q * sorted.size()))]; };
+  out.median = quantile(0.5);
+  out.p90 = quantile(0.9);
+  out.max = sorted.back();
+  out.mean_ratio = ref_sum > 0.0 ? bake_sum / ref_sum : 0.0;
+  return out;
+}
+
+}  // namespace hemibake::bench

@@ -1,0 +1,58 @@
+// The error of a bake as a viewer displays it: radiosity interpolated over the baked triangles at
+// random points on the scene's surfaces, against a path-traced reference at the same points.
+// Element centres are not enough: a face left as one flat element has its mean near its centre.
+#pragma once
+
+#include "hemibake/solver/solver.h"
+
+#include <glm/vec3.hpp>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace hemibake::bench {
+
+/// A point on an input patch's front side with its reference radiosity.
+struct SurfacePoint {
+  uint32_t patch = 0;
+  glm::dvec3 position{0.0};
+  glm::dvec3 normal{0.0};
+  glm::dvec3 reference{0.0};  ///< path-traced radiosity
+  double std_error = 0.0;     ///< of the reference's channel sum
+  uint32_t samples = 0;       ///< paths traced for it
+};
+
+struct ReferenceOptions {
+  uint32_t points = 300;
+  uint64_t seed = 1;
+  double max_std_error = 0.015;  ///< trace until the standard error is at most this share of the value
+                                 ///< (of a floor of 5 % of the points' mean for dark points)
+  uint32_t max_samples = 1u << 17;
+  uint32_t threads = 0;          ///< 0 = all cores
+};
+
+/// `points` places area-weighted (seeded) on the patches that emit nothing, each traced until its
+/// standard error meets `max_std_error` or `max_samples` paths.
+std::vector<SurfacePoint> reference_points(const solver::Scene& scene, const ReferenceOptions& options);
+
+struct DisplayError {
+  double median = 0.0;   ///< relative error of the channel sum, |bake - reference| / max(reference, floor)
+  double p90 = 0.0;
+  double max = 0.0;
+  double mean_ratio = 0.0;  ///< sum of bake / sum of reference over the points (overall brightness)
+  double worst_std_error = 0.0;  ///< largest relative standard error of the reference
+  uint32_t missed = 0;   ///< points no baked triangle covers (counted as 100 % error)
+  std::vector<double> errors;  ///< per point, in the order of the points
+};
+
+/// The error of `baked` (triangles in world space with per-vertex radiosity, as read_baked_mesh
+/// gives, or any mesh whose element loops are its displayed polygons) at `points`. The floor of the
+/// relative error is 5 % of the points' mean reference, so points in an umbra do not dominate.
+DisplayError displayed_error(const std::vector<SurfacePoint>& points, const solver::Mesh& baked);
+
+/// The value `baked` displays at a point, interpolated barycentrically over the triangle (of the
+/// element loops' fans) that contains it on the side facing `normal`; false if none does.
+bool displayed_value(const solver::Mesh& baked, const glm::dvec3& position, const glm::dvec3& normal, glm::dvec3& out);
+
+}  // namespace hemibake::bench
