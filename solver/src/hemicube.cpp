@@ -90,26 +90,39 @@ glm::dvec3 newell_normal(std::span<const glm::dvec3> p) {
 
 }  // namespace
 
-void GroupAdjacency::add(uint32_t a, uint32_t b) {
+void GroupAdjacency::add(uint32_t a, uint32_t b, bool folded) {
   if (a == b) return;
-  keys_.push_back((static_cast<uint64_t>(a) << 32) | b);
-  keys_.push_back((static_cast<uint64_t>(b) << 32) | a);
+  links_.push_back({(static_cast<uint64_t>(a) << 32) | b, folded});
+  links_.push_back({(static_cast<uint64_t>(b) << 32) | a, folded});
 }
 
+// Groups whose common edges disagree (a fin standing on the line between two floor tiles of one
+// group: one tile on each side) count as tiling, as every neighbour did before orientation was known.
 void GroupAdjacency::finish() {
-  std::sort(keys_.begin(), keys_.end());
-  keys_.erase(std::unique(keys_.begin(), keys_.end()), keys_.end());
+  std::sort(links_.begin(), links_.end(), [](const Link& x, const Link& y) { return x.key < y.key; });
+  size_t out = 0;
+  for (size_t i = 0; i < links_.size(); ++i) {
+    if (out > 0 && links_[out - 1].key == links_[i].key) {
+      links_[out - 1].folded = links_[out - 1].folded && links_[i].folded;
+      continue;
+    }
+    links_[out++] = links_[i];
+  }
+  links_.resize(out);
 }
 
-bool GroupAdjacency::adjacent(uint32_t a, uint32_t b) const {
-  return std::binary_search(keys_.begin(), keys_.end(), (static_cast<uint64_t>(a) << 32) | b);
+const GroupAdjacency::Link* GroupAdjacency::find(uint32_t a, uint32_t b) const {
+  const uint64_t key = (static_cast<uint64_t>(a) << 32) | b;
+  const auto it = std::lower_bound(links_.begin(), links_.end(), key, [](const Link& l, uint64_t k) { return l.key < k; });
+  return it != links_.end() && it->key == key ? &*it : nullptr;
 }
 
-std::span<const uint64_t> GroupAdjacency::neighbours(uint32_t a) const {
+std::span<const GroupAdjacency::Link> GroupAdjacency::neighbours(uint32_t a) const {
   const uint64_t lo = static_cast<uint64_t>(a) << 32;
-  const auto b = std::lower_bound(keys_.begin(), keys_.end(), lo);
-  const auto e = std::lower_bound(b, keys_.end(), lo + (uint64_t{1} << 32));
-  return {keys_.data() + (b - keys_.begin()), static_cast<size_t>(e - b)};
+  auto below = [](const Link& l, uint64_t k) { return l.key < k; };
+  const auto b = std::lower_bound(links_.begin(), links_.end(), lo, below);
+  const auto e = std::lower_bound(b, links_.end(), lo + (uint64_t{1} << 32), below);
+  return {links_.data() + (b - links_.begin()), static_cast<size_t>(e - b)};
 }
 
 Hemicube::Hemicube(uint32_t resolution) : n_(resolution) {
@@ -467,7 +480,8 @@ class PixelResolver {
     if (element & kBackFace) return (uint64_t{1} << 32) | group_of_[element & ~kBackFace];
     return group_of_[element];
   }
-  bool adjacent(uint64_t a, uint64_t b);
+  enum class Meet : uint8_t { kApart, kTile, kFold };
+  Meet meet(uint64_t a, uint64_t b);
   void sum_groups(uint32_t lo, uint32_t hi);
   bool merge_neighbours();
   void order_layers(bool any_back);
@@ -489,21 +503,27 @@ class PixelResolver {
   const GroupAdjacency& adjacency_;
   // Neighbouring pixels mostly ask about the same two surfaces: the last answer is kept.
   uint64_t asked_a_ = 0, asked_b_ = 0;
-  bool asked_answer_ = false, asked_any_ = false;
+  Meet asked_answer_ = Meet::kApart;
+  bool asked_any_ = false;
   std::vector<std::pair<uint64_t, uint32_t>> by_group_;  // (surface, fragment)
   std::vector<GroupSum> groups_;
   std::vector<uint32_t> layers_;
   std::vector<uint32_t> rank_;  // per group root: its place in `layers_`
+  std::vector<double> fold_cap_;  // per group root: the most a fold leaves it (share_pixel)
+  std::vector<std::pair<uint32_t, uint32_t>> folds_;  // pairs of the pixel's groups folded one behind the other
 };
 
-// Two back faces that share an edge tile like two front faces; a front and a back face do not.
-bool PixelResolver::adjacent(uint64_t a, uint64_t b) {
+// How two surfaces (with their side bits) meet in a pixel: apart, side by side, or one folded
+// behind the other (GroupAdjacency; a back face is projected reversed, so a different side flips
+// the link's case).
+PixelResolver::Meet PixelResolver::meet(uint64_t a, uint64_t b) {
   if (!asked_any_ || a != asked_a_ || b != asked_b_) {
     asked_a_ = a;
     asked_b_ = b;
-    asked_answer_ = (a >> 32) == (b >> 32) &&
-                    adjacency_.adjacent(static_cast<uint32_t>(a), static_cast<uint32_t>(b));
     asked_any_ = true;
+    const GroupAdjacency::Link* link = adjacency_.find(static_cast<uint32_t>(a), static_cast<uint32_t>(b));
+    const bool sides_differ = (a >> 32) != (b >> 32);
+    asked_answer_ = link == nullptr ? Meet::kApart : link->folded != sides_differ ? Meet::kFold : Meet::kTile;
   }
   return asked_answer_;
 }
@@ -539,7 +559,8 @@ bool PixelResolver::two_surfaces(uint32_t lo, uint32_t hi) {
     depth1 = std::max(depth1, f.inv_depth);
   }
   float trans0, trans1;
-  if (g1 == g0 || adjacent(g0, g1)) {
+  const Meet how = g1 == g0 ? Meet::kTile : meet(g0, g1);
+  if (how == Meet::kTile) {
     const double total = sum0 + sum1;
     trans0 = trans1 = static_cast<float>(total > 1.0 ? 1.0 / total : 1.0);
   } else {
@@ -548,10 +569,11 @@ bool PixelResolver::two_surfaces(uint32_t lo, uint32_t hi) {
     const double near_sum = first_near ? sum0 : sum1, far_sum = first_near ? sum1 : sum0;
     const float near_trans = static_cast<float>(near_sum > 1.0 ? 1.0 / near_sum : 1.0);
     double t = 1.0 - std::min(near_sum, 1.0);
-    // A front and a back face with a common edge project to the same side of it, the far
-    // one folded behind the near one (a wall seen past the edge of the roof it meets): in a
-    // pixel on that edge the far one shows only where it reaches past the near one.
-    if ((g0 >> 32) != (g1 >> 32) && adjacent(g0 & 0xffffffffu, g1 & 0xffffffffu) && far_sum > 0.0)
+    // Two surfaces with a common edge that project to the same side of it, the far one folded
+    // behind the near one (a wall's back seen past the edge of the roof it meets; the inside of
+    // a double-sided box seen through its top): in a pixel on that edge the far one shows only
+    // where it reaches past the near one.
+    if (how == Meet::kFold && far_sum > 0.0)
       t = std::min(t, std::max(0.0, far_sum - near_sum) / far_sum);
     const float far_trans = static_cast<float>(far_sum > 1.0 ? t / far_sum : t);
     trans0 = first_near ? near_trans : far_trans;
@@ -566,9 +588,9 @@ bool PixelResolver::two_surfaces(uint32_t lo, uint32_t hi) {
 
 void PixelResolver::layers(uint32_t lo, uint32_t hi) {
   sum_groups(lo, hi);
-  const bool any_back = merge_neighbours();
-  order_layers(any_back);
-  share_pixel(any_back);
+  const bool any_fold = merge_neighbours();
+  order_layers(any_fold);
+  share_pixel(any_fold);
   for (uint32_t i = 0; i < groups_.size(); ++i) groups_[i].trans = groups_[root(i)].trans;
   size_t gi = 0;
   for (const auto& [g, fi] : by_group_) {
@@ -593,30 +615,46 @@ void PixelResolver::sum_groups(uint32_t lo, uint32_t hi) {
   }
 }
 
-// Merges groups that share an edge (front-facing neighbours project side by side). A surface's
-// neighbours are looked up among the pixel's (sorted) surfaces: linear in the surfaces, where
-// testing every pair was quadratic (a pixel of a coarse near-field hemicube can hold hundreds of a
-// finely tessellated sphere's facets). Returns whether any back face is among them.
+// Merges groups that project side by side (GroupAdjacency). A surface's neighbours are looked up
+// among the pixel's (sorted) surfaces: linear in the surfaces, where testing every pair was
+// quadratic (a pixel of a coarse near-field hemicube can hold hundreds of a finely tessellated
+// sphere's facets). Returns whether any two of them are folded one behind the other.
 bool PixelResolver::merge_neighbours() {
-  bool any_back = false;
-  if (!adjacency_.empty() && groups_.size() > 1) {
-    for (uint32_t i = 0; i < groups_.size(); ++i) {
-      const uint64_t side = groups_[i].group & ~uint64_t{0xffffffffu};
-      any_back = any_back || side != 0;
-      for (uint64_t key : adjacency_.neighbours(static_cast<uint32_t>(groups_[i].group))) {
-        const int64_t j = index_of(side | (key & 0xffffffffu));
-        if (j < 0) continue;
-        const uint32_t ri = root(i), rj = root(static_cast<uint32_t>(j));
-        if (ri != rj) groups_[std::max(ri, rj)].root = std::min(ri, rj);
-      }
+  if (adjacency_.empty() || groups_.size() <= 1) return false;
+  // Folded pairs first: two surfaces folded one behind the other never join one layer, even
+  // through neighbours that tile with both (the floors of two rooms meet under the wall between
+  // them, and each tiles with the wall's side that faces its room).
+  folds_.clear();
+  for (uint32_t i = 0; i < groups_.size(); ++i) {
+    const uint64_t side = groups_[i].group & ~uint64_t{0xffffffffu};
+    for (const GroupAdjacency::Link& link : adjacency_.neighbours(static_cast<uint32_t>(groups_[i].group))) {
+      const uint64_t fold_side = link.folded ? side : side ^ (uint64_t{1} << 32);
+      const int64_t j = index_of(fold_side | (link.key & 0xffffffffu));
+      if (j >= 0) folds_.emplace_back(i, static_cast<uint32_t>(j));
     }
   }
-  return any_back;
+  for (uint32_t i = 0; i < groups_.size(); ++i) {
+    const uint64_t side = groups_[i].group & ~uint64_t{0xffffffffu};
+    for (const GroupAdjacency::Link& link : adjacency_.neighbours(static_cast<uint32_t>(groups_[i].group))) {
+      const uint64_t tile_side = link.folded ? side ^ (uint64_t{1} << 32) : side;
+      const int64_t j = index_of(tile_side | (link.key & 0xffffffffu));
+      if (j < 0) continue;
+      const uint32_t ri = root(i), rj = root(static_cast<uint32_t>(j));
+      if (ri == rj) continue;
+      bool apart = false;
+      for (const auto& [x, y] : folds_) {
+        const uint32_t rx = root(x), ry = root(y);
+        apart = apart || (rx == ri && ry == rj) || (rx == rj && ry == ri);
+      }
+      if (!apart) groups_[std::max(ri, rj)].root = std::min(ri, rj);
+    }
+  }
+  return !folds_.empty();
 }
 
 // The merged groups' roots as layers, nearest first; ties go to the lower group id so the order is
 // deterministic.
-void PixelResolver::order_layers(bool any_back) {
+void PixelResolver::order_layers(bool any_fold) {
   layers_.clear();
   for (uint32_t i = 0; i < groups_.size(); ++i) {
     const uint32_t r = root(i);
@@ -631,29 +669,38 @@ void PixelResolver::order_layers(bool any_back) {
     if (groups_[a].inv_depth != groups_[b].inv_depth) return groups_[a].inv_depth > groups_[b].inv_depth;
     return groups_[a].group < groups_[b].group;
   });
-  if (any_back) {
+  if (any_fold) {
     rank_.assign(groups_.size(), 0);
     for (uint32_t li = 0; li < layers_.size(); ++li) rank_[layers_[li]] = li;
   }
 }
 
 // Each layer's transmission: what nearer layers left of the pixel (the paper's 1 - f_{k-1}).
-void PixelResolver::share_pixel(bool any_back) {
+void PixelResolver::share_pixel(bool any_fold) {
+  // A layer folded behind a nearer one that shares an edge with it (two_surfaces) shows only where
+  // it reaches past that one. Any surface merged into the layer may share the edge: the insides of a
+  // double-sided box tile one layer, which only the faces meeting the near side's edges touch.
+  if (any_fold) {
+    fold_cap_.assign(groups_.size(), 1.0);
+    for (uint32_t i = 0; i < groups_.size(); ++i) {
+      const uint32_t ri = root(i);
+      if (groups_[ri].area <= 0.0) continue;
+      const uint64_t side = groups_[i].group & ~uint64_t{0xffffffffu};
+      for (const GroupAdjacency::Link& link : adjacency_.neighbours(static_cast<uint32_t>(groups_[i].group))) {
+        const uint64_t fold_side = link.folded ? side : side ^ (uint64_t{1} << 32);
+        const int64_t j = index_of(fold_side | (link.key & 0xffffffffu));
+        if (j < 0) continue;
+        const uint32_t rj = root(static_cast<uint32_t>(j));
+        if (rank_[rj] < rank_[ri])
+          fold_cap_[ri] = std::min(fold_cap_[ri], std::max(0.0, groups_[ri].area - groups_[rj].area) / groups_[ri].area);
+      }
+    }
+  }
   double f = 0.0;  // the paper's f_{k-1}: the pixel's fraction taken by nearer layers
   for (size_t li = 0; li < layers_.size(); ++li) {
     GroupSum& g = groups_[layers_[li]];
     double t = 1.0 - f;
-    // Folded behind a nearer layer of the other facing that shares an edge with it
-    // (two_surfaces).
-    if (any_back && g.area > 0.0) {
-      const uint64_t other = (g.group & ~uint64_t{0xffffffffu}) ^ (uint64_t{1} << 32);
-      for (uint64_t key : adjacency_.neighbours(static_cast<uint32_t>(g.group))) {
-        const int64_t j = index_of(other | (key & 0xffffffffu));
-        if (j < 0) continue;
-        const uint32_t r = root(static_cast<uint32_t>(j));
-        if (rank_[r] < li) t = std::min(t, std::max(0.0, g.area - groups_[r].area) / g.area);
-      }
-    }
+    if (any_fold) t = std::min(t, fold_cap_[layers_[li]]);
     // Overlapping pieces of one layer (sum > 1) share the pixel in proportion.
     g.trans = static_cast<float>(g.area > 1.0 ? t / g.area : t);
     f += std::min(g.area, 1.0) * t;
@@ -739,20 +786,23 @@ std::vector<double> hemicube_form_factors(const glm::dvec3& eye, const glm::dvec
   // Polygons with a common edge (the same two corner points) are neighbours, as in a solve.
   detail::GroupAdjacency adjacency;
   {
-    std::map<std::pair<std::array<double, 3>, std::array<double, 3>>, std::vector<uint32_t>> edges;
+    // (polygon, whether it runs the edge from the smaller corner to the larger) per edge.
+    std::map<std::pair<std::array<double, 3>, std::array<double, 3>>, std::vector<std::pair<uint32_t, bool>>> edges;
     for (uint32_t i = 0; i < polygons.size(); ++i) {
       const auto& poly = polygons[i].corners;
       for (size_t k = 0; k < poly.size() && poly.size() >= 3; ++k) {
         std::array<double, 3> a{poly[k].x, poly[k].y, poly[k].z};
         const glm::dvec3& q = poly[(k + 1) % poly.size()];
         std::array<double, 3> b{q.x, q.y, q.z};
-        if (b < a) std::swap(a, b);
-        edges[{a, b}].push_back(i);
+        const bool forward = a < b;
+        if (!forward) std::swap(a, b);
+        edges[{a, b}].emplace_back(i, forward);
       }
     }
     for (const auto& [edge, list] : edges)
       for (size_t x = 0; x < list.size(); ++x)
-        for (size_t y = x + 1; y < list.size(); ++y) adjacency.add(group_of[list[x]], group_of[list[y]]);
+        for (size_t y = x + 1; y < list.size(); ++y)
+          adjacency.add(group_of[list[x].first], group_of[list[y].first], list[x].second == list[y].second);
     adjacency.finish();
   }
   detail::ThreadPool pool(1);

@@ -39,19 +39,31 @@ inline constexpr uint32_t kBackFace = 0x80000000u;
 /// lying on another's back) stays in front of it.
 inline constexpr float kBackDepthScale = 1.0f - 1e-5f;
 
-/// Pairs of occlusion groups that share an edge. Two front-facing polygons that share an edge
-/// project to opposite sides of it, so within a pixel their coverages add rather than occlude.
+/// Pairs of occlusion groups that share an edge, and how they project where both face the eye.
+/// A polygon's corners run counter-clockwise as seen from its front, so its interior lies to the
+/// left of each edge. Two polygons that run their common edge in opposite directions (a
+/// consistently wound surface: a room's walls, a box's outside) project to opposite sides of it
+/// and tile: within a pixel their coverages add rather than occlude. Two that run it in the same
+/// direction project to the same side, one folded behind the other: the inside of a double-sided
+/// box (the back twin of one side) seen through the front of the face it meets. A back face's
+/// polygon is projected reversed, which swaps the two cases.
 class GroupAdjacency {
  public:
-  void add(uint32_t a, uint32_t b);
+  struct Link {
+    uint64_t key;  ///< a << 32 | b
+    bool folded;   ///< every common edge runs the same way in both (see above)
+  };
+  /// `folded`: this common edge runs the same way in a's and b's corner order.
+  void add(uint32_t a, uint32_t b, bool folded);
   void finish();  ///< call once after the last add()
-  bool adjacent(uint32_t a, uint32_t b) const;
-  /// The groups adjacent to `a`, as keys (a << 32 | b) in increasing b.
-  std::span<const uint64_t> neighbours(uint32_t a) const;
-  bool empty() const { return keys_.empty(); }
+  /// The link between a and b, or null when they share no edge.
+  const Link* find(uint32_t a, uint32_t b) const;
+  /// The links of `a`, in increasing b.
+  std::span<const Link> neighbours(uint32_t a) const;
+  bool empty() const { return links_.empty(); }
 
  private:
-  std::vector<uint64_t> keys_;
+  std::vector<Link> links_;
 };
 
 /// A polygon being clipped: at most 4 corners plus one per clip plane.

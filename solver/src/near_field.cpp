@@ -165,4 +165,38 @@ bool Solver::Impl::absorber_close(const Piece& piece) const {
   return false;
 }
 
+// Whether point x of patch p lies under another surface resting on p: a patch in p's plane facing
+// the other way (not p's own other side) whose polygon holds x, as a block's bottom holds the floor
+// under it. Light there is the mesh's error (a floor element reaching under the block got some),
+// and a hemicube there would see the block's inside.
+bool Solver::Impl::covered(uint32_t p, const glm::dvec3& x) const {
+  const glm::dvec3& n = prep.normal[p];
+  const double eps = kCloseFacingLength * prep.diagonal;
+  std::vector<uint32_t> nodes{0};
+  while (!nodes.empty()) {
+    const BoxNode& node = tree[nodes.back()];
+    nodes.pop_back();
+    if (glm::any(glm::lessThan(x, node.lo - eps)) || glm::any(glm::greaterThan(x, node.hi + eps))) continue;
+    if (node.child != kNone) {
+      nodes.push_back(node.child);
+      nodes.push_back(node.child + 1);
+      continue;
+    }
+    for (uint32_t i = node.begin; i < node.end; ++i) {
+      const uint32_t q = tree_patch[i];
+      if (glm::dot(prep.normal[q], n) > -1.0 + 1e-9 || prep.twin[q] == p) continue;
+      const Patch& pq = patches[q];
+      if (std::abs(glm::dot(prep.normal[q], x - pq.corners[0])) > eps) continue;
+      bool inside = true;
+      for (uint32_t k = 0; k < pq.corner_count && inside; ++k) {
+        const glm::dvec3& a = pq.corners[k];
+        const glm::dvec3& b = pq.corners[(k + 1) % pq.corner_count];
+        inside = glm::dot(glm::cross(b - a, x - a), prep.normal[q]) > eps * glm::length(b - a);
+      }
+      if (inside) return true;
+    }
+  }
+  return false;
+}
+
 }  // namespace hemibake::solver

@@ -11,6 +11,7 @@
 #include <limits>
 #include <numeric>
 #include <sstream>
+#include <tuple>
 #include <unordered_map>
 
 namespace hemibake::solver {
@@ -58,8 +59,14 @@ struct PositionHash {
   }
 };
 
-// Pairs of patches (a < b) with an edge of one overlapping an edge of the other along a line.
-std::vector<std::pair<uint32_t, uint32_t>> touching_patches(const Scene& scene, double diagonal) {
+// Patches that touch: an edge of one overlaps an edge of the other along a line.
+struct Touch {
+  uint32_t a, b;       ///< a < b
+  bool folded;         ///< the edges run the same way (GroupAdjacency)
+  glm::dvec3 p, q;     ///< where they overlap
+};
+
+std::vector<Touch> touching_patches(const Scene& scene, double diagonal) {
   struct Edge {
     glm::dvec3 p, q;
     uint32_t patch;
@@ -71,7 +78,8 @@ std::vector<std::pair<uint32_t, uint32_t>> touching_patches(const Scene& scene, 
       edges.push_back({pa.corners[c], pa.corners[(c + 1) % pa.corner_count], i});
   }
   const double tol = 1e-7 * diagonal;
-  auto overlap = [tol](const Edge& e, const Edge& f) {
+  // Whether f lies on e's line and overlaps it, and where (`from`, `to`).
+  auto overlap = [tol](const Edge& e, const Edge& f, glm::dvec3& from, glm::dvec3& to) {
     const glm::dvec3 d = e.q - e.p;
     const double len = glm::length(d);
     if (len <= tol) return false;
@@ -81,7 +89,10 @@ std::vector<std::pair<uint32_t, uint32_t>> touching_patches(const Scene& scene, 
       if (glm::length(r - u * glm::dot(r, u)) > tol) return false;
     }
     const double t0 = glm::dot(f.p - e.p, u), t1 = glm::dot(f.q - e.p, u);
-    return std::min(std::max(t0, t1), len) - std::max(std::min(t0, t1), 0.0) > tol;
+    const double lo = std::max(std::min(t0, t1), 0.0), hi = std::min(std::max(t0, t1), len);
+    from = e.p + u * lo;
+    to = e.p + u * hi;
+    return hi - lo > tol;
   };
   // A uniform grid over the scene; an edge is listed in every cell its bounding box touches, and
   // edges that span too many cells are tested against all edges instead.
@@ -107,13 +118,14 @@ std::vector<std::pair<uint32_t, uint32_t>> touching_patches(const Scene& scene, 
         for (int z = a.z; z <= b.z; ++z)
           cells[(static_cast<uint64_t>(x) * 1024 + y) * 1024 + z].push_back(i);
   }
-  std::vector<std::pair<uint32_t, uint32_t>> pairs;
+  std::vector<Touch> pairs;
   auto test = [&](uint32_t i, uint32_t j) {
     const Edge& e = edges[i];
     const Edge& f = edges[j];
     if (e.patch == f.patch) return;
-    if (overlap(e, f) || overlap(f, e))
-      pairs.emplace_back(std::min(e.patch, f.patch), std::max(e.patch, f.patch));
+    glm::dvec3 from, to;
+    if (overlap(e, f, from, to) || overlap(f, e, from, to))
+      pairs.push_back({std::min(e.patch, f.patch), std::max(e.patch, f.patch), glm::dot(e.q - e.p, f.q - f.p) > 0.0, from, to});
   };
   for (const auto& [key, list] : cells)
     for (size_t x = 0; x < list.size(); ++x)
@@ -121,8 +133,10 @@ std::vector<std::pair<uint32_t, uint32_t>> touching_patches(const Scene& scene, 
   for (uint32_t i : big)
     for (uint32_t j = 0; j < edges.size(); ++j)
       if (j != i) test(i, j);
-  std::sort(pairs.begin(), pairs.end());
-  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+  auto tuple = [](const Touch& t) { return std::tuple(t.a, t.b, t.folded); };
+  std::sort(pairs.begin(), pairs.end(), [&](const Touch& x, const Touch& y) { return tuple(x) < tuple(y); });
+  pairs.erase(std::unique(pairs.begin(), pairs.end(), [&](const Touch& x, const Touch& y) { return tuple(x) == tuple(y); }),
+              pairs.end());
   return pairs;
 }
 
@@ -267,7 +281,7 @@ EdgePatches patches_by_edge(const Scene& scene, const PointIds& point_of) {
 void find_groups(const Scene& scene, const EdgePatches& edge_patches, PreparedScene& out) {
   const size_t n = scene.patches.size();
   UnionFind occl(n), smooth(n);
-  std::vector<std::pair<uint32_t, uint32_t>> neighbours;
+  std::vector<Touch> neighbours;
   auto coplanar = [&](uint32_t a, uint32_t b) {
     if (glm::dot(out.normal[a], out.normal[b]) < 1.0 - 1e-9) return false;
     const Patch& pa = scene.patches[a];
@@ -277,8 +291,30 @@ void find_groups(const Scene& scene, const EdgePatches& edge_patches, PreparedSc
         return false;
     return true;
   };
+  // The plane of a, either way round (a double-sided surface's twins lie in one).
+  auto same_plane = [&](uint32_t a, uint32_t b) {
+    if (std::abs(glm::dot(out.normal[a], out.normal[b])) < 1.0 - 1e-9) return false;
+    const Patch& pa = scene.patches[a];
+    const Patch& pb = scene.patches[b];
+    for (uint32_t c = 0; c < pb.corner_count; ++c)
+      if (std::abs(glm::dot(out.normal[a], pb.corners[c] - pa.corners[0])) > 1e-9 * out.diagonal)
+        return false;
+    return true;
+  };
+  // A junction: a surface of another plane stands on the edge between two patches (a wall on the
+  // line between two rooms' floors, a shelf on a seam of the wall behind it). Light differs on its
+  // two sides, so the patches are neither one smooth surface (their vertices would average across
+  // the wall) nor one occlusion group (whose pieces never hide each other: the floor behind the
+  // wall would be lit with the floor in front of it).
   // Patches sharing a whole edge (same two points) may share vertices: one smooth surface.
   for (const auto& [key, list] : edge_patches) {
+    bool junction = false;
+    for (size_t x = 1; x < list.size() && !junction; ++x)
+      for (size_t y = 0; y < x && !junction; ++y)
+        if (!same_plane(list[x], list[y]))
+          for (size_t z = 0; z < list.size() && !junction; ++z)
+            junction = !same_plane(list[z], list[x]) && !same_plane(list[z], list[y]);
+    if (junction) continue;
     for (size_t x = 0; x < list.size(); ++x) {
       for (size_t y = x + 1; y < list.size(); ++y) {
         const uint32_t a = list[x], b = list[y];
@@ -290,9 +326,36 @@ void find_groups(const Scene& scene, const EdgePatches& edge_patches, PreparedSc
   }
   // Patches whose edges overlap on a line (shared edges and T-junctions alike) touch: coplanar
   // ones are one occlusion group, the others are adjacent groups.
-  for (const auto& [a, b] : touching_patches(scene, out.diagonal)) {
-    if (coplanar(a, b)) occl.unite(a, b);
-    neighbours.emplace_back(a, b);
+  neighbours = touching_patches(scene, out.diagonal);
+  std::vector<std::vector<uint32_t>> touches(n);
+  for (uint32_t i = 0; i < neighbours.size(); ++i) {
+    touches[neighbours[i].a].push_back(i);
+    touches[neighbours[i].b].push_back(i);
+  }
+  const double tol = 1e-7 * out.diagonal;
+  // Whether a patch of another plane than coplanar a and b touches a along their common edge.
+  auto junction = [&](const Touch& t) {
+    const glm::dvec3 d = t.q - t.p;
+    const double len = glm::length(d);
+    for (uint32_t i : touches[t.a]) {
+      const Touch& u = neighbours[i];
+      const uint32_t c = u.a == t.a ? u.b : u.a;
+      if (c == t.b || same_plane(t.a, c)) continue;
+      const double s0 = glm::dot(u.p - t.p, d) / len, s1 = glm::dot(u.q - t.p, d) / len;
+      const bool on_line = glm::length(glm::cross(u.p - t.p, d)) / len <= tol && glm::length(glm::cross(u.q - t.p, d)) / len <= tol;
+      if (on_line && std::min(std::max(s0, s1), len) - std::max(std::min(s0, s1), 0.0) > tol) return true;
+    }
+    return false;
+  };
+  // Coplanar patches split by a junction are not neighbours either: seen from one side, the far one
+  // lies behind the junction's surface, which tiles with the near one, and neighbours would join
+  // all three in one layer.
+  std::vector<uint8_t> split(neighbours.size(), 0);
+  for (size_t i = 0; i < neighbours.size(); ++i) {
+    const Touch& t = neighbours[i];
+    if (!coplanar(t.a, t.b)) continue;
+    if (junction(t)) split[i] = 1;
+    else occl.unite(t.a, t.b);
   }
   out.occlusion_group.resize(n);
   out.smoothing_group.resize(n);
@@ -300,7 +363,9 @@ void find_groups(const Scene& scene, const EdgePatches& edge_patches, PreparedSc
     out.occlusion_group[i] = occl.find(i);
     out.smoothing_group[i] = smooth.find(i);
   }
-  for (const auto& [a, b] : neighbours) out.adjacency.add(out.occlusion_group[a], out.occlusion_group[b]);
+  for (size_t i = 0; i < neighbours.size(); ++i)
+    if (!split[i])
+      out.adjacency.add(out.occlusion_group[neighbours[i].a], out.occlusion_group[neighbours[i].b], neighbours[i].folded);
   out.adjacency.finish();
 }
 
@@ -324,7 +389,11 @@ void hide_twin_backs(const Scene& scene, const PointIds& point_of, PreparedScene
   for (const auto& [key, list] : by_points)
     for (size_t x = 0; x < list.size(); ++x)
       for (size_t y = x + 1; y < list.size(); ++y)
-        if (glm::dot(out.normal[list[x]], out.normal[list[y]]) < 0.0) out.back_hidden[list[x]] = out.back_hidden[list[y]] = 1;
+        if (glm::dot(out.normal[list[x]], out.normal[list[y]]) < 0.0) {
+          out.back_hidden[list[x]] = out.back_hidden[list[y]] = 1;
+          out.twin[list[x]] = list[y];
+          out.twin[list[y]] = list[x];
+        }
 }
 
 // Second kind: outward-facing solids. The signed volume of an edge-connected set of patches
@@ -388,6 +457,7 @@ PreparedScene prepare(const Scene& scene) {
   const EdgePatches edge_patches = patches_by_edge(scene, point_of);
   find_groups(scene, edge_patches, out);
   out.back_hidden.assign(scene.patches.size(), 0);
+  out.twin.assign(scene.patches.size(), kNone);
   hide_twin_backs(scene, point_of, out);
   hide_solid_backs(scene, edge_patches, out);
   make_vertices(scene, point_of, out);

@@ -25,6 +25,8 @@ struct PreparedScene {
   /// patches enclosing a positive signed volume). Open sheets and inward-facing shells (a room's
   /// walls seen from outside) need their backs projected as occluders.
   std::vector<uint8_t> back_hidden;
+  std::vector<uint32_t> twin;                 ///< per patch: its other side (the same points facing
+                                              ///< the other way: a double-sided surface), or kNone
   double total_area = 0.0;
   double diagonal = 0.0;                      ///< of the scene's bounding box
 };

@@ -158,15 +158,32 @@ void Solver::Impl::receiver_form_factors(const Piece& piece, const std::vector<u
           glm::distance(piece.centre, e_centre[e]) - e_radius[e] < piece.diameter && is_close(piece, e)) {
         // A receiver the hemicube did not see (the piece's centre lies behind it, though part of
         // the piece is in front: a floor piece under a block's face) is taken as unoccluded from
-        // the part in front, which lies within a diameter of it.
+        // the part in front, which lies within a diameter of it, and that part shoots its own
+        // unshot radiosity (front_share: the floor under a block that stands on it is dark).
         const double f = exact_form_factor(piece, e, size < 0.5 * piece.diameter ? 1 : size < piece.diameter ? 2 : 3);
-        f_recv[e] = seen_here ? f * (e_ff[e] / e_ff_open[e]) : f;
+        f_recv[e] = seen_here ? f * (e_ff[e] / e_ff_open[e]) : f * front_share(piece, e);
         f_open[e] = f;
       }
       // Visible shares are at most the unoccluded ones, and both form factors at most 1.
       HEMIBAKE_DCHECK(f_recv[e] >= 0.0 && f_recv[e] <= f_open[e] && f_open[e] <= 1.0);
     }
   });
+}
+
+// The unshot radiosity of the part of `piece` in front of receiver e's plane, as a share of the
+// piece's: its leaves there, by their centres (1 for a piece of uniform radiosity).
+double Solver::Impl::front_share(const Piece& piece, uint32_t e) const {
+  if (piece.src.size() != 1 || e_child[piece.src[0]] == kNone || piece.src_area != piece.area) return 1.0;
+  const glm::dvec3& nq = prep.normal[e_patch[e]];
+  const glm::dvec3& oq = patches[e_patch[e]].corners[0];
+  double power = 0.0, area = 0.0;
+  for_leaves(piece.src[0], [&](uint32_t x) {
+    if (glm::dot(nq, e_centre[x] - oq) <= 0.0) return;
+    power += channel_sum(e_unshot[x]) * e_area[x];
+    area += e_area[x];
+  });
+  const double mean = channel_sum(piece.dB);
+  return area > 0.0 && mean > 0.0 ? std::min(1.0, power / area / mean) : 0.0;
 }
 
 // The share of the hemicube's view that its receivers take, sum of F(piece -> receiver): at most 1

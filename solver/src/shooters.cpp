@@ -5,6 +5,7 @@
 #include <glm/geometric.hpp>
 
 #include <algorithm>
+#include <cmath>
 
 namespace hemibake::solver {
 namespace {
@@ -26,10 +27,18 @@ void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<u
   piece.normal = prep.normal[p];
   piece.area = polygon_area(node.c, n);
   piece.dB = node.unshot;
+  piece.centre = polygon_centre(node.c, n);
   if (node.element != kNone && e_child[node.element] != kNone) {
-    glm::dvec3 power(0.0);
-    for_leaves(node.element, [&](uint32_t e) { power += e_unshot[e] * e_area[e]; });
+    // The hemicube stands where the piece's unshot power is: at its leaves' centres weighted by
+    // their power (a point of the piece, which is convex). A floor piece half under a block, lit
+    // only outside it, then shoots into the room rather than into the block.
+    glm::dvec3 power(0.0), moment(0.0);
+    for_leaves(node.element, [&](uint32_t e) {
+      power += e_unshot[e] * e_area[e];
+      moment += channel_sum(e_unshot[e]) * e_area[e] * e_centre[e];
+    });
     piece.dB = power / piece.area;
+    if (channel_sum(power) > 0.0) piece.centre = moment / channel_sum(power);
   } else if (node.element != kNone) {
     piece.dB = e_unshot[node.element];
   }
@@ -38,14 +47,47 @@ void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<u
     record_broken = true;  // a replay could not know this piece
     return;
   }
+  // A piece centred under a surface resting on its patch (covered) shoots from its parts; what is
+  // left under that surface is not shot (a replay could not know it).
+  if (covered(p, piece.centre)) {
+    const bool is_leaf = node.element == kNone || e_child[node.element] == kNone;
+    if (is_leaf && node.depth >= kMaxShooterDepth) {
+      record_broken = true;
+      return;
+    }
+    for (uint32_t k = 0; k < 4; ++k) {
+      ShooterNode part;
+      child_corners(node.c, n, k, part.c);
+      part.depth = is_leaf ? node.depth + 1 : node.depth;
+      part.element = is_leaf ? kNone : e_child[node.element] + k;
+      part.source = is_leaf ? node.source : part.element;
+      part.unshot = piece.dB;
+      shoot_node(p, part, receivers, whole_scene);
+    }
+    return;
+  }
   piece.src.assign(1, node.source);
   piece.src_area = node.element != kNone ? piece.area : e_area[node.source];
-  piece.centre = polygon_centre(node.c, n);
   piece.up = node.c[1] - node.c[0];
   piece.diameter = polygon_diameter(node.c, n);
   piece.points.assign(node.c.begin(), node.c.begin() + n);
   piece.depth = node.depth;
   piece.power = channel_sum(piece.dB) * piece.area;
+  // A piece shoots its mean unshot radiosity from its centre. Where that is uneven, the centre's
+  // view is not its bright part's: a ceiling piece over a lamp hung 1 mm under it, bright only
+  // above the lamp, would give the room the light that only the lamp's top sees; a lit floor piece
+  // reaching under a block would give its light to the block's inside. Such pieces (strong enough
+  // to refine at all) shoot from their children, each with its own unshot radiosity.
+  if (node.element != kNone && e_child[node.element] != kNone && piece.power >= params.feps * emitted_power &&
+      uneven_piece(node.element)) {
+    for (uint32_t k = 0; k < 4; ++k) {
+      const uint32_t kid = e_child[node.element] + k;
+      ShooterNode part{{}, kid, glm::dvec3(0.0), node.depth, kid};
+      corners_of(kid, part.c);
+      shoot_node(p, part, receivers, whole_scene);
+    }
+    return;
+  }
   // Weak shots stay whole.
   piece.may_refine = node.depth < kMaxShooterDepth && piece.power >= params.feps * emitted_power;
   const std::vector<uint32_t> near = shoot_piece(piece, std::move(receivers), whole_scene);
@@ -60,6 +102,25 @@ void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<u
     kid.unshot = piece.dB;  // a geometric piece of a leaf shares the leaf's unshot radiosity
     shoot_node(p, kid, near, false);
   }
+}
+
+// Whether the children of inner element `element` depart from its mean unshot radiosity by more
+// than kUnevenShare (area-weighted, channels summed), so that it shoots from them (shoot_node).
+bool Solver::Impl::uneven_piece(uint32_t element) const {
+  double power[4] = {0.0, 0.0, 0.0, 0.0}, area[4] = {0.0, 0.0, 0.0, 0.0}, total = 0.0, total_area = 0.0;
+  for (uint32_t k = 0; k < 4; ++k) {
+    for_leaves(e_child[element] + k, [&](uint32_t e) {
+      power[k] += channel_sum(e_unshot[e]) * e_area[e];
+      area[k] += e_area[e];
+    });
+    total += power[k];
+    total_area += area[k];
+  }
+  if (total <= 0.0) return false;
+  const double mean = total / total_area;
+  double departure = 0.0;
+  for (uint32_t k = 0; k < 4; ++k) departure += std::abs(power[k] - mean * area[k]);
+  return departure > kUnevenShare * total;
 }
 
 // Shoots cluster node c to `receivers` as one piece along its mean normal; `depth` counts the

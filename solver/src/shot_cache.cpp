@@ -94,6 +94,10 @@ bool Solver::Impl::replayed_radiosities(const ShotRecord& r, std::vector<glm::dv
       growth = rp.dB[c] > 0.0 ? std::max(growth, dBs[i][c] / rp.dB[c]) : std::numeric_limits<double>::infinity();
     }
     if (std::isinf(growth) || growth > rp.headroom) return false;
+    // A piece that would now shoot from its children (shoot_node) cannot replay as one.
+    if (rp.src_end - rp.src_begin == 1 && e_child[r.src[rp.src_begin]] != kNone && rp.src_area == rp.area &&
+        channel_sum(dBs[i]) * rp.area >= params.feps * emitted_power && uneven_piece(r.src[rp.src_begin]))
+      return false;
     if (rp.extra) continue;
     const double shot = channel_sum(dBs[i]) * rp.area;
     total += shot;

@@ -87,6 +87,9 @@ constexpr double kClusterCone = 0.9397;
 // A shooting piece with an absorbing back close in front of it that takes at least this share of
 // the light from its centre is refined (absorber_close).
 constexpr double kAbsorberShare = 0.1;
+// A piece of a patch whose children's unshot radiosities depart from its mean by more than this,
+// summed over them by area as a share of the mean, shoots from its children (uneven_piece).
+constexpr double kUnevenShare = 0.5;
 // Lengths under this share of the scene's diagonal are rounding. An eye that near a patch's plane
 // sees it edge-on: project() leaves such patches out and projects backs beyond it, and
 // absorber_close, which predicts which absorbing backs the hemicube will see, must draw the same
@@ -240,6 +243,9 @@ struct Solver::Impl {
   bool is_close(const Piece& piece, uint32_t e) const;
   double near_error(const Piece& piece, uint32_t e) const;
   bool absorber_close(const Piece& piece) const;
+  bool uneven_piece(uint32_t element) const;
+  double front_share(const Piece& piece, uint32_t e) const;
+  bool covered(uint32_t p, const glm::dvec3& x) const;
   static double point_piece_form_factor(const Piece& piece, const glm::dvec3& x, const glm::dvec3& n);
   double element_piece_form_factor(const Piece& piece, uint32_t e, int side) const;
   double exact_form_factor(const Piece& piece, uint32_t e, int side);
