@@ -116,6 +116,19 @@ Reference::~Reference() {
   rtcReleaseDevice(impl_->device);
 }
 
+namespace {
+
+// The emitter sampling's density, per solid angle, of a point of an emitting patch with emission
+// `e` at squared distance r2 seen at cosine cos_y: the patch is chosen by power, the point by area.
+double light_pdf(double total_power, const glm::dvec3& e, double r2, double cos_y) {
+  return cos_y > 0.0 ? (e.x + e.y + e.z) * r2 / (total_power * cos_y) : 0.0;
+}
+
+// The power heuristic (Veach): the weight of a sample drawn with density a, where b also draws it.
+double mis_weight(double a, double b) { return a * a / (a * a + b * b); }
+
+}  // namespace
+
 ReferencePoint Reference::radiosity_at(uint32_t patch, const glm::dvec3& x0, uint32_t samples, uint64_t seed) const {
   const Impl& s = *impl_;
   std::mt19937_64 rng(seed);
@@ -162,7 +175,8 @@ ReferencePoint Reference::radiosity_at(uint32_t patch, const glm::dvec3& x0, uin
             const auto& pe = s.input->patches[em.patch];
             const double power = (pe.emission.x + pe.emission.y + pe.emission.z) * em.area;
             const double prob = power / s.total_power;  // of choosing this triangle
-            value += weight * pe.emission * (cos_x * cos_y * em.area / (std::numbers::pi * r2 * prob));
+            const double w = mis_weight(light_pdf(s.total_power, pe.emission, r2, cos_y), cos_x / std::numbers::pi);
+            value += weight * pe.emission * (w * cos_x * cos_y * em.area / (std::numbers::pi * r2 * prob));
           }
         }
       }
@@ -192,6 +206,14 @@ ReferencePoint Reference::radiosity_at(uint32_t patch, const glm::dvec3& x0, uin
       const glm::dvec3 nq = s.normal[q];
       if (glm::dot(nq, d) >= 0.0) break;  // the back of a one-sided surface: black
       const auto& pq = s.input->patches[q];
+      // An emitter met by the cosine-weighted direction counts too, weighted against the emitter
+      // sampling above: close to a lamp (a ceiling 1 mm over it) only this finds its light.
+      if (pq.emission != glm::dvec3(0.0)) {
+        const double dist = static_cast<double>(rh.ray.tfar) + s.eps;
+        const double w = mis_weight(glm::dot(n, d) / std::numbers::pi,
+                                    light_pdf(s.total_power, pq.emission, dist * dist, -glm::dot(nq, d)));
+        value += weight * pq.emission * w;
+      }
       // Russian roulette on the reflectance's mean keeps the estimate unbiased.
       const double keep = std::min(0.95, (pq.reflectance.x + pq.reflectance.y + pq.reflectance.z) / 3.0);
       if (keep <= 0.0 || uni(rng) >= keep) break;
