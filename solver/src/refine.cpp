@@ -68,23 +68,26 @@ std::vector<uint32_t> Solver::Impl::too_coarse(const glm::dvec3& dB, double weig
                                                const std::vector<uint32_t>& accepted) {
   std::vector<uint32_t> to_split;
   for (uint32_t e : accepted) {
-    if (e_area[e] < min_split_area()) continue;
+    if (e_area[e] < min_sharp_split_area()) continue;
+    // Under AEPS only a sharp edge of light splits (kSharpJump).
+    const bool sharp_only = e_area[e] < min_split_area();
+    const double tolerance = sharp_only ? kSharpJump * b_tolerance : b_tolerance;
     bool split_it = false;
     if (projected(e)) {
       // (a) too coarse for this interaction.
-      split_it = e_ff[e] * weight > params.feps;
+      split_it = !sharp_only && e_ff[e] * weight > params.feps;
       stats.splits_form_factor += split_it;
       // (b) partly hidden, and the hidden part matters.
-      if (!split_it && e_ff[e] > 0.0 && e_ff[e] < e_ff_open[e]) {
+      if (!split_it && !sharp_only && e_ff[e] > 0.0 && e_ff[e] < e_ff_open[e]) {
         const double open = shot_radiosity(e, dB, f_open[e]);
-        split_it = open - shot_b[e] > b_tolerance;
+        split_it = open - shot_b[e] > tolerance;
         stats.splits_visibility += split_it;
       }
     }
     // (c) the shot's radiosity jumps across one of its corners.
     for (uint32_t k = 0; k < corner_count(e) && !split_it; ++k) {
       const uint32_t vert = e_corner[e][k];
-      split_it = vmax[vert] - vmin[vert] > b_tolerance;
+      split_it = vmax[vert] - vmin[vert] > tolerance;
       stats.splits_gradient += split_it;
     }
     if (split_it) to_split.push_back(e);
@@ -97,14 +100,16 @@ std::vector<uint32_t> Solver::Impl::too_coarse(const glm::dvec3& dB, double weig
 double Solver::Impl::split_headroom(const glm::dvec3& dB, double weight, const std::vector<uint32_t>& accepted) const {
   double room = std::numeric_limits<double>::infinity();
   for (uint32_t e : accepted) {
-    if (e_area[e] < min_split_area()) continue;
+    if (e_area[e] < min_sharp_split_area()) continue;
+    const bool sharp_only = e_area[e] < min_split_area();
+    const double tolerance = sharp_only ? kSharpJump * b_tolerance : b_tolerance;
     if (projected(e)) {
-      lower_headroom(room, params.feps, e_ff[e] * weight);
-      if (e_ff[e] > 0.0 && e_ff[e] < e_ff_open[e])
-        lower_headroom(room, b_tolerance, shot_radiosity(e, dB, f_open[e]) - shot_b[e]);
+      if (!sharp_only) lower_headroom(room, params.feps, e_ff[e] * weight);
+      if (!sharp_only && e_ff[e] > 0.0 && e_ff[e] < e_ff_open[e])
+        lower_headroom(room, tolerance, shot_radiosity(e, dB, f_open[e]) - shot_b[e]);
     }
     for (uint32_t k = 0; k < corner_count(e); ++k)
-      lower_headroom(room, b_tolerance, vmax[e_corner[e][k]] - vmin[e_corner[e][k]]);
+      lower_headroom(room, tolerance, vmax[e_corner[e][k]] - vmin[e_corner[e][k]]);
   }
   return room;
 }

@@ -90,6 +90,11 @@ constexpr double kAbsorberShare = 0.1;
 // A piece of a patch whose children's unshot radiosities depart from its mean by more than this,
 // summed over them by area as a share of the mean, shoots from its children (uneven_piece).
 constexpr double kUnevenShare = 0.5;
+// Elements under AEPS split further, down to AEPS / kSharpAreaFactor (four more levels), only where
+// the shot's radiosity jumps by more than kSharpJump radiosity tolerances: the outline of a lamp
+// hung 1 mm under a ceiling, bright above the lamp and dark beside it, the edge of a contact shadow.
+constexpr double kSharpAreaFactor = 256.0;
+constexpr double kSharpJump = 10.0;
 // Lengths under this share of the scene's diagonal are rounding. An eye that near a patch's plane
 // sees it edge-on: project() leaves such patches out and projects backs beyond it, and
 // absorber_close, which predicts which absorbing backs the hemicube will see, must draw the same
@@ -272,6 +277,7 @@ struct Solver::Impl {
                        std::vector<uint32_t>& accepted, std::vector<uint32_t>& seen);
   // A split makes four children, none smaller than aeps_area.
   double min_split_area() const { return 4.0 * aeps_area; }
+  double min_sharp_split_area() const { return min_split_area() / kSharpAreaFactor; }
 
   // shot_cache.cpp: records and replays.
   bool replay(uint32_t unit);
