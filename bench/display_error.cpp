@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <thread>
 
@@ -78,7 +79,11 @@ std::vector<SurfacePoint> reference_points(const solver::Scene& scene, const Ref
     sp.normal = glm::normalize(glm::cross(p.corners[1] - p.corners[0], p.corners[2] - p.corners[0]));
     points.push_back(sp);
   }
+  trace_reference(scene, points, options);
+  return points;
+}
 
+void trace_reference(const solver::Scene& scene, std::vector<SurfacePoint>& points, const ReferenceOptions& options) {
   // A first pass gives every point a value; the floor for dark points is 5 % of their mean.
   const baselines::Reference reference(scene);
   constexpr uint32_t kBatch = 512;
@@ -104,15 +109,14 @@ std::vector<SurfacePoint> reference_points(const solver::Scene& scene, const Ref
            points[i].std_error > options.max_std_error * std::max(channel_sum(points[i].reference), floor))
       trace(i);
   });
-  return points;
 }
 
 bool displayed_value(const solver::Mesh& baked, const glm::dvec3& x, const glm::dvec3& normal, glm::dvec3& out) {
   // The triangle containing x on the side facing `normal`, nearest to x's plane.
   double best = std::numeric_limits<double>::max();
   bool found = false;
-  auto consider = [&](uint32_t a, uint32_t b, uint32_t c) {
-    const glm::dvec3 &pa = baked.positions[a], &pb = baked.positions[b], &pc = baked.positions[c];
+  auto consider = [&](const glm::dvec3& pa, const glm::dvec3& pb, const glm::dvec3& pc, const glm::dvec3& ba,
+                      const glm::dvec3& bb, const glm::dvec3& bc) {
     const glm::dvec3 n = glm::cross(pb - pa, pc - pa);
     const double n2 = glm::dot(n, n);
     if (n2 <= 0.0) return;
@@ -130,17 +134,27 @@ bool displayed_value(const solver::Mesh& baked, const glm::dvec3& x, const glm::
     if (wa < kSlack || wb < kSlack || wc < kSlack) return;
     best = dist;
     found = true;
-    out = wa * baked.radiosity[a] + wb * baked.radiosity[b] + wc * baked.radiosity[c];
+    out = wa * ba + wb * bb + wc * bc;
   };
+  const auto& p = baked.positions;
+  const auto& b = baked.radiosity;
   for (const auto& el : baked.elements) {
     const uint32_t nb = el.boundary_end - el.boundary_begin;
     if (nb == 3 || nb == 0) {
-      consider(el.corners[0], el.corners[1], el.corners[2]);
+      const auto& c = el.corners;
+      consider(p[c[0]], p[c[1]], p[c[2]], b[c[0]], b[c[1]], b[c[2]]);
       continue;
     }
-    // A loop with hanging vertices: a fan from its first vertex covers the (convex) element.
+    // As the writer shows a loop of more than three vertices: a fan from its centre, which takes
+    // the mean of the loop's values.
     const uint32_t* loop = baked.boundary.data() + el.boundary_begin;
-    for (uint32_t k = 1; k + 1 < nb; ++k) consider(loop[0], loop[k], loop[k + 1]);
+    glm::dvec3 centre(0.0), value(0.0);
+    for (uint32_t k = 0; k < nb; ++k) {
+      centre += p[loop[k]] / static_cast<double>(nb);
+      value += b[loop[k]] / static_cast<double>(nb);
+    }
+    for (uint32_t k = 0; k < nb; ++k)
+      consider(centre, p[loop[k]], p[loop[(k + 1) % nb]], value, b[loop[k]], b[loop[(k + 1) % nb]]);
   }
   return found;
 }

@@ -36,6 +36,9 @@ struct ReferenceOptions {
 /// standard error meets `max_std_error` or `max_samples` paths.
 std::vector<SurfacePoint> reference_points(const solver::Scene& scene, const ReferenceOptions& options);
 
+/// Traces the reference at `points` (patch, position and normal set) as reference_points does.
+void trace_reference(const solver::Scene& scene, std::vector<SurfacePoint>& points, const ReferenceOptions& options);
+
 struct DisplayError {
   double median = 0.0;   ///< relative error of the channel sum, |bake - reference| / max(reference, floor)
   double p90 = 0.0;
@@ -51,8 +54,9 @@ struct DisplayError {
 /// relative error is 5 % of the points' mean reference, so points in an umbra do not dominate.
 DisplayError displayed_error(const std::vector<SurfacePoint>& points, const solver::Mesh& baked);
 
-/// The value `baked` displays at a point, interpolated barycentrically over the triangle (of the
-/// element loops' fans) that contains it on the side facing `normal`; false if none does.
+/// The value `baked` displays at a point, interpolated barycentrically over the triangle that
+/// contains it on the side facing `normal`; false if none does. An element loop of more than three
+/// vertices (a solver mesh) is shown as the writer shows it: a fan from its centre.
 bool displayed_value(const solver::Mesh& baked, const glm::dvec3& position, const glm::dvec3& normal, glm::dvec3& out);
 
 }  // namespace hemibake::bench

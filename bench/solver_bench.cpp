@@ -2,6 +2,7 @@
 // cost of re-projecting against reusing the parent's pixels, and how the cost of one hemicube grows
 // with the number of elements. Each configuration runs in a child process so that its peak memory
 // is its own. Prints markdown tables (see bench/README.md).
+#include "display_error.h"
 #include "hemibake/baselines/reference.h"
 #include "hemibake/protocol/bake.h"
 #include "hemibake/solver/scenes.h"
@@ -137,6 +138,7 @@ struct Run {
   uint64_t elements = 0;
   uint64_t links = 0;
   Error error;
+  double shown_median = 0.0, shown_p90 = 0.0, shown_max = 0.0;  // as displayed (display_error.h)
   long peak_kib = 0;
 };
 
@@ -145,7 +147,8 @@ struct Run {
 // per element) is measured after the clock stops. With `repeats` > 1 the solve runs that many times
 // and the fastest counts (this machine is shared).
 Run run_method(const Scene& scene, const std::string& method, uint32_t threads, uint32_t samples,
-               const hemibake::protocol::JobSpec& base = {}, uint32_t repeats = 1) {
+               const hemibake::protocol::JobSpec& base = {}, uint32_t repeats = 1,
+               const std::vector<hemibake::bench::SurfacePoint>* points = nullptr) {
   long peak = 0;
   Run r = isolated_value<Run>(
       [&] {
@@ -172,6 +175,12 @@ Run run_method(const Scene& scene, const std::string& method, uint32_t threads, 
         }
         out.elements = mesh.elements.size();
         if (samples > 0) out.error = error_of(scene, mesh, samples);
+        if (points != nullptr) {
+          const hemibake::bench::DisplayError shown = hemibake::bench::displayed_error(*points, mesh);
+          out.shown_median = shown.median;
+          out.shown_p90 = shown.p90;
+          out.shown_max = shown.max;
+        }
         return out;
       },
       &peak);
@@ -181,54 +190,69 @@ Run run_method(const Scene& scene, const std::string& method, uint32_t threads, 
 
 void print_runs_header() {
   std::printf("| method | threads | time (s) | shots (hr: iterations) | replayed shots | hemicubes | elements | links | "
-              "RMS error | RMS error, reference noise removed | max error | energy / reference's | peak memory (MB) |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+              "shown: median error | shown: p90 | shown: max | centres: RMS error | centres: RMS, reference noise removed | "
+              "centres: max error | energy / reference's | peak memory (MB) |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
 }
 
 void print_run(const Run& r) {
-  std::printf("| %s | %s | %.3f | %llu | %llu | %llu | %llu | %llu | %.4f | %.4f | %.4f | %.4f | %.1f |\n", r.method,
-              r.threads == 0 ? "all" : std::to_string(r.threads).c_str(),
+  std::printf("| %s | %s | %.3f | %llu | %llu | %llu | %llu | %llu | %.1f %% | %.1f %% | %.0f %% | %.4f | %.4f | %.4f | %.4f | %.1f |\n",
+              r.method, r.threads == 0 ? "all" : std::to_string(r.threads).c_str(),
               r.seconds, static_cast<unsigned long long>(r.shots), static_cast<unsigned long long>(r.replayed),
               static_cast<unsigned long long>(r.hemicubes),
-              static_cast<unsigned long long>(r.elements), static_cast<unsigned long long>(r.links), r.error.rms,
+              static_cast<unsigned long long>(r.elements), static_cast<unsigned long long>(r.links),
+              100.0 * r.shown_median, 100.0 * r.shown_p90, 100.0 * r.shown_max, r.error.rms,
               r.error.rms_clean, r.error.max, r.error.energy, r.peak_kib / 1024.0);
   std::fflush(stdout);
 }
 
 Stats solve_stats(const Scene& scene, const JobSpec& spec) { return hemibake::protocol::solve(scene, spec).stats; }
 
-// Equal quality: each method at several tolerances, error against the reference, time; prints the
-// time each needs to reach the best error both reach, and their ratio. A setting within 1 % of that
-// error counts as reaching it: errors closer than that are within the reference's own noise (two
-// hr settings on the room differed in the fourth decimal and picked a time twice as long).
-void sweep(const Scene& scene, const char* title, uint32_t samples, const std::vector<JobSpec>& aa,
-           const std::vector<JobSpec>& hr, const std::vector<std::string>& labels, uint32_t repeats) {
-  std::printf("## Equal quality (%s; all threads; error = RMS against the reference, its noise removed)\n\n", title);
-  std::printf("| method | setting | time (s) | elements | links | error |\n|---|---|---|---|---|---|\n");
+// Equal quality: each method at several settings, its error as displayed (p90 over the points,
+// display_error.h) and its time; prints the time each needs to reach the best p90 that aa and hr
+// both reach, and their ratio.
+void sweep(const Scene& scene, const char* title, const std::vector<hemibake::bench::SurfacePoint>& points,
+           const std::vector<std::pair<std::string, std::vector<JobSpec>>>& methods,
+           const std::vector<std::string>& labels, uint32_t repeats) {
+  std::printf("## Time against error as displayed (%s; all threads; %zu random surface points)\n\n", title,
+              points.size());
+  std::printf("| method | setting | time (s) | elements | links | median error | p90 error | max error |\n"
+              "|---|---|---|---|---|---|---|---|\n");
   std::vector<Run> runs;
   size_t label = 0;
-  for (const JobSpec& spec : aa) {
-    runs.push_back(run_method(scene, "aa", 0, samples, spec, repeats));
-    std::printf("| aa | %s | %.3f | %llu | | %.4f |\n", labels[label++].c_str(), runs.back().seconds,
-                static_cast<unsigned long long>(runs.back().elements), runs.back().error.rms_clean);
-    std::fflush(stdout);
+  for (const auto& [method, specs] : methods) {
+    for (const JobSpec& spec : specs) {
+      runs.push_back(run_method(scene, method, 0, 0, spec, repeats, &points));
+      const Run& r = runs.back();
+      std::printf("| %s | %s | %.3f | %llu | %llu | %.1f %% | %.1f %% | %.0f %% |\n", method.c_str(),
+                  labels[label++].c_str(), r.seconds, static_cast<unsigned long long>(r.elements),
+                  static_cast<unsigned long long>(r.links), 100.0 * r.shown_median, 100.0 * r.shown_p90,
+                  100.0 * r.shown_max);
+      std::fflush(stdout);
+    }
   }
-  for (const JobSpec& spec : hr) {
-    runs.push_back(run_method(scene, "hr", 0, samples, spec, repeats));
-    std::printf("| hr | %s | %.3f | %llu | %llu | %.4f |\n", labels[label++].c_str(), runs.back().seconds,
-                static_cast<unsigned long long>(runs.back().elements), static_cast<unsigned long long>(runs.back().links),
-                runs.back().error.rms_clean);
-    std::fflush(stdout);
-  }
-  auto is_aa = [](const Run& r) { return std::strcmp(r.method, "aa") == 0; };
-  double best_aa = 1e300, best_hr = 1e300;
-  for (const Run& r : runs) (is_aa(r) ? best_aa : best_hr) = std::min(is_aa(r) ? best_aa : best_hr, r.error.rms_clean);
-  const double target = std::max(best_aa, best_hr);
-  double t_aa = 1e300, t_hr = 1e300;
-  for (const Run& r : runs)
-    if (r.error.rms_clean <= target * 1.01) (is_aa(r) ? t_aa : t_hr) = std::min(is_aa(r) ? t_aa : t_hr, r.seconds);
-  std::printf("\nTo reach an error of %.4f (within 1 %%): aa %.3f s, hr %.3f s; hr / aa = %.2f\n\n", target, t_aa, t_hr,
-              t_hr / t_aa);
+  auto best = [&](const char* m) {
+    double b = 1e300;
+    for (const Run& r : runs)
+      if (std::strcmp(r.method, m) == 0) b = std::min(b, r.shown_p90);
+    return b;
+  };
+  const double target = std::max(best("aa"), best("hr"));
+  auto time_to = [&](const char* m) {
+    double t = 1e300;
+    for (const Run& r : runs)
+      if (std::strcmp(r.method, m) == 0 && r.shown_p90 <= target * 1.01) t = std::min(t, r.seconds);
+    return t;
+  };
+  std::printf("\nTo reach a p90 error of %.1f %% (within 1 %%): aa %.3f s, hr %.3f s; hr / aa = %.2f\n\n",
+              100.0 * target, time_to("aa"), time_to("hr"), time_to("hr") / time_to("aa"));
+}
+
+// The points of the displayed-error measure and their reference, once per scene.
+std::vector<hemibake::bench::SurfacePoint> points_of(const Scene& scene, uint32_t count) {
+  hemibake::bench::ReferenceOptions options;
+  options.points = count;
+  return hemibake::bench::reference_points(scene, options);
 }
 
 }  // namespace
@@ -246,27 +270,30 @@ int main(int argc, char** argv) {
     // AEPS neither method subdivides (its patches are below 4 x AEPS), so what sets their accuracy
     // is aa's hemicube resolution and hr's visibility rays per link.
     const bool room = mode == "--sweep-room";
-    std::vector<JobSpec> aa, hr;
+    std::vector<std::pair<std::string, std::vector<JobSpec>>> methods{{"aa", {}}, {"classical", {}}, {"hr", {}}};
     std::vector<std::string> labels;
     auto label = [&](const char* format, double v) {
       char text[64];
       std::snprintf(text, sizeof text, format, v);
       labels.emplace_back(text);
     };
-    for (const double v : room ? std::vector<double>{50, 100, 140, 200} : std::vector<double>{0.1, 0.03, 0.01}) {
-      aa.emplace_back();
-      if (room) aa.back().params.resolution = static_cast<uint32_t>(v);
-      else aa.back().params.beps = v;
-      label(room ? "resolution %g" : "beps %g", v);
+    for (int m = 0; m < 2; ++m) {
+      for (const double v : room ? std::vector<double>{50, 100, 140, 200} : std::vector<double>{0.1, 0.03, 0.01, 0.003}) {
+        methods[m].second.emplace_back();
+        if (room) methods[m].second.back().params.resolution = static_cast<uint32_t>(v);
+        else methods[m].second.back().params.beps = v;
+        label(room ? "resolution %g" : "beps %g", v);
+      }
     }
-    for (const double v : room ? std::vector<double>{1, 4, 8, 16} : std::vector<double>{0.01, 0.003, 0.001}) {
-      hr.emplace_back();
-      if (room) hr.back().rays = static_cast<uint32_t>(v);
-      else hr.back().params.feps = v;
+    for (const double v : room ? std::vector<double>{1, 4, 8, 16} : std::vector<double>{0.01, 0.003, 0.001, 0.0003}) {
+      methods[2].second.emplace_back();
+      if (room) methods[2].second.back().rays = static_cast<uint32_t>(v);
+      else methods[2].second.back().params.feps = v;
       label(room ? "%g rays per link" : "FEPS %g", v);
     }
-    if (room) sweep(make_furnished_room(), "furnished room, 6758 patches", 256, aa, hr, labels, 2);
-    else sweep(cornell, "Cornell box", 512, aa, hr, labels, 3);
+    const Scene scene = room ? make_furnished_room() : cornell;
+    const auto points = points_of(scene, room ? 200 : 300);
+    sweep(scene, room ? "furnished room, 6758 patches" : "Cornell box", points, methods, labels, room ? 1 : 3);
     return 0;
   }
   if (mode == "--chamber") {
@@ -275,8 +302,9 @@ int main(int argc, char** argv) {
     std::printf("## Furnished room (%zu patches; resolution 100, FEPS 0.001, AEPS 0.0001, unshot < 0.001; "
                 "reference 256 paths per element centre)\n\n",
                 room.patches.size());
+    const auto points = points_of(room, 200);
     print_runs_header();
-    for (const char* m : {"aa", "classical", "hr"}) print_run(run_method(room, m, 0, 256));
+    for (const char* m : {"aa", "classical", "hr"}) print_run(run_method(room, m, 0, 256, {}, 1, &points));
     JobSpec fresh;
     fresh.params.shot_cache_mb = 0;
     Run r = run_method(room, "aa", 0, 256, fresh);
@@ -349,13 +377,14 @@ int main(int argc, char** argv) {
   std::printf("\n## Methods side by side (Cornell box, paper's settings; error against a path-traced reference, "
               "%u paths per element centre, as fractions of its mean radiosity)\n\n",
               samples);
+  const auto points = points_of(cornell, 300);
   print_runs_header();
   const uint32_t repeats = quick ? 1 : 3;
-  print_run(run_method(cornell, "aa", 0, samples, {}, repeats));
-  print_run(run_method(cornell, "aa", 1, samples, {}, repeats));
-  print_run(run_method(cornell, "classical", 0, samples, {}, repeats));
-  print_run(run_method(cornell, "hr", 0, samples, {}, repeats));
-  print_run(run_method(cornell, "hr", 1, samples, {}, repeats));
+  print_run(run_method(cornell, "aa", 0, samples, {}, repeats, &points));
+  print_run(run_method(cornell, "aa", 1, samples, {}, repeats, &points));
+  print_run(run_method(cornell, "classical", 0, samples, {}, repeats, &points));
+  print_run(run_method(cornell, "hr", 0, samples, {}, repeats, &points));
+  print_run(run_method(cornell, "hr", 1, samples, {}, repeats, &points));
 
   std::printf("\n## Cost of one hemicube against elements (closed box, no subdivision, aa, all threads)\n\n");
   std::printf("| elements | hemicubes | time per hemicube (ms) | time per hemicube per 1000 elements (ms) |\n");

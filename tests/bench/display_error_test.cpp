@@ -1,0 +1,143 @@
+// The error as displayed (bench/display_error.h) against closed forms, and bakes of emitters close
+// to surfaces measured with it against the path tracer: the bright region above a lamp hung 1 mm
+// under a ceiling ends at the lamp's outline, and the room's light stays the reference's.
+#include "display_error.h"
+
+#include "hemibake/solver/scenes.h"
+#include "hemibake/solver/solver.h"
+
+#include <gtest/gtest.h>
+#include <glm/geometric.hpp>
+
+#include <cstdio>
+#include <random>
+
+namespace hemibake::bench {
+namespace {
+
+using glm::dvec3;
+using solver::Patch;
+using solver::Scene;
+
+solver::Mesh solve(const Scene& scene) {
+  EXPECT_EQ(solver::validate(scene), "");
+  solver::Params params;
+  params.threads = 2;
+  solver::Solver s(scene, params);
+  s.run();
+  EXPECT_TRUE(s.stats().converged);
+  return s.mesh();
+}
+
+// A closed box with uniform emission and reflectance: B = E / (1 - rho) everywhere, so the
+// measure must find no error but the reference's noise.
+TEST(DisplayedError, ClosedBoxShowsItsClosedForm) {
+  const Scene box = solver::make_closed_box(1.0, 3, dvec3(0.5), dvec3(1.0), true);
+  const solver::Mesh mesh = solve(box);
+  ReferenceOptions options;
+  options.points = 100;
+  const auto points = reference_points(box, options);
+  ASSERT_EQ(points.size(), 0u);  // every patch emits: no point to measure
+  // The same box with one patch dark: its points are measured (the dark one reflects only).
+  Scene lit = box;
+  lit.patches[0].emission = dvec3(0.0);
+  lit.patches[0].material = 1;  // vertex radiosity is averaged within a material, not across emitters
+  const auto lit_points = reference_points(lit, options);
+  ASSERT_EQ(lit_points.size(), 100u);
+  const DisplayError e = displayed_error(lit_points, solve(lit));
+  std::printf("closed box, one patch dark: median %.4f p90 %.4f max %.4f, missed %u\n", e.median, e.p90, e.max, e.missed);
+  EXPECT_EQ(e.missed, 0u);
+  EXPECT_LT(e.median, 0.03);
+  EXPECT_NEAR(e.mean_ratio, 1.0, 0.02);
+}
+
+// A 4 x 3 x 4 room (one-sided walls facing in) with a 1 m lamp under its ceiling, `gap` below it,
+// facing down; `double_sided` adds the lamp's upward side (as exporters write a double-sided
+// emissive quad), which lights the ceiling above it.
+Scene room_with_lamp(double gap, bool double_sided, uint32_t& ceiling) {
+  Scene s;
+  const dvec3 lo(-2.0, 0.0, -2.0), hi(2.0, 3.0, 2.0), rho(0.7);
+  auto quad = [&](dvec3 a, dvec3 b, dvec3 c, dvec3 d, const dvec3& r, const dvec3& e, uint32_t m) {
+    solver::add_quad(s, a, b, c, d, r, e, m);
+  };
+  quad({lo.x, lo.y, lo.z}, {lo.x, lo.y, hi.z}, {hi.x, lo.y, hi.z}, {hi.x, lo.y, lo.z}, rho, dvec3(0.0), 0);  // floor, up
+  ceiling = static_cast<uint32_t>(s.patches.size());
+  quad({lo.x, hi.y, lo.z}, {hi.x, hi.y, lo.z}, {hi.x, hi.y, hi.z}, {lo.x, hi.y, hi.z}, rho, dvec3(0.0), 0);  // ceiling, down
+  quad({lo.x, lo.y, lo.z}, {hi.x, lo.y, lo.z}, {hi.x, hi.y, lo.z}, {lo.x, hi.y, lo.z}, rho, dvec3(0.0), 0);  // z = lo, +z
+  quad({lo.x, lo.y, hi.z}, {lo.x, hi.y, hi.z}, {hi.x, hi.y, hi.z}, {hi.x, lo.y, hi.z}, rho, dvec3(0.0), 0);  // z = hi, -z
+  quad({lo.x, lo.y, lo.z}, {lo.x, hi.y, lo.z}, {lo.x, hi.y, hi.z}, {lo.x, lo.y, hi.z}, rho, dvec3(0.0), 0);  // x = lo, +x
+  quad({hi.x, lo.y, lo.z}, {hi.x, lo.y, hi.z}, {hi.x, hi.y, hi.z}, {hi.x, hi.y, lo.z}, rho, dvec3(0.0), 0);  // x = hi, -x
+  const double y = hi.y - gap;
+  const dvec3 a(-0.5, y, -0.5), b(0.5, y, -0.5), c(0.5, y, 0.5), d(-0.5, y, 0.5), e(5.0);
+  quad(a, b, c, d, dvec3(0.8), e, 1);  // facing down
+  if (double_sided) quad(a, d, c, b, dvec3(0.8), e, 1);
+  return s;
+}
+
+// Points on the ceiling (patch `ceiling`, facing down) at distances in [d0, d1] outside the lamp's
+// outline, seeded.
+std::vector<SurfacePoint> ring(uint32_t ceiling, double d0, double d1, uint32_t count) {
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  std::vector<SurfacePoint> out;
+  while (out.size() < count) {
+    const double x = -0.5 - d1 + uni(rng) * (1.0 + 2.0 * d1), z = -0.5 - d1 + uni(rng) * (1.0 + 2.0 * d1);
+    const double outside = std::max(std::abs(x), std::abs(z)) - 0.5;
+    if (outside < d0 || outside > d1) continue;
+    SurfacePoint p;
+    p.patch = ceiling;
+    p.position = dvec3(x, 3.0, z);
+    p.normal = dvec3(0.0, -1.0, 0.0);
+    out.push_back(p);
+  }
+  return out;
+}
+
+void expect_lamp_outline_and_room_light(double gap, bool double_sided) {
+  uint32_t ceiling = 0;
+  const Scene scene = room_with_lamp(gap, double_sided, ceiling);
+  const solver::Mesh mesh = solve(scene);
+  ReferenceOptions options;
+  options.points = 200;
+  const auto points = reference_points(scene, options);
+  const DisplayError room = displayed_error(points, mesh);
+  auto near = ring(ceiling, 0.01, 0.03, 60);
+  trace_reference(scene, near, options);
+  const DisplayError edge = displayed_error(near, mesh);
+  std::printf("lamp %.4f m under the ceiling, %s: room median %.3f p90 %.3f, bake/reference %.3f; "
+              "ceiling 1-3 cm outside the lamp: median %.3f, bake/reference %.3f\n",
+              gap, double_sided ? "double-sided" : "one-sided", room.median, room.p90, room.mean_ratio, edge.median,
+              edge.mean_ratio);
+  EXPECT_NEAR(room.mean_ratio, 1.0, 0.03);
+  EXPECT_LT(room.median, 0.05);
+  // Next to the outline the ceiling is lit only by the room: the lamp's upward light stays above it.
+  EXPECT_LT(edge.mean_ratio, 1.5);
+  EXPECT_LT(edge.median, 0.5);
+}
+
+TEST(EmitterNearSurface, DoubleSidedLampOneMillimetreUnderTheCeiling) { expect_lamp_outline_and_room_light(0.001, true); }
+TEST(EmitterNearSurface, OneSidedLampOneMillimetreUnderTheCeiling) { expect_lamp_outline_and_room_light(0.001, false); }
+TEST(EmitterNearSurface, DoubleSidedLampTenCentimetresUnderTheCeiling) { expect_lamp_outline_and_room_light(0.1, true); }
+
+// A lamp standing on a wall's face (touching it along its edge, facing into the room): the wall
+// next to it is lit as the path tracer lights it.
+TEST(EmitterNearSurface, LampTouchingAWall) {
+  uint32_t ceiling = 0;
+  Scene scene = room_with_lamp(0.5, false, ceiling);
+  // Move the lamp so that one edge lies on the wall x = -2.
+  for (auto& p : scene.patches)
+    if (p.emission.x > 0.0)
+      for (auto& c : p.corners) c.x -= 1.5;
+  const solver::Mesh mesh = solve(scene);
+  ReferenceOptions options;
+  options.points = 200;
+  const auto points = reference_points(scene, options);
+  const DisplayError room = displayed_error(points, mesh);
+  std::printf("lamp touching a wall: median %.3f p90 %.3f, bake/reference %.3f\n", room.median, room.p90,
+              room.mean_ratio);
+  EXPECT_NEAR(room.mean_ratio, 1.0, 0.03);
+  EXPECT_LT(room.median, 0.05);
+}
+
+}  // namespace
+}  // namespace hemibake::bench
