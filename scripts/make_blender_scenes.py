@@ -69,25 +69,30 @@ def room_with_panel(single_sided):
 
 
 def room_with_window(single_sided):
-    """The same room with a window in one wall (a hole) and an emissive 'sky' plane outside it,
-    facing in: the only light."""
+    """The same room with a 1.2 x 1.0 m window in its +x wall and an emissive 'sky' plane outside
+    it, facing in: the only light. The walls' faces point out (as a cube's do), or in when
+    single-sided."""
     reset()
     white = material("white", (0.7, 0.7, 0.7), single_sided=single_sided)
     sky = material("sky", (0.0, 0.0, 0.0), emission=(0.6, 0.7, 1.0), strength=3.0, single_sided=single_sided)
-    room = box("room", (4.0, 4.0, 3.0), (0.0, 0.0, 1.5), white, flip=single_sided)
-    # Cut the window: a boolean difference with a box through the +x wall.
-    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(2.0, 0.0, 1.5))
-    cutter = bpy.context.active_object
-    cutter.scale = (0.5, 1.2, 1.0)
-    mod = room.modifiers.new("window", "BOOLEAN")
-    mod.operation = "DIFFERENCE"
-    mod.object = cutter
-    bpy.context.view_layer.objects.active = room
-    bpy.ops.object.modifier_apply(modifier="window")
-    bpy.data.objects.remove(cutter)
+    x0, x1, y0, y1, z0, z1 = -2.0, 2.0, -2.0, 2.0, 0.0, 3.0
+    wy0, wy1, wz0, wz1 = -0.6, 0.6, 1.0, 2.0  # the window in the x = x1 wall
+    v = [(x0, y0, z0), (x1, y0, z0), (x1, y1, z0), (x0, y1, z0),
+         (x0, y0, z1), (x1, y0, z1), (x1, y1, z1), (x0, y1, z1),
+         (x1, wy0, wz0), (x1, wy1, wz0), (x1, wy1, wz1), (x1, wy0, wz1),
+         (x1, wy0, z0), (x1, wy1, z0), (x1, wy1, z1), (x1, wy0, z1)]
+    faces = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (2, 3, 7, 6), (0, 4, 7, 3),  # outward
+             (1, 12, 15, 5), (13, 2, 6, 14),                       # the +x wall beside the window
+             (12, 13, 9, 8), (11, 10, 14, 15)]                     # below and above it
+    if single_sided:
+        faces = [tuple(reversed(f)) for f in faces]
+    mesh = bpy.data.meshes.new("room")
+    mesh.from_pydata(v, [], faces)
+    mesh.update()
+    room = bpy.data.objects.new("room", mesh)
+    bpy.context.scene.collection.objects.link(room)
+    room.data.materials.append(white)
     plane("sky", (1.6, 1.4), (2.3, 0.0, 1.5), sky, rotation=(0.0, -1.5707963, 0.0))
-
-
 for single in (False, True):
     suffix = "-single" if single else ""
     room_with_panel(single)
