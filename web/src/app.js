@@ -33,7 +33,7 @@ function showAuth(serverMessage) {
   $('auth').hidden = false;
   $('auth-message').textContent = had
     ? `The server did not accept the token (${serverMessage}). Enter a valid one.`
-    : `Without a token the server answers only its health checks (${serverMessage}). Ask its administrator for one.`;
+    : `This server's API needs a bearer token (the server says: ${serverMessage}). Enter yours; the server's administrator gives them out.`;
   $('auth-token').focus();
   stopJob();
 }
@@ -138,12 +138,20 @@ function makeField(p) {
   }
   input.id = id;
   input.name = p.name;
+  // The range and default always show; the description while the field has the focus (screen
+  // readers get both through aria-describedby).
   const hint = document.createElement('span');
   hint.className = 'hint';
   hint.id = `${id}-hint`;
   const range = schema.minimum !== undefined
-    ? `${schema.minimum} to ${schema.maximum !== undefined ? schema.maximum : '∞'}, ` : '';
-  hint.textContent = `${p.description ?? ''} (${range}default ${schema.default})`;
+    ? `${schema.minimum} to ${schema.maximum !== undefined ? schema.maximum : '∞'} · ` : '';
+  const limits = document.createElement('span');
+  limits.textContent = `${range}default ${schema.default}`;
+  const about = document.createElement('span');
+  about.className = 'about';
+  about.textContent = `: ${p.description ?? ''}`;
+  hint.append(limits, about);
+  label.title = p.description ?? '';
   const error = document.createElement('span');
   error.className = 'field-error';
   error.id = `${id}-error`;
@@ -474,7 +482,7 @@ async function previewLoop(current) {
         const shown = await viewer.show(buffer, current.id);
         if (job !== current) return;
         const p = current.progress;
-        $('view-caption').textContent = `Preview${p ? ` after ${p.shots} shots, ${formatFraction(p.unshot_fraction)} unshot` : ''}: ` +
+        $('view-caption').textContent = `Preview${p ? ` after ${p.shots} shot${p.shots === 1 ? '' : 's'}, ${formatFraction(p.unshot_fraction)} unshot` : ''}: ` +
           `${shown.triangles.toLocaleString('en')} triangles (not converged; the ambient term stands in for the unshot light)`;
         $('download-preview').disabled = false;
       } catch (e) {
