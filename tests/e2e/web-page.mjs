@@ -12,7 +12,10 @@
 //             ends it (the page and the API both say cancelled);
 //   token     a server with bearer tokens: the page asks for one, refuses a wrong one with a
 //             clear message, keeps a right one for the session (a reload does not ask again) and
-//             follows a bake's events with it.
+//             follows a bake's events with it;
+//   keyboard  a bake by keyboard alone on a laptop-sized window (Tab, Enter, the file chooser,
+//             arrow keys in the 3D view and the display buttons), then the same page at 4K: no
+//             sideways overflow, larger text, a larger 3D view.
 // Every case also checks that no request left the server's origin and that the page logged no
 // error or warning and threw nothing (besides the failed loads the case provokes). Screenshots go
 // to OUT_DIR. Exit status 0 when every check passes, 1 otherwise (the failed check on stderr), 2 on
@@ -28,7 +31,7 @@ import { readPng } from './png.mjs';
 
 const kHere = path.dirname(fileURLToPath(import.meta.url));
 const kCornell = path.resolve(kHere, '../../data/cornell-box.gltf');
-const kUsage = 'usage: node web-page.mjs SERVER OUT_DIR bake|bad-file|cancel|token [--timeout SECONDS]';
+const kUsage = 'usage: node web-page.mjs SERVER OUT_DIR bake|bad-file|cancel|token|keyboard [--timeout SECONDS]';
 const kChromiumFlags = [
   '--headless', '--no-sandbox', '--disable-gpu', '--disable-background-networking',
   '--disable-component-update', '--disable-sync', '--no-first-run', '--disable-quic',
@@ -218,7 +221,22 @@ async function watchStates(page) {
   });
 }
 
+// HEAD over a real connection: the GET's headers, Content-Length included, and no body.
+async function checkHead(origin) {
+  for (const file of ['/', '/assets/three/examples/jsm/libs/draco/draco_decoder.wasm']) {
+    const get = await fetch(`${origin}${file}`, { headers: { 'Accept-Encoding': 'identity' } });
+    const body = Buffer.from(await get.arrayBuffer());
+    const head = await fetch(`${origin}${file}`, { method: 'HEAD', headers: { 'Accept-Encoding': 'identity' } });
+    assert.equal(head.status, 200, `HEAD ${file}`);
+    assert.equal(head.headers.get('content-type'), get.headers.get('content-type'), `HEAD ${file}`);
+    assert.equal(head.headers.get('etag'), get.headers.get('etag'), `HEAD ${file}`);
+    assert.equal(Number(head.headers.get('content-length')), body.length, `HEAD ${file}`);
+    assert.equal((await head.arrayBuffer()).byteLength, 0, `HEAD ${file} has a body`);
+  }
+}
+
 async function bake({ server, page, record, out, log }) {
+  await checkHead(server.origin);
   await openPage(page, server.origin);
   await page.locator('#app').waitFor({ state: 'visible' });
   assert.equal(await page.locator('#auth').isVisible(), false, 'no token is configured, yet the page asks for one');
@@ -431,7 +449,70 @@ async function tokenCase({ server, page, record, out, log }) {
   checkRecord(record, server.origin, { allowedFailedLoads: [/status of 401 /] });
 }
 
-const kCases = { bake, 'bad-file': badFile, cancel, token: tokenCase };
+// The page by keyboard alone on a laptop screen (1366 x 768), then on a 4K screen: nothing runs
+// off the side, text grows with the screen, the 3D view takes the room it is given.
+async function keyboard({ server, page, record, out, log }) {
+  await page.setViewportSize({ width: 1366, height: 768 });
+  await openPage(page, server.origin);
+  await page.locator('#app').waitFor({ state: 'visible' });
+  // Tab from the top of the page to the file input; Space opens the file chooser.
+  const focusedId = () => page.evaluate(() => document.activeElement?.id ?? '');
+  let steps = 0;
+  while ((await focusedId()) !== 'scene') {
+    await page.keyboard.press('Tab');
+    assert.ok(++steps < 10, 'the file input is not reached by Tab');
+  }
+  const drop = await page.evaluate(() => getComputedStyle(document.getElementById('drop')).outlineStyle);
+  assert.notEqual(drop, 'none', 'the focused file input shows no focus ring');
+  const [chooser] = await Promise.all([page.waitForEvent('filechooser'), page.keyboard.press('Space')]);
+  await chooser.setFiles(kCornell);
+  await page.locator('#scene-name', { hasText: 'cornell-box.gltf' }).waitFor();
+  // On to the Bake button and press it.
+  steps = 0;
+  while ((await focusedId()) !== 'submit') {
+    await page.keyboard.press('Tab');
+    assert.ok(++steps < 40, 'the Bake button is not reached by Tab');
+  }
+  await page.keyboard.press('Enter');
+  await page.locator('#job[data-job-state="succeeded"]').waitFor({ timeout: 120000 });
+  await page.waitForFunction(() => document.getElementById('view').dataset.loaded, null, { timeout: 60000 });
+  // The 3D view takes the focus and turns with the arrow keys (OrbitControls pans with them).
+  await page.locator('#view').focus();
+  await settled(page);
+  const before = await page.locator('#view').screenshot();
+  for (let i = 0; i < 6; ++i) await page.keyboard.press('ArrowLeft');
+  await settled(page);
+  const after = await page.locator('#view').screenshot({ path: path.join(out, 'web-keyboard-panned.png') });
+  assert.ok(!before.equals(after), 'the arrow keys did not move the view');
+  // The display radio buttons change with the arrow keys.
+  await page.locator('input[name="mode"][value="baked"]').focus();
+  await page.keyboard.press('ArrowRight');
+  assert.equal(await page.locator('input[name="mode"]:checked').getAttribute('value'), 'radiosity');
+  const overflow = () => page.evaluate(() => document.documentElement.scrollWidth - window.innerWidth);
+  assert.ok((await overflow()) <= 0, 'the page runs off the side of a laptop screen');
+  await page.screenshot({ path: path.join(out, 'web-laptop.png') });
+  const laptop = await page.evaluate(() => ({
+    font: parseFloat(getComputedStyle(document.documentElement).fontSize),
+    view: document.getElementById('view').getBoundingClientRect().width,
+  }));
+
+  await page.setViewportSize({ width: 3840, height: 2160 });
+  await settled(page);
+  assert.ok((await overflow()) <= 0, 'the page runs off the side of a 4K screen');
+  const big = await page.evaluate(() => ({
+    font: parseFloat(getComputedStyle(document.documentElement).fontSize),
+    view: document.getElementById('view').getBoundingClientRect().width,
+  }));
+  log(`laptop: ${JSON.stringify(laptop)}, 4K: ${JSON.stringify(big)}`);
+  assert.ok(big.font >= laptop.font * 1.3, 'the text does not grow on a 4K screen');
+  assert.ok(big.view >= laptop.view * 2, 'the 3D view does not use a 4K screen');
+  const view = await shoot(page, '#view', path.join(out, 'web-4k-view.png'));
+  assert.ok(view.red > 0.02 && view.green > 0.02, 'the 3D view is not drawn after the resize');
+  await page.screenshot({ path: path.join(out, 'web-4k.png') });
+  checkRecord(record, server.origin);
+}
+
+const kCases = { bake, 'bad-file': badFile, cancel, token: tokenCase, keyboard };
 
 async function main() {
   const argv = process.argv.slice(2);

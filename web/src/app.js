@@ -138,8 +138,6 @@ function makeField(p) {
   }
   input.id = id;
   input.name = p.name;
-  // The range and default always show; the description while the field has the focus (screen
-  // readers get both through aria-describedby).
   const hint = document.createElement('span');
   hint.className = 'hint';
   hint.id = `${id}-hint`;
@@ -149,7 +147,7 @@ function makeField(p) {
   limits.textContent = `${range}default ${schema.default}`;
   const about = document.createElement('span');
   about.className = 'about';
-  about.textContent = `: ${p.description ?? ''}`;
+  about.textContent = ` · ${p.description ?? ''}`;
   hint.append(limits, about);
   label.title = p.description ?? '';
   const error = document.createElement('span');
