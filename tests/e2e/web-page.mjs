@@ -15,7 +15,9 @@
 //             follows a bake's events with it;
 //   keyboard  a bake by keyboard alone on a laptop-sized window (Tab, Enter, the file chooser,
 //             arrow keys in the 3D view and the display buttons), then the same page at 4K: no
-//             sideways overflow, larger text, a larger 3D view.
+//             sideways overflow, larger text, a larger 3D view;
+//   jobs      17 jobs made through the API: the list's pages are the API's pages, and a job
+//             opens from the list by keyboard.
 // Every case also checks that no request left the server's origin and that the page logged no
 // error or warning and threw nothing (besides the failed loads the case provokes). Screenshots go
 // to OUT_DIR. Exit status 0 when every check passes, 1 otherwise (the failed check on stderr), 2 on
@@ -31,7 +33,7 @@ import { readPng } from './png.mjs';
 
 const kHere = path.dirname(fileURLToPath(import.meta.url));
 const kCornell = path.resolve(kHere, '../../data/cornell-box.gltf');
-const kUsage = 'usage: node web-page.mjs SERVER OUT_DIR bake|bad-file|cancel|token|keyboard [--timeout SECONDS]';
+const kUsage = 'usage: node web-page.mjs SERVER OUT_DIR bake|bad-file|cancel|token|keyboard|jobs [--timeout SECONDS]';
 const kChromiumFlags = [
   '--headless', '--no-sandbox', '--disable-gpu', '--disable-background-networking',
   '--disable-component-update', '--disable-sync', '--no-first-run', '--disable-quic',
@@ -512,7 +514,43 @@ async function keyboard({ server, page, record, out, log }) {
   checkRecord(record, server.origin);
 }
 
-const kCases = { bake, 'bad-file': badFile, cancel, token: tokenCase, keyboard };
+// The job list pages through GET /v1/jobs as the API does, and a job opens from it.
+async function jobs({ server, page, record, out, log }) {
+  // 17 small jobs (distinct max_shots, so none is a cached answer of another), through the API.
+  const scene = fs.readFileSync(kCornell);
+  for (let k = 1; k <= 17; ++k) {
+    const r = await fetch(`${server.origin}/v1/jobs?max_shots=${k}`, { method: 'POST', headers: { 'Content-Type': 'model/gltf+json' }, body: scene });
+    assert.equal(r.status, 202, await r.text());
+  }
+  const first = await (await fetch(`${server.origin}/v1/jobs?limit=15`)).json();
+  const second = await (await fetch(`${server.origin}${first.next}`)).json();
+  assert.equal(first.jobs.length, 15);
+  assert.equal(second.jobs.length, 2);
+  await openPage(page, server.origin);
+  await page.locator('#app').waitFor({ state: 'visible' });
+  const shown = () => page.locator('#jobs a').evaluateAll((links) => links.map((a) => a.dataset.jobId));
+  await page.locator('#jobs a').first().waitFor();
+  assert.deepEqual(await shown(), first.jobs.map((j) => j.id), 'the first page is not the API\'s first page');
+  await page.locator('#jobs-older').click();
+  await page.waitForFunction((n) => document.querySelectorAll('#jobs a').length === n, second.jobs.length);
+  assert.deepEqual(await shown(), second.jobs.map((j) => j.id), 'the second page is not the API\'s second page');
+  assert.equal(await page.locator('#jobs-older').isVisible(), false, 'an Older button after the last page');
+  await page.screenshot({ path: path.join(out, 'web-jobs-older.png') });
+  await page.locator('#jobs-newer').click();
+  await page.waitForFunction((n) => document.querySelectorAll('#jobs a').length === n, 15);
+  // The oldest job of the first page, opened by keyboard from the list.
+  const id = first.jobs[14].id;
+  await page.locator(`#jobs a[data-job-id="${id}"]`).focus();
+  await page.keyboard.press('Enter');
+  await page.waitForFunction((jobId) => location.hash === `#/jobs/${jobId}`, id);
+  await page.locator('#job[data-job-state="succeeded"]').waitFor({ timeout: 120000 });
+  assert.equal((await (await fetch(`${server.origin}/v1/jobs/${id}`)).json()).state, 'succeeded');
+  assert.equal(await page.locator('#job-title').getAttribute('title'), id);
+  assert.equal(await page.locator(`#jobs a[data-job-id="${id}"]`).getAttribute('aria-current'), 'true');
+  checkRecord(record, server.origin);
+}
+
+const kCases = { bake, 'bad-file': badFile, cancel, token: tokenCase, keyboard, jobs };
 
 async function main() {
   const argv = process.argv.slice(2);
