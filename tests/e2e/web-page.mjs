@@ -6,13 +6,13 @@
 //   bake      upload data/cornell-box.gltf, follow the job to succeeded, check the 3D view's
 //             screenshots (lit and coloured: red and green walls; each display toggle changes
 //             the image as it should), the plot, the job list and the GLB download;
-//   bad-file  a file that is not glTF and an out-of-range parameter: the page shows the
+//   bad-file  a file that is not glTF (dropped on the page) and an out-of-range parameter: the page shows the
 //             server's own messages (asked for separately, with node's fetch);
 //   cancel    a job that would run for long: its preview appears while it runs, then Cancel
 //             ends it (the page and the API both say cancelled);
 //   token     a server with bearer tokens: the page asks for one, refuses a wrong one with a
 //             clear message, keeps a right one for the session (a reload does not ask again) and
-//             follows a bake's events with it;
+//             follows a bake's events with it (the scene a GLB dropped on the page);
 //   keyboard  a bake by keyboard alone on a laptop-sized window (Tab, Enter, the file chooser,
 //             arrow keys in the 3D view and the display buttons), then the same page at 4K: no
 //             sideways overflow, larger text, a larger 3D view;
@@ -29,6 +29,7 @@ import os from 'node:os';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
 import { chromium } from 'playwright-core';
+import { createIO } from './gltf-io.mjs';
 import { readPng } from './png.mjs';
 
 const kHere = path.dirname(fileURLToPath(import.meta.url));
@@ -211,6 +212,22 @@ async function submitCornell(page, paramsToSet = {}) {
   return page.evaluate(() => decodeURIComponent(location.hash.slice('#/jobs/'.length)));
 }
 
+// Drops a file on the page's drop zone as a drag from the desktop would: a DataTransfer holding a
+// File, with dragenter, dragover and drop events.
+async function dropFile(page, file) {
+  const bytes = fs.readFileSync(file).toString('base64');
+  await page.evaluate(([name, data]) => {
+    const binary = atob(data);
+    const array = Uint8Array.from(binary, (c) => c.charCodeAt(0));
+    const transfer = new DataTransfer();
+    transfer.items.add(new File([array], name));
+    const zone = document.getElementById('drop');
+    for (const type of ['dragenter', 'dragover', 'drop']) {
+      zone.dispatchEvent(new DragEvent(type, { dataTransfer: transfer, bubbles: true, cancelable: true }));
+    }
+  }, [path.basename(file), bytes]);
+}
+
 async function watchStates(page) {
   // Every value data-job-state takes, in order, as the page sets it.
   await page.evaluate(() => {
@@ -344,7 +361,8 @@ async function badFile({ server, page, record, out, log }) {
     method: 'POST', headers: { 'Content-Type': 'model/gltf+json' }, body: fs.readFileSync(bad),
   })).json();
   log(`server says: ${expected.error}`);
-  await page.locator('#scene').setInputFiles(bad);
+  await dropFile(page, bad);
+  await page.locator('#scene-name', { hasText: 'not-a-scene.gltf' }).waitFor();
   await page.locator('#submit').click();
   const box = page.locator('#submit-error');
   await box.filter({ hasText: expected.error }).waitFor({ timeout: 30000 });
@@ -431,11 +449,22 @@ async function tokenCase({ server, page, record, out, log }) {
   // A bake followed through its event stream, which needs the token too.
   const sent = [];
   page.on('request', (r) => { if (new URL(r.url()).pathname.startsWith('/v1/')) sent.push([r.url(), r.headers().authorization]); });
-  const id = await submitCornell(page);
+  // The scene as a GLB this time (written by gltf-transform), dropped on the drop zone.
+  const glb = path.join(out, 'cornell-box.glb');
+  const io = await createIO();
+  await io.write(glb, await io.read(kCornell));
+  assert.equal(fs.readFileSync(glb).toString('latin1', 0, 4), 'glTF');
+  await dropFile(page, glb);
+  await page.locator('#scene-name', { hasText: 'cornell-box.glb' }).waitFor();
+  await page.locator('#submit').click();
+  await page.waitForFunction(() => /^#\/jobs\/./.test(location.hash), null, { timeout: 30000 });
+  const id = await page.evaluate(() => decodeURIComponent(location.hash.slice('#/jobs/'.length)));
   await page.locator('#job[data-job-state="succeeded"]').waitFor({ timeout: 120000 });
   await page.waitForFunction((jobId) => document.getElementById('view').dataset.loaded === jobId, id, { timeout: 60000 });
   await settled(page);
   const view = await shoot(page, '#view', path.join(out, 'web-token-result.png'));
+  const job = await (await fetch(`${server.origin}/v1/jobs/${id}`, { headers: { Authorization: 'Bearer s3cret-token' } })).json();
+  assert.equal(job.scene_bytes, fs.statSync(glb).size, 'the server did not get the GLB');
   log(`result: ${JSON.stringify(view)}`);
   assert.ok(view.red > 0.02 && view.green > 0.02);
   assert.ok(sent.some(([url]) => url.endsWith(`/v1/jobs/${id}/events`)), 'the page did not read the event stream');
