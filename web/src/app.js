@@ -15,6 +15,7 @@ const kJobsPage = 15;
 
 let viewer = null; // made on first use: WebGL is not needed until a job is shown
 let viewerModule = null;
+let viewerFailed = ''; // why there is no 3D view
 let plot = null;
 let params = []; // {name, schema, description, input}
 let selectedFile = null;
@@ -408,7 +409,7 @@ async function openJob(id) {
   plot ??= new ConvergencePlot($('plot'));
   await ensureViewer();
   if (job !== current) return;
-  viewer.clear();
+  viewer?.clear();
 
   let record;
   try {
@@ -465,13 +466,15 @@ function showProgress(current, p, live) {
   if (live && (p.phase === 'shooting' || p.phase === 'done')) plot.add(p.elapsed_seconds, p.unshot_fraction);
 }
 
-// While the job runs, its latest preview every few seconds (a preview waits for the worker's next
-// shot, so one request at a time). hr and a reference job's tracing have none: skipped.
+// While the job shoots, its latest preview every few seconds (a preview waits for the worker's
+// next shot, so one request at a time). Other phases (hr, a reference job's tracing) have none.
 async function previewLoop(current) {
   const signal = current.controller.signal;
   while (job === current && !kFinal.has(current.state)) {
     const phase = current.progress?.phase;
-    if (current.state === 'running' && (!phase || phase === 'shooting')) {
+    if (!viewer) {
+      $('view-caption').textContent = viewerFailed;
+    } else if (current.state === 'running' && phase === 'shooting') {
       try {
         const response = await request(`/v1/jobs/${encodeURIComponent(current.id)}/preview`, { signal });
         const buffer = await response.arrayBuffer();
@@ -491,7 +494,7 @@ async function previewLoop(current) {
     } else if (current.state === 'queued') {
       $('view-caption').textContent = 'Queued: waiting for a worker.';
     } else if (current.state === 'running' && !current.preview) {
-      $('view-caption').textContent = `No preview in the ${phase} phase.`;
+      $('view-caption').textContent = phase ? `No preview in the ${phase} phase.` : 'Starting…';
     }
     await sleep(kPreviewSeconds * 1000, signal);
   }
@@ -505,6 +508,10 @@ async function loadResult(current) {
     if (job !== current) return;
     current.result = buffer;
     $('download-result').disabled = false;
+    if (!viewer) {
+      $('view-caption').textContent = viewerFailed;
+      return;
+    }
     const shown = await viewer.show(buffer, current.id);
     if (job !== current) return;
     $('view-caption').textContent = `Result: ${shown.triangles.toLocaleString('en')} triangles, exposure ${shown.exposure.toPrecision(3)}` +
@@ -547,11 +554,21 @@ $('download-preview').addEventListener('click', () => job?.preview && download(j
 // ---------------------------------------------------------------------------------------------
 // 3D view controls
 
+// The 3D view, made on first use; null (with a message) where the browser has no WebGL.
 async function ensureViewer() {
-  if (viewer) return;
-  viewerModule ??= await import('./viewer.js');
-  viewer = new viewerModule.Viewer($('view'));
-  window.hemibakeViewer = viewer; // for the browser tests: pixel statistics of the canvas
+  if (viewer || viewerFailed) return;
+  try {
+    viewerModule ??= await import('./viewer.js');
+    viewer = new viewerModule.Viewer($('view'));
+  } catch (e) {
+    viewerFailed = `The 3D view is not available in this browser (${e.message}); the GLB can still be downloaded.`;
+    return;
+  }
+  // The browser may have restored the controls' state on a reload.
+  viewer.setMode(document.querySelector('input[name="mode"]:checked')?.value ?? 'baked');
+  viewer.setStops(Number($('exposure').value));
+  viewer.setWireframe($('wireframe').checked);
+  $('exposure').disabled = viewer.mode !== 'radiosity';
 }
 
 document.querySelectorAll('input[name="mode"]').forEach((radio) => radio.addEventListener('change', () => {
