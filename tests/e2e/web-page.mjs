@@ -333,8 +333,17 @@ async function bake({ server, page, record, out, log }) {
     const [r, g, b] = plot.rgba.subarray(4 * i, 4 * i + 3);
     if (r > 180 && g > 120 && g < 190 && b < 100) ++accent;
   }
-  log(`plot: ${accent} pixels of the line`);
+  log(`plot: ${accent} pixels of the line; ${await page.locator('#plot').getAttribute('aria-label')}`);
   assert.ok(accent > 50, 'the convergence plot has no line');
+  // Its points are the stream's shooting progress events, read here with node's fetch.
+  const stream = await (await fetch(`${server.origin}/v1/jobs/${id}/events`)).text();
+  const progress = stream.split('\n\n').filter((e) => /^event: progress$/m.test(e))
+    .map((e) => JSON.parse(/^data: (.*)$/m.exec(e)[1]))
+    .filter((p) => (p.phase === 'shooting' || p.phase === 'done') && p.unshot_fraction > 0);
+  assert.ok(progress.length >= 2, `only ${progress.length} progress events`);
+  assert.equal(await page.locator('#plot').getAttribute('data-points'), String(progress.length));
+  const last = progress[progress.length - 1];
+  assert.match(await page.locator('#plot').getAttribute('aria-label'), new RegExp(`to ${last.unshot_fraction.toExponential(2).replace('+', '\\+')} at`));
   assert.equal(await page.locator('#f-shots').textContent(), job.progress.shots.toLocaleString('en'));
   await page.screenshot({ path: path.join(out, 'web-bake-page.png') });
 
@@ -402,6 +411,10 @@ async function cancel({ server, page, record, out, log }) {
   assert.ok(preview.covered > 0.3 && preview.red > 0.02 && preview.green > 0.02, 'the preview is not lit and coloured');
   const shots = Number((await page.locator('#f-shots').textContent()).replace(/,/g, ''));
   assert.ok(shots > 0, 'no shots shown while running');
+  assert.equal(await page.locator('#f-phase').textContent(), 'shooting');
+  const eta = await page.locator('#f-eta').textContent();
+  log(`while running: ${shots} shots, time left ${eta}, unshot ${await page.locator('#f-unshot').textContent()}`);
+  assert.match(eta, /^(\d.* s|\d+ min \d+ s|\d+ h \d+ min|unknown)$/, 'no time left shown');
   await page.locator('#cancel').click();
   await page.locator('#job[data-job-state="cancelled"]').waitFor({ timeout: 30000 });
   const job = await (await fetch(`${server.origin}/v1/jobs/${id}`)).json();

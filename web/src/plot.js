@@ -23,7 +23,24 @@ export class ConvergencePlot {
     this.draw();
   }
 
+  // The plot in words, for screen readers (and the browser tests): its points and their range.
+  describe() {
+    const n = this.points.length;
+    const canvas = this.canvas;
+    canvas.dataset.points = String(n);
+    if (n === 0) {
+      canvas.setAttribute('aria-label', 'Unshot energy against time: no progress yet');
+      return;
+    }
+    const [t0, v0] = this.points[0];
+    const [t1, v1] = this.points[n - 1];
+    canvas.setAttribute('aria-label', `Unshot energy against time, log scale: ${n} points, from ${v0.toExponential(2)} ` +
+      `at ${t0.toFixed(2)} s to ${v1.toExponential(2)} at ${t1.toFixed(2)} s` +
+      (this.target ? `; target ${this.target.toExponential(1)}` : ''));
+  }
+
   draw() {
+    this.describe();
     const canvas = this.canvas;
     const ratio = window.devicePixelRatio || 1;
     const width = canvas.clientWidth;
