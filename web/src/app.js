@@ -472,6 +472,7 @@ async function previewLoop(current) {
   const signal = current.controller.signal;
   while (job === current && !kFinal.has(current.state)) {
     const phase = current.progress?.phase;
+    const started = performance.now();
     if (!viewer) {
       $('view-caption').textContent = viewerFailed;
     } else if (current.state === 'running' && phase === 'shooting') {
@@ -496,7 +497,8 @@ async function previewLoop(current) {
     } else if (current.state === 'running' && !current.preview) {
       $('view-caption').textContent = phase ? `No preview in the ${phase} phase.` : 'Starting…';
     }
-    await sleep(kPreviewSeconds * 1000, signal);
+    // A large scene's preview takes a while to write, send and draw: then the page asks less often.
+    await sleep(Math.max(kPreviewSeconds * 1000, 2 * (performance.now() - started)), signal);
   }
 }
 
