@@ -17,7 +17,9 @@
 //             arrow keys in the 3D view and the display buttons), then the same page at 4K: no
 //             sideways overflow, larger text, a larger 3D view;
 //   jobs      17 jobs made through the API: the list's pages are the API's pages, and a job
-//             opens from the list by keyboard.
+//             opens from the list by keyboard;
+//   failed    a job over the server's time budget (--job-seconds 3): the page shows it failed,
+//             with the server's reason.
 // Every case also checks that no request left the server's origin and that the page logged no
 // error or warning and threw nothing (besides the failed loads the case provokes). Screenshots go
 // to OUT_DIR. Exit status 0 when every check passes, 1 otherwise (the failed check on stderr), 2 on
@@ -34,7 +36,7 @@ import { readPng } from './png.mjs';
 
 const kHere = path.dirname(fileURLToPath(import.meta.url));
 const kCornell = path.resolve(kHere, '../../data/cornell-box.gltf');
-const kUsage = 'usage: node web-page.mjs SERVER OUT_DIR bake|bad-file|cancel|token|keyboard|jobs [--timeout SECONDS]';
+const kUsage = 'usage: node web-page.mjs SERVER OUT_DIR bake|bad-file|cancel|token|keyboard|jobs|failed [--timeout SECONDS]';
 const kChromiumFlags = [
   '--headless', '--no-sandbox', '--disable-gpu', '--disable-background-networking',
   '--disable-component-update', '--disable-sync', '--no-first-run', '--disable-quic',
@@ -50,9 +52,9 @@ function usage(message) {
 // ---------------------------------------------------------------------------------------------
 // The server
 
-async function startServer(binary, { tokens = [] } = {}) {
+async function startServer(binary, { tokens = [], extra = [] } = {}) {
   const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'hemibake-web-'));
-  const args = ['--listen', '127.0.0.1:0', '--data', path.join(dir, 'store'), '--workers', '1'];
+  const args = ['--listen', '127.0.0.1:0', '--data', path.join(dir, 'store'), '--workers', '1', ...extra];
   if (tokens.length) {
     fs.writeFileSync(path.join(dir, 'tokens'), tokens.join('\n') + '\n');
     args.push('--tokens', path.join(dir, 'tokens'));
@@ -614,7 +616,29 @@ async function jobs({ server, page, record, out, log }) {
   checkRecord(record, server.origin);
 }
 
-const kCases = { bake, 'bad-file': badFile, cancel, token: tokenCase, keyboard, jobs };
+// A job that fails (the server's time budget is 3 s here): the page says so with the server's reason.
+async function failed({ server, page, record, out, log }) {
+  await openPage(page, server.origin);
+  await page.locator('#app').waitFor({ state: 'visible' });
+  await watchStates(page);
+  const id = await submitCornell(page, { convergence: '1e-30', resolution: 600, shot_cache_mb: 0 });
+  await page.locator('#job[data-job-state="failed"]').waitFor({ timeout: 60000 });
+  const job = await (await fetch(`${server.origin}/v1/jobs/${id}`)).json();
+  assert.equal(job.state, 'failed');
+  log(`server: ${job.error}; page: ${await page.locator('#job-error').textContent()}`);
+  assert.ok(job.error.includes('time budget'), job.error);
+  assert.equal(await page.locator('#job-error').textContent(), `The bake failed: ${job.error}`);
+  assert.ok(await page.locator('#cancel').isDisabled());
+  assert.ok(await page.locator('#download-result').isDisabled(), 'a failed job offers a result');
+  const states = await page.evaluate(() => window.__states);
+  assert.deepEqual(states.slice(-2), ['running', 'failed']);
+  await page.locator(`#jobs a[data-job-id="${id}"] .state-failed`).waitFor({ timeout: 15000 });
+  await page.screenshot({ path: path.join(out, 'web-failed.png') });
+  await page.locator('#plot').screenshot({ path: path.join(out, 'web-failed-plot.png') });
+  checkRecord(record, server.origin, { allowedFailedLoads: [/status of 409 .*\/preview/] });
+}
+
+const kCases = { bake, 'bad-file': badFile, cancel, token: tokenCase, keyboard, jobs, failed };
 
 async function main() {
   const argv = process.argv.slice(2);
@@ -638,7 +662,10 @@ async function main() {
   let server;
   let status = 0;
   try {
-    server = await startServer(binary, { tokens: name === 'token' ? ['s3cret-token'] : [] });
+    server = await startServer(binary, {
+      tokens: name === 'token' ? ['s3cret-token'] : [],
+      extra: name === 'failed' ? ['--job-seconds', '3'] : [],
+    });
     cleanup.push(() => server.stop());
     log(`server at ${server.origin}`);
     const { page, record } = await startBrowser(server.origin, cleanup);

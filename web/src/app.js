@@ -395,6 +395,8 @@ async function openJob(id) {
     $('job-body').hidden = true;
     return;
   }
+  // In one column the job is below the form: bring it into view.
+  if (matchMedia('(max-width: 60rem)').matches) $('job').scrollIntoView({ block: 'start' });
   $('job-title').textContent = `Job ${id.slice(0, 8)}`;
   $('job-title').title = id;
   $('job-hint').hidden = true;

@@ -72,6 +72,9 @@ export class ConvergencePlot {
     if (hi <= lo) hi = lo + 1;
     hi = Math.max(hi, 0);
     lo = Math.min(lo, hi - 1);
+    // A target far below the data (1e-30) would flatten the line: the axis stops three decades
+    // under the data, and the target is then named instead of drawn.
+    if (this.points.length > 0) lo = Math.max(lo, Math.floor(Math.log10(Math.min(...this.points.map((p) => p[1])))) - 3);
     const tMax = Math.max(1e-3, ...this.points.map((p) => p[0]));
     const x = (t) => left + (t / tMax) * (right - left);
     const y = (v) => top + ((hi - Math.log10(v)) / (hi - lo)) * (bottom - top);
@@ -103,7 +106,11 @@ export class ConvergencePlot {
     }
     g.fillText('time since start (s)', (left + right) / 2, bottom + font * 1.3);
 
-    if (this.target) {
+    if (this.target && Math.log10(this.target) < lo) {
+      g.textAlign = 'right';
+      g.textBaseline = 'bottom';
+      g.fillText(`target ${this.target.toExponential(0)}: below the axis`, right, bottom - font * 0.2);
+    } else if (this.target) {
       g.save();
       g.setLineDash([font * 0.4, font * 0.3]);
       g.strokeStyle = ink;
