@@ -1,20 +1,18 @@
 #include "web_assets.h"
 
+#include <nlohmann/json.hpp>
+
 #include <algorithm>
 #include <cctype>
 
 namespace hemibake::server::web {
 namespace {
 
+// The path in the message comes from the request: bytes that are not UTF-8 are replaced, not thrown.
 Response plain_error(int status, const std::string& message) {
   Response r;
   r.status = status;
-  std::string escaped;
-  for (const char c : message) {
-    if (c == '"' || c == '\\') escaped += '\\';
-    escaped += c;
-  }
-  r.body = "{\"error\":\"" + escaped + "\"}";
+  r.body = nlohmann::json{{"error", message}}.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   return r;
 }
 

@@ -148,6 +148,9 @@ TEST(WebPage, UnknownFilesAndOtherMethodsAreRefused) {
   EXPECT_NE(missing.body.find("\"error\""), std::string::npos);
   EXPECT_EQ(f.get("/assets/three/package.json").status, 404);  // only the files the page uses
   EXPECT_EQ(f.get("/assets/../server/src/main.cpp").status, 404);
+  const Response odd = f.get("/assets/\xff\"\x01.js");
+  EXPECT_EQ(odd.status, 404);
+  EXPECT_EQ(odd.body, "{\"error\":\"no such file: /assets/\xef\xbf\xbd\\\"\\u0001.js\"}");
   const Response post = f.get("/", {}, "POST");
   EXPECT_EQ(post.status, 405);
   EXPECT_EQ(header(post, "Allow"), "GET, HEAD");
