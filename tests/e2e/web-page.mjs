@@ -604,9 +604,15 @@ async function jobs({ server, page, record, out, log }) {
   await page.screenshot({ path: path.join(out, 'web-jobs-older.png') });
   await page.locator('#jobs-newer').click();
   await page.waitForFunction((n) => document.querySelectorAll('#jobs a').length === n, 15);
-  // The oldest job of the first page, opened by keyboard from the list.
+  // The oldest job of the first page, opened by keyboard from the list; a refresh of the list in
+  // between leaves the focus where it was.
   const id = first.jobs[14].id;
   await page.locator(`#jobs a[data-job-id="${id}"]`).focus();
+  const refreshed = page.waitForResponse((r) => r.url().includes('/v1/jobs?limit='));
+  await page.locator('#jobs-refresh').evaluate((b) => b.click());
+  await refreshed;
+  await settled(page);
+  assert.equal(await page.evaluate(() => document.activeElement?.dataset.jobId), id, 'a refresh of the list took the focus');
   await page.keyboard.press('Enter');
   await page.waitForFunction((jobId) => location.hash === `#/jobs/${jobId}`, id);
   await page.locator('#job[data-job-state="succeeded"]').waitFor({ timeout: 120000 });

@@ -325,6 +325,8 @@ async function loadJobs() {
 
 function renderJobs(jobs) {
   const list = $('jobs');
+  // A refresh must not take the keyboard focus away from the job it was on.
+  const focused = list.contains(document.activeElement) ? document.activeElement.dataset.jobId : null;
   list.replaceChildren(...jobs.map((job) => {
     const item = document.createElement('li');
     const link = document.createElement('a');
@@ -348,6 +350,7 @@ function renderJobs(jobs) {
     item.append(link);
     return item;
   }));
+  if (focused) list.querySelector(`a[data-job-id="${CSS.escape(focused)}"]`)?.focus();
   $('jobs-empty').hidden = jobs.length > 0 || jobsPage.length > 1;
 }
 
