@@ -409,7 +409,7 @@ async function openJob(id) {
   $('download-preview').disabled = true;
   $('cancel').disabled = true;
   $('view-caption').textContent = 'Loading…';
-  const current = { id, state: null, controller: new AbortController(), progress: null, result: null, preview: null };
+  const current = { id, state: null, controller: new AbortController(), progress: null, result: null, preview: null, previewRequest: null };
   job = current;
   plot ??= new ConvergencePlot($('plot'));
   await ensureViewer();
@@ -448,6 +448,7 @@ function onEvent(current, event) {
 function setState(current, state, error) {
   if (!state || kFinal.has(current.state) || state === current.state) return;
   current.state = state;
+  if (kFinal.has(state)) current.previewRequest?.abort();
   $('job').dataset.jobState = state;
   const badge = $('job-state');
   badge.textContent = state;
@@ -469,6 +470,7 @@ function showProgress(current, p, live) {
   $('f-elapsed').textContent = p.elapsed_seconds !== undefined ? formatSeconds(p.elapsed_seconds) : '–';
   $('f-eta').textContent = p.phase === 'done' ? '0 s' : p.eta_seconds >= 0 ? formatSeconds(p.eta_seconds) : 'unknown';
   if (live && (p.phase === 'shooting' || p.phase === 'done')) plot.add(p.elapsed_seconds, p.unshot_fraction);
+  if (p.phase !== 'shooting') current.previewRequest?.abort();
 }
 
 // While the job shoots, its latest preview every few seconds (a preview waits for the worker's
@@ -482,7 +484,18 @@ async function previewLoop(current) {
       $('view-caption').textContent = viewerFailed;
     } else if (current.state === 'running' && phase === 'shooting') {
       try {
-        const response = await request(`/v1/jobs/${encodeURIComponent(current.id)}/preview`, { signal });
+        // Given up when the job says it is done: the server would answer 409 once it ends.
+        const ask = new AbortController();
+        current.previewRequest = ask;
+        const stop = () => ask.abort();
+        signal.addEventListener('abort', stop, { once: true });
+        let response;
+        try {
+          response = await request(`/v1/jobs/${encodeURIComponent(current.id)}/preview`, { signal: ask.signal });
+        } finally {
+          signal.removeEventListener('abort', stop);
+          current.previewRequest = null;
+        }
         const buffer = await response.arrayBuffer();
         if (job !== current || kFinal.has(current.state)) return;
         current.preview = buffer;
@@ -494,8 +507,9 @@ async function previewLoop(current) {
         $('download-preview').disabled = false;
       } catch (e) {
         if (signal.aborted) return;
-        // 409: between phases, or it just finished; the state event tells which. Others: try again.
-        if (!(e instanceof ApiError) && !current.preview) $('view-caption').textContent = `No preview yet: ${e.message}`;
+        // Given up (the job is done), or 409: between phases, or it just finished; the state event
+        // tells which. Others: try again.
+        if (!(e instanceof ApiError) && e.name !== 'AbortError' && !current.preview) $('view-caption').textContent = `No preview yet: ${e.message}`;
       }
     } else if (current.state === 'queued') {
       $('view-caption').textContent = 'Queued: waiting for a worker.';
