@@ -19,7 +19,8 @@
 //   jobs      17 jobs made through the API: the list's pages are the API's pages, and a job
 //             opens from the list by keyboard;
 //   failed    a job over the server's time budget (--job-seconds 3): the page shows it failed,
-//             with the server's reason.
+//             with the server's reason;
+//   methods   hr and reference jobs (the baselines) bake through the page and show lit.
 // Every case also checks that no request left the server's origin and that the page logged no
 // error or warning and threw nothing (besides the failed loads the case provokes). Screenshots go
 // to OUT_DIR. Exit status 0 when every check passes, 1 otherwise (the failed check on stderr), 2 on
@@ -36,7 +37,7 @@ import { readPng } from './png.mjs';
 
 const kHere = path.dirname(fileURLToPath(import.meta.url));
 const kCornell = path.resolve(kHere, '../../data/cornell-box.gltf');
-const kUsage = 'usage: node web-page.mjs SERVER OUT_DIR bake|bad-file|cancel|token|keyboard|jobs|failed [--timeout SECONDS]';
+const kUsage = 'usage: node web-page.mjs SERVER OUT_DIR bake|bad-file|cancel|token|keyboard|jobs|failed|methods [--timeout SECONDS]';
 const kChromiumFlags = [
   '--headless', '--no-sandbox', '--disable-gpu', '--disable-background-networking',
   '--disable-component-update', '--disable-sync', '--no-first-run', '--disable-quic',
@@ -646,7 +647,36 @@ async function failed({ server, page, record, out, log }) {
   checkRecord(record, server.origin);
 }
 
-const kCases = { bake, 'bad-file': badFile, cancel, token: tokenCase, keyboard, jobs, failed };
+// The baselines through the page: hierarchical radiosity and a path-traced reference (few paths)
+// bake, and their results show lit and coloured.
+async function methods({ server, page, record, out, log }) {
+  await openPage(page, server.origin);
+  await page.locator('#app').waitFor({ state: 'visible' });
+  for (const [method, more] of [['hr', {}], ['reference', { samples: 16 }]]) {
+    await page.locator('#scene').setInputFiles(kCornell);
+    await page.locator('#param-method').selectOption(method);
+    if (more.samples) {
+      await page.locator('#params-more-box').evaluate((d) => { d.open = true; });
+      await page.locator('#param-samples').fill(String(more.samples));
+    }
+    const before = await page.evaluate(() => location.hash);
+    await page.locator('#submit').click();
+    await page.waitForFunction((h) => /^#\/jobs\/./.test(location.hash) && location.hash !== h, before);
+    const id = await page.evaluate(() => decodeURIComponent(location.hash.slice('#/jobs/'.length)));
+    await page.locator('#job[data-job-state="succeeded"]').waitFor({ timeout: 120000 });
+    await page.waitForFunction((jobId) => document.getElementById('view').dataset.loaded === jobId, id, { timeout: 60000 });
+    await settled(page);
+    const job = await (await fetch(`${server.origin}/v1/jobs/${id}`)).json();
+    assert.equal(job.params.method, method);
+    const view = await shoot(page, '#view', path.join(out, `web-method-${method}.png`));
+    log(`${method}: ${JSON.stringify(view)}`);
+    assert.ok(view.covered > 0.3 && view.red > 0.08 && view.green > 0.08 && view.distinct > 500, `the ${method} result is not lit and coloured`);
+    await page.locator('#reset-params').click();
+  }
+  checkRecord(record, server.origin);
+}
+
+const kCases = { bake, 'bad-file': badFile, cancel, token: tokenCase, keyboard, jobs, failed, methods };
 
 async function main() {
   const argv = process.argv.slice(2);
