@@ -9,7 +9,7 @@ scripts/setup.sh
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build build -j"$(nproc)" --target hemibake hemibake-server
 cat <<'TXT'
-Try, from another terminal:
+Open http://127.0.0.1:8080/ in a browser, or try, from another terminal:
   curl -sS -X POST --data-binary @data/cornell-box.gltf -H 'Content-Type: model/gltf+json' \
        http://127.0.0.1:8080/v1/jobs                      # -> 202 with the job's id
   curl -sS -N http://127.0.0.1:8080/v1/jobs/ID/events     # live progress

@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # Installs the Debian packages hemibake needs to build and run, and with --test also those its tests
-# need. Idempotent: when everything is present it only checks (dpkg-query) and returns in well under
-# a second.
+# need; then the web page's three.js from npm (web/, at the versions in its package-lock.json), which
+# the build embeds into hemibake-server. Idempotent: when everything is present it only checks
+# (dpkg-query, file dates) and returns in well under a second.
 set -euo pipefail
+cd "$(dirname "$0")/.."
 
 packages=(
   build-essential cmake pkg-config
@@ -11,13 +13,14 @@ packages=(
   libboost1.81-dev libsqlite3-dev libssl-dev libembree-dev zlib1g-dev
   libgtest-dev libgmock-dev libbenchmark-dev
 )
+# Node.js and npm: the build embeds the web page's three.js from npm (web/), and the tests' glTF
+# checks run under node (a newer node already on the machine is kept).
+if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
+  packages+=(nodejs npm)
+fi
 if [[ "${1:-}" == "--test" ]]; then
-  # Chromium for the three.js render check; Node.js and npm for the independent glTF checks in
-  # tests/e2e (a newer node already on the machine is kept).
+  # Chromium for the three.js render checks and the web page's browser tests.
   packages+=(chromium)
-  if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
-    packages+=(nodejs npm)
-  fi
 fi
 
 missing=()
@@ -26,13 +29,17 @@ for p in "${packages[@]}"; do
   [[ "$status" == "install ok installed" ]] || missing+=("$p")
 done
 
-if ((${#missing[@]} == 0)); then
-  exit 0
+if ((${#missing[@]} > 0)); then
+  echo "setup: installing ${missing[*]}" >&2
+  sudo=""
+  if [[ $(id -u) -ne 0 ]]; then sudo="sudo"; fi
+  export DEBIAN_FRONTEND=noninteractive
+  $sudo apt-get update -qq
+  $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 fi
 
-echo "setup: installing ${missing[*]}" >&2
-sudo=""
-if [[ $(id -u) -ne 0 ]]; then sudo="sudo"; fi
-export DEBIAN_FRONTEND=noninteractive
-$sudo apt-get update -qq
-$sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+# three.js for the web page, at the version web/package-lock.json pins (again when the lock changes).
+if [[ ! -f web/node_modules/.package-lock.json || web/package-lock.json -nt web/node_modules/.package-lock.json ]]; then
+  echo "setup: installing the web page's node packages (web/, npm ci)" >&2
+  (cd web && npm ci --no-audit --no-fund --loglevel=error)
+fi

@@ -6,6 +6,7 @@
 #include "hemibake/solver/solver.h"
 #include "openapi.h"
 #include "pool.h"
+#include "web_assets.h"
 
 #include <nlohmann/json.hpp>
 #include <openssl/evp.h>
@@ -721,6 +722,8 @@ void Service::give_preview(const std::string& id, const std::vector<uint8_t>& gl
 
 // What never waits, answered on the caller's (I/O) thread; nullopt for the rest.
 std::optional<Response> Service::answer_at_once(const Request& req, const std::string& path) const {
+  // The web page and its files, from memory and without a token (its API requests carry one).
+  if (auto page = web::answer(req, path)) return page;
   if (auto denied = check_auth(req)) return denied;
   const bool get = req.method == "GET";
   if ((path == "/healthz" || path == "/readyz" || path == "/metrics" || path == "/openapi.json") && !get) return not_allowed("GET, HEAD");
