@@ -439,6 +439,12 @@ Value bake_record(Method method, const solver::Params& params, const solver::Sta
   Value::Object h;
   h["exposure"] = Value(exposure);
   h["colors"] = Value(std::string("COLOR_0 = exposure * radiosity / base colour, clamped to [0, 1]; _RADIOSITY = radiosity"));
+  // The units, for whoever turns _RADIOSITY into an engine's lightmap (README, "Units").
+  h["radiosity"] = Value(std::string(
+      "_RADIOSITY is exitance B: rho * E for a surface of irradiance E, pi * L for an emitter of "
+      "radiance L (emissiveFactor x emissive texture x emissive strength); "
+      "point and spot intensities are candela, directional lux, the sky a radiance, with no 683 lm/W factor. "
+      "three.js lightMap: E = B / rho; bevy and Godot lightmaps: E / pi"));
   h["parameters"] = Value(p);
   h["statistics"] = Value(s);
   Value::Object extras;

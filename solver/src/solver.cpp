@@ -76,6 +76,9 @@ Solver::Impl::Impl(const Scene& scene, const Params& p)
   scratch.resize(chunks);
   chunk_frags.resize(chunks);
   gather_chunks.resize(chunks);
+  lights = scene.lights;
+  sky = scene.sky;
+  prepare_lights();
 }
 
 // Element e takes rho dB F of a shot: radiosity and unshot radiosity alike, and the unshot power of
@@ -97,6 +100,8 @@ void Solver::Impl::receive(uint32_t e, const glm::dvec3& dB, double f) {
 // replay is exact, else afresh.
 bool Solver::Impl::step() {
   if (done) return false;
+  // Lights and the sky shoot first, each once (lights.cpp).
+  if (stats.shots < params.max_shots && shoot_next_light()) return true;
   if (stats.unshot_fraction < params.convergence || emitted_power <= 0.0) {
     stats.converged = true;
     done = true;

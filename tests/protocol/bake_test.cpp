@@ -14,6 +14,7 @@
 #include <glm/mat4x4.hpp>
 
 #include <cmath>
+#include <numbers>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -49,12 +50,13 @@ struct GltfBuilder {
     doc["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", off}, {"byteLength", size}});
     return static_cast<int>(doc["bufferViews"].size()) - 1;
   }
-  int material(const glm::dvec3& base, const glm::dvec3& emission) {
+  // `exitance` is the emitted radiosity; glTF's emission is its radiance, exitance / pi.
+  int material(const glm::dvec3& base, const glm::dvec3& exitance) {
     json m = {{"pbrMetallicRoughness", {{"baseColorFactor", {base.x, base.y, base.z, 1.0}}}}};
-    const double top = std::max({emission.x, emission.y, emission.z});
+    const double top = std::max({exitance.x, exitance.y, exitance.z});
     if (top > 0) {
-      m["emissiveFactor"] = {emission.x / top, emission.y / top, emission.z / top};
-      m["extensions"]["KHR_materials_emissive_strength"]["emissiveStrength"] = top;
+      m["emissiveFactor"] = {exitance.x / top, exitance.y / top, exitance.z / top};
+      m["extensions"]["KHR_materials_emissive_strength"]["emissiveStrength"] = top / std::numbers::pi;
     }
     doc["materials"].push_back(m);
     return static_cast<int>(doc["materials"].size()) - 1;

@@ -30,6 +30,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <numbers>
 #include <limits>
 #include <cstring>
 #include <string>
@@ -139,12 +140,13 @@ json plain_material(const V& base, const std::string& name = "") {
   return m;
 }
 
-// A lamp: black (reflects nothing, so that only direct light is compared) and emitting `e`.
+// A lamp: black (reflects nothing, so that only direct light is compared) and emitting the
+// exitance `e` (glTF's emission is the radiance e / pi).
 json lamp_material(const V& e) {
   const double top = std::max({e.x, e.y, e.z});
   json m = plain_material(V(0.0), "lamp");
   m["emissiveFactor"] = {e.x / top, e.y / top, e.z / top};
-  m["extensions"]["KHR_materials_emissive_strength"]["emissiveStrength"] = top;
+  m["extensions"]["KHR_materials_emissive_strength"]["emissiveStrength"] = top / std::numbers::pi;
   return m;
 }
 
@@ -897,15 +899,19 @@ solver::Scene lamp_patches(const json& strength) {
   return r.document ? scene_of(*r.document) : solver::Scene{};
 }
 
-// JSON has one number type: "emissiveStrength": 3 is the same as 3.0 (emission = factor x 3).
+// JSON has one number type: "emissiveStrength": 3 is the same as 3.0 (radiance = factor x 3, so
+// the emitted exitance is pi times that).
 TEST(EmissiveStrengthFeature, IntegerStrengthWorksLikeTheSameRealNumber) {
   ASSERT_EQ(json(3).dump(), "3");
   ASSERT_EQ(json(3.0).dump(), "3.0");
   const solver::Scene as_int = lamp_patches(json(3)), as_real = lamp_patches(json(3.0));
   ASSERT_EQ(as_int.patches.size(), 1u);
   ASSERT_EQ(as_real.patches.size(), 1u);
-  EXPECT_EQ(as_int.patches[0].emission, V(3.0, 1.5, 0.75));
-  EXPECT_EQ(as_real.patches[0].emission, V(3.0, 1.5, 0.75));
+  const V exitance = std::numbers::pi * V(3.0, 1.5, 0.75);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_DOUBLE_EQ(as_int.patches[0].emission[c], exitance[c]);
+    EXPECT_DOUBLE_EQ(as_real.patches[0].emission[c], exitance[c]);
+  }
 }
 
 // A KHR_lights_punctual light is named as not supported in a warning; the file still loads, and the
