@@ -38,9 +38,15 @@ namespace {
 constexpr double kPi = std::numbers::pi;
 // Directions of the sky's parallel projections, and its refinement rounds (each re-projects all).
 constexpr uint32_t kSkyDirections = 512;
-constexpr int kSkyRounds = 4;
-// Every kSkyEstimateStep-th direction estimates the sky's power before the solve.
+constexpr int kSkyRounds = 8;
+// Every kSkyEstimateStep-th direction estimates the sky's power before the solve, and every
+// kSkyRefineStep-th decides the sky's splits.
 constexpr uint32_t kSkyEstimateStep = 8;
+constexpr uint32_t kSkyRefineStep = 4;
+// A receiver that sees less than this share of its open sky sees none: the silhouette pixels of a
+// closed room's walls, seen from outside, let through a few parts in ten thousand, which would
+// light a closed room (and split its elements for partial visibility).
+constexpr double kSkyLeak = 3e-3;
 
 bool finite(const glm::dvec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 
@@ -403,21 +409,24 @@ std::vector<glm::dvec3> Solver::Impl::sky_factors(uint32_t step, std::span<const
       open_sum[p] = q;
     }
     const double norm = open_sum[p] > 0.0 ? kPi / (open_sum[p] * e_area[e]) : 0.0;
-    sums[e] = glm::dvec3(sums[e].x * norm, sums[e].y * norm, 0.0);
+    const double visible = sums[e].x < kSkyLeak * sums[e].y ? 0.0 : sums[e].x;
+    sums[e] = glm::dvec3(visible * norm, sums[e].y * norm, 0.0);
   }
   return sums;
 }
 
 // The sky's shot: every leaf's view of the sky, refined by the criteria of refine.cpp (every
-// direction projected again after each round of splits, at most kSkyRounds rounds).
+// direction projected again after each round of splits, at most kSkyRounds rounds). The rounds
+// that decide splits look along every kSkyRefineStep-th direction only; the light is then
+// distributed from all of them.
 void Solver::Impl::shoot_sky() {
   std::vector<uint32_t> accepted = leaves;
   const glm::dvec3 dB = sky;
   const double weight = channel_sum(dB) / emitted_power;
   std::vector<glm::dvec3> f;
-  for (int round = 0;; ++round) {
+  for (int round = 0; round < kSkyRounds; ++round) {
     grow_scratch();
-    f = sky_factors(1, accepted);
+    f = sky_factors(kSkyRefineStep, accepted);
     ++stamp;
     for (uint32_t e : accepted) {
       f_recv[e] = f[e].x;
@@ -426,7 +435,6 @@ void Solver::Impl::shoot_sky() {
       e_ff_open[e] = f_open[e] * e_area[e];
       e_stamp[e] = stamp;
     }
-    if (round + 1 == kSkyRounds) break;
     spread_shot(dB, accepted);
     std::vector<uint32_t> to_split = too_coarse(dB, weight, accepted);
     reset_spread(accepted);
@@ -436,8 +444,10 @@ void Solver::Impl::shoot_sky() {
     replace_split(leaves);
     replace_split(accepted);
   }
+  grow_scratch();
+  f = sky_factors(1, accepted);
   for (uint32_t e : accepted)
-    if (f_recv[e] > 0.0) light_receive(e, dB * f_recv[e]);
+    if (f[e].x > 0.0) light_receive(e, dB * f[e].x);
 }
 
 // Before the solve: the power the lights and the sky bring to the surfaces (from unrefined views)
