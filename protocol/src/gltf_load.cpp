@@ -83,6 +83,10 @@ bool supported_extension(const std::string& ext) {
 
 // What the file has that the bake leaves out, said rather than left for the user to find.
 void ignored_feature_warnings(const tinygltf::Model& m, std::vector<std::string>& warnings) {
+  // Environment lighting has no ratified glTF form; the vendor and draft extensions are not read.
+  for (const char* env : {"EXT_lights_image_based", "KHR_environment_map"})
+    if (std::find(m.extensionsUsed.begin(), m.extensionsUsed.end(), env) != m.extensionsUsed.end())
+      warnings.push_back(std::string(env) + " (environment lighting) is not read; set a uniform sky with the job parameter sky (--sky R,G,B)");
   if (!m.skins.empty()) warnings.push_back("skins are ignored: meshes are baked in their bind pose");
   if (!m.animations.empty()) warnings.push_back("animations are ignored: the scene is baked as it stands");
 }
@@ -496,6 +500,15 @@ void add_patch(const std::array<uint32_t, 4>& v, uint32_t count, const glm::dvec
   // light); a Lambertian emitter of radiance L sends out the exitance pi L, the solver's unit.
   // extras.hemibake.emission is given in the solver's unit already.
   patch.emission = mat.emission_override.value_or(std::numbers::pi * emission);
+  // An emitter is shown in its emissive colour, not its base colour (the writer gives its material
+  // the emissive factor and texture as the unlit base colour): emissiveFactor's hue times the
+  // emissive texture's mean here, so that COLOR_0 carries the brightness.
+  if (patch.emission != glm::dvec3(0.0)) {
+    const glm::dvec3 shown = mat.emission_override ? *mat.emission_override : emission;
+    const double top = mat.emission_override ? std::max({shown.x, shown.y, shown.z})
+                                             : std::max({mat.emissive.x, mat.emissive.y, mat.emissive.z});
+    if (top > 0.0) src.base = glm::clamp(shown / top, 0.0, 1.0);
+  }
   patch.material = material;
   doc.scene.patches.push_back(patch);
   doc.sources.push_back(src);

@@ -455,6 +455,7 @@ void Solver::Impl::shoot_sky() {
 void Solver::Impl::prepare_lights() {
   const bool has_sky = sky != glm::dvec3(0.0);
   if (lights.empty() && !has_sky) return;
+  const auto t0 = Clock::now();
   light_cube = std::make_unique<detail::Hemicube>(params.resolution);
   // A direction of the sky is one of hundreds: its shadows are summed with the others', so half
   // the resolution serves.
@@ -478,6 +479,7 @@ void Solver::Impl::prepare_lights() {
   b_tolerance += params.beps * (power / 3.0) / prep.total_area;
   stats.emitted_power = emitted_power;
   update_unshot_total();
+  stats.seconds_lights += seconds_since(t0);
 }
 
 // Shoots the next light, or the sky after the last light; false when all have shot.
@@ -496,6 +498,7 @@ bool Solver::Impl::shoot_next_light() {
   ++stats.light_shots;
   update_unshot_total();
   stats.seconds += seconds_since(t0);
+  stats.seconds_lights += seconds_since(t0);
   return true;
 }
 

@@ -127,6 +127,7 @@ struct Stats {
   uint64_t shots = 0;            ///< patch shots (Southwell steps), light and sky shots included
   uint64_t light_shots = 0;      ///< ... of which lights' (each light once) and the sky's (once)
   uint64_t light_projections = 0;  ///< projections of the scene for lights and the sky
+  double seconds_lights = 0.0;   ///< in the lights' and the sky's shots and their power estimate
   uint64_t hemicubes = 0;        ///< hemicubes placed (a patch shoots from one or more sub-areas)
   uint64_t replayed_shots = 0;   ///< shots that reused the form factors of the shooter's earlier shot
   uint64_t replays_reshot = 0;   ///< ... of which shot anew to the children of receivers split since
