@@ -29,7 +29,9 @@
 #include <glm/vec2.hpp>
 
 #include <algorithm>
+#include <fstream>
 #include <functional>
+#include <iterator>
 #include <random>
 #include <array>
 #include <cmath>
@@ -1119,6 +1121,77 @@ TEST(PunctualLightsFeature, ImageBasedLightingIsNamedAsNotRead) {
   ASSERT_TRUE(r.document) << r.error;
   EXPECT_TRUE(mentions(r.warnings, "EXT_lights_image_based")) << joined(r.warnings);
   EXPECT_TRUE(mentions(r.warnings, "sky")) << joined(r.warnings);
+}
+
+// Files from Blender's own exporter (tests/data, made by scripts/make_blender_lights.py with
+// Blender 3.4): Z-up scenes turned Y-up, lights on nodes turned to point along -Z, intensities
+// converted from watts by Blender's rule (point and spot: W / (4 pi) x 683 candela; sun:
+// W/m^2 x 683 lux; a spot's outer cone half its size, inner outer x (1 - blend)).
+TEST(BlenderExportFeature, LightsArePlacedAndScaledAsBlenderSetThem) {
+  const LoadResult r = load_gltf_file(HEMIBAKE_SOURCE_DIR "/tests/data/blender-lights.glb");
+  ASSERT_TRUE(r.document) << r.error;
+  const solver::Scene& scene = scene_of(*r.document);
+  ASSERT_EQ(scene.lights.size(), 3u);
+  // Blender (x, y, z) is glTF (x, z, -y).
+  auto gltf = [](const V& b) { return V(b.x, b.z, -b.y); };
+  const double pi = std::numbers::pi;
+  const solver::Light* point = nullptr;
+  const solver::Light* sun = nullptr;
+  const solver::Light* spot = nullptr;
+  for (const auto& l : scene.lights)
+    (l.type == solver::Light::Type::kPoint ? point : l.type == solver::Light::Type::kSpot ? spot : sun) = &l;
+  ASSERT_TRUE(point && sun && spot);
+  auto near = [](const V& a, const V& b, double tol) { return glm::length(a - b) < tol; };
+  EXPECT_TRUE(near(point->position, gltf(V(0.5, -0.5, 1.0)), 1e-6));
+  const double bulb = 100.0 / (4.0 * pi) * 683.0;
+  EXPECT_TRUE(near(point->intensity, bulb * V(1.0, 0.8, 0.6), 1e-3 * bulb));
+  // The sun turned by Blender's XYZ Euler angles (40, 0, 30) degrees shines along R (0, 0, -1).
+  const double ax = 40.0 * pi / 180.0, az = 30.0 * pi / 180.0;
+  const V rx(0.0, std::sin(ax), -std::cos(ax));
+  const V sun_dir(std::cos(az) * rx.x - std::sin(az) * rx.y, std::sin(az) * rx.x + std::cos(az) * rx.y, rx.z);
+  EXPECT_TRUE(near(sun->direction, gltf(sun_dir), 1e-5)) << sun->direction.x << " " << sun->direction.y << " " << sun->direction.z;
+  EXPECT_NEAR(sun->intensity.x, 3.0 * 683.0, 1e-6);
+  EXPECT_TRUE(near(spot->position, gltf(V(-1.0, 1.0, 2.0)), 1e-6));
+  EXPECT_TRUE(near(spot->direction, V(0.0, -1.0, 0.0), 1e-6));
+  EXPECT_NEAR(spot->intensity.x, 200.0 / (4.0 * pi) * 683.0, 1e-3);
+  EXPECT_NEAR(spot->outer_cone, 30.0 * pi / 180.0, 1e-6);
+  EXPECT_NEAR(spot->inner_cone, 30.0 * pi / 180.0 * 0.75, 1e-6);
+  // The lamp's material: emission (1, 0.5, 0.2) at strength 3 is a radiance; it emits pi times it.
+  bool lamp = false;
+  for (const auto& p : scene.patches)
+    if (p.emission != V(0.0)) {
+      lamp = true;
+      EXPECT_TRUE(near(p.emission, pi * 3.0 * V(1.0, 0.5, 0.2), 1e-5));
+    }
+  EXPECT_TRUE(lamp);
+  const LoadResult dark = load_gltf_file(HEMIBAKE_SOURCE_DIR "/tests/data/blender-point.glb");
+  ASSERT_TRUE(dark.document) << dark.error;
+  EXPECT_EQ(bake_error(*dark.document), "");  // lit by its light alone
+}
+
+// Blender's point light over Blender's (double-sided) floor: the top is rho I h / d^3 as a viewer
+// shows it; the underside is dark.
+TEST(BlenderExportFeature, PointLightLightsTheFloorAsIHOverDCubed) {
+  const uint64_t seed = test::test_seed();
+  std::mt19937_64 rng(seed);
+  std::ifstream in(HEMIBAKE_SOURCE_DIR "/tests/data/blender-point.glb", std::ios::binary);
+  const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const Baked b = bake(bytes, true, solver::Params{});
+  ASSERT_TRUE(b.loaded.document);
+  const V pos(0.3, 0.8, -0.2);  // Blender's (0.3, 0.2, 0.8)
+  const double intensity = 50.0 / (4.0 * std::numbers::pi) * 683.0, rho = 0.6;
+  std::vector<Tri> top, bottom;
+  for (const Tri& t : all_of(baked_node(b.out, 0))) (t.front.y > 0.0 ? top : bottom).push_back(t);
+  ASSERT_NEAR(total_area(top), 16.0, 1e-3);  // 4 m x 4 m
+  ASSERT_NEAR(total_area(bottom), 16.0, 1e-3);
+  auto truth = [&](const V& x) {
+    const double d = glm::length(pos - x);
+    return V(rho * intensity * pos.y / (d * d * d));
+  };
+  const auto [median, p90] = errors_against(sample_tris(top, 3000, rng), 0, truth);
+  EXPECT_LE(median, 0.02) << test::seed_note(seed);
+  EXPECT_LE(p90, 0.05) << test::seed_note(seed);
+  EXPECT_EQ(mean_radiosity(bottom), V(0.0));
 }
 
 // A scene with neither emitter, light nor sky is refused, and the message names all three.
