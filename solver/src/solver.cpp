@@ -25,7 +25,8 @@
 // This file picks the shooter (step) and holds the public API. shooters.cpp cuts a shooter into
 // pieces (1); shoot_piece.cpp shoots one piece in stages, with shaft.cpp (what may hide the
 // receivers) and projection.cpp (2), refine.cpp (3) and shot_cache.cpp (records for replays);
-// near_field.cpp decides which receivers are too close to a piece for its hemicube.
+// near_field.cpp decides which receivers are too close to a piece for its hemicube. lights.cpp
+// shoots the punctual lights and the sky, once each, before the first patch.
 // element_tree.cpp, patch_bvh.cpp and clusters.cpp hold what they walk; mesh_export.cpp the result.
 #include "solver_impl.h"
 
