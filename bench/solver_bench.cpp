@@ -8,6 +8,8 @@
 #include "hemibake/solver/scenes.h"
 #include "hemibake/solver/solver.h"
 
+#include <glm/geometric.hpp>
+
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -260,8 +262,8 @@ std::vector<hemibake::bench::SurfacePoint> points_of(const Scene& scene, uint32_
 int main(int argc, char** argv) {
   const std::string mode = argc > 1 ? argv[1] : "";
   const bool quick = mode == "--quick";
-  if (!mode.empty() && !quick && mode != "--sweep" && mode != "--sweep-room" && mode != "--chamber" && mode != "--scaling") {
-    std::fprintf(stderr, "usage: hemibake-bench [--quick | --sweep | --sweep-room | --chamber | --scaling]\n");
+  if (!mode.empty() && !quick && mode != "--sweep" && mode != "--sweep-room" && mode != "--chamber" && mode != "--scaling" && mode != "--lights") {
+    std::fprintf(stderr, "usage: hemibake-bench [--quick | --sweep | --sweep-room | --chamber | --scaling | --lights]\n");
     return 2;
   }
   const Scene cornell = make_cornell_box();
@@ -294,6 +296,65 @@ int main(int argc, char** argv) {
     const Scene scene = room ? make_furnished_room() : cornell;
     const auto points = points_of(scene, room ? 200 : 300);
     sweep(scene, room ? "furnished room, 6758 patches" : "Cornell box", points, methods, labels, room ? 1 : 3);
+    return 0;
+  }
+  if (mode == "--lights") {
+    // What lights and a sky cost on the furnished room, next to the same room lit by its panels.
+    // Sun and sky only reach the inside with the ceiling open, so the room is also baked roofless.
+    std::printf("## Lights on the furnished room (resolution 100, FEPS 0.001, AEPS 0.0001, unshot < 0.001, all threads)\n\n");
+    std::printf("| scene | light | time (s) | of which lights (s) | shots | light shots | light projections | elements | peak memory (MB) |\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|\n");
+    const Scene room = make_furnished_room();
+    double top = -1e300;
+    for (const Patch& p : room.patches)
+      for (uint32_t k = 0; k < p.corner_count; ++k) top = std::max(top, p.corners[k].y);
+    Scene dark = room, open = room;
+    for (Patch& p : dark.patches) p.emission = glm::dvec3(0.0);
+    open.patches.clear();
+    for (const Patch& p : dark.patches) {
+      bool ceiling = true;
+      for (uint32_t k = 0; k < p.corner_count; ++k) ceiling = ceiling && p.corners[k].y > top - 1e-9;
+      if (!ceiling) open.patches.push_back(p);
+    }
+    Light bulb;
+    bulb.type = Light::Type::kPoint;
+    bulb.position = glm::dvec3(3.0, 2.5, 2.5);
+    bulb.intensity = glm::dvec3(20.0);
+    Light sun;
+    sun.type = Light::Type::kDirectional;
+    sun.direction = glm::normalize(glm::dvec3(0.4, -1.0, 0.3));
+    sun.intensity = glm::dvec3(50.0);
+    struct Case {
+      const char* scene;
+      const char* light;
+      Scene s;
+    };
+    std::vector<Case> cases;
+    cases.push_back({"furnished room", "its ceiling panels", room});
+    Scene with_bulb = dark;
+    with_bulb.lights.push_back(bulb);
+    cases.push_back({"furnished room, panels off", "a point light", with_bulb});
+    Scene with_sun = open;
+    with_sun.lights.push_back(sun);
+    cases.push_back({"roofless room, panels off", "a sun", with_sun});
+    Scene with_sky = open;
+    with_sky.sky = glm::dvec3(5.0);
+    cases.push_back({"roofless room, panels off", "a sky", with_sky});
+    for (const Case& c : cases) {
+      long peak = 0;
+      const Stats st = isolated_value<Stats>(
+          [&] {
+            Params params;
+            Solver solver(c.s, params);
+            return solver.run();
+          },
+          &peak);
+      std::printf("| %s (%zu patches) | %s | %.2f | %.2f | %llu | %llu | %llu | %llu | %.0f |\n", c.scene, c.s.patches.size(), c.light,
+                  st.seconds, st.seconds_lights, static_cast<unsigned long long>(st.shots), static_cast<unsigned long long>(st.light_shots),
+                  static_cast<unsigned long long>(st.light_projections), static_cast<unsigned long long>(st.elements),
+                  peak / 1024.0);
+    }
+    std::printf("\n");
     return 0;
   }
   if (mode == "--chamber") {

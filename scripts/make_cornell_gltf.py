@@ -7,6 +7,7 @@ material (emissiveFactor times KHR_materials_emissive_strength). The ceiling is 
 quads around the light so that nothing overlaps. Run from the repository root."""
 import base64
 import json
+import math
 import struct
 
 MM = 0.001
@@ -101,7 +102,8 @@ gltf = {
         {'name': 'light', 'pbrMetallicRoughness': {'baseColorFactor': [0.78, 0.78, 0.78, 1.0],
                                                     'metallicFactor': 0.0},
          'emissiveFactor': [1.0, 11.65 / 15.94, 5.12 / 15.94],
-         'extensions': {'KHR_materials_emissive_strength': {'emissiveStrength': 15.94}}},
+         # glTF's emission is a radiance: the exitance 15.94 over pi.
+         'extensions': {'KHR_materials_emissive_strength': {'emissiveStrength': 15.94 / math.pi}}},
     ],
     'buffers': [{'byteLength': len(blob),
                  'uri': 'data:application/octet-stream;base64,' + base64.b64encode(bytes(blob)).decode()}],

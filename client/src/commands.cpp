@@ -221,7 +221,7 @@ int run_bake(const CommandLine& o, const Console& c) {
     std::fprintf(c.err, "hemibake: %s: %s\n", o.input.c_str(), loaded.error.c_str());
     return 1;
   }
-  if (std::string e = protocol::bake_error(*loaded.document); !e.empty()) {
+  if (std::string e = protocol::bake_error(*loaded.document, o.spec); !e.empty()) {
     std::fprintf(c.err, "hemibake: %s: %s\n", o.input.c_str(), e.c_str());
     return 1;
   }

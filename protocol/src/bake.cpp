@@ -126,13 +126,31 @@ Solution solve_with(const solver::Scene& scene, const JobSpec& spec, const BakeH
 
 }  // namespace
 
+std::string bake_error(const SceneDocument& document, const JobSpec& spec) {
+  const solver::Scene& scene = scene_of(document);
+  const bool baseline = spec.method == Method::kHierarchical || spec.method == Method::kReference;
+  if (baseline && (!scene.lights.empty() || spec.sky != glm::dvec3(0.0)))
+    return std::string("method ") + to_string(spec.method) +
+           " bakes emitting surfaces only; KHR_lights_punctual lights and the sky are baked by aa and classical";
+  if (spec.sky != glm::dvec3(0.0)) return {};
+  return bake_error(document);
+}
+
+solver::Scene scene_with(const solver::Scene& scene, const JobSpec& spec) {
+  solver::Scene out = scene;
+  out.sky = spec.sky;
+  return out;
+}
+
 Solution solve(const solver::Scene& scene, const JobSpec& spec, const BakeHooks& hooks) {
+  if (spec.sky != scene.sky) return solve_with(scene_with(scene, spec), spec, hooks, nullptr);
   return solve_with(scene, spec, hooks, nullptr);
 }
 
 BakeOutput bake(const SceneDocument& document, const JobSpec& spec, const BakeHooks& hooks) {
   BakeOutput out;
-  out.solution = solve_with(scene_of(document), spec, hooks, &document);
+  if (spec.sky != scene_of(document).sky) out.solution = solve_with(scene_with(scene_of(document), spec), spec, hooks, &document);
+  else out.solution = solve_with(scene_of(document), spec, hooks, &document);
   if (out.solution.cancelled()) return out;
   auto written = write_baked_glb(document, out.solution.mesh, spec.method, solver_params(spec), out.solution.stats, spec.write);
   out.glb = std::move(written.glb);

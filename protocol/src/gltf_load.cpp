@@ -32,6 +32,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <numbers>
 
 namespace hemibake::protocol {
 namespace {
@@ -75,17 +76,17 @@ bool mirrors(const glm::dmat4& world) { return glm::determinant(glm::dmat3(world
 
 // Extensions that change nothing the bake reads, or that the loader applies.
 bool supported_extension(const std::string& ext) {
-  return ext == "KHR_draco_mesh_compression" || ext == "KHR_materials_emissive_strength" ||
+  return ext == "KHR_draco_mesh_compression" || ext == "KHR_materials_emissive_strength" || ext == "KHR_lights_punctual" ||
          ext == "KHR_materials_unlit" || ext == "KHR_texture_transform" || ext == "KHR_mesh_quantization" ||
          ext == "KHR_materials_pbrSpecularGlossiness";
 }
 
 // What the file has that the bake leaves out, said rather than left for the user to find.
 void ignored_feature_warnings(const tinygltf::Model& m, std::vector<std::string>& warnings) {
-  if (m.extensionsUsed.end() != std::find(m.extensionsUsed.begin(), m.extensionsUsed.end(), "KHR_lights_punctual") &&
-      !m.lights.empty())
-    warnings.push_back("KHR_lights_punctual lights (" + std::to_string(m.lights.size()) +
-                       ") are not supported and are not baked; use emissive materials for light sources");
+  // Environment lighting has no ratified glTF form; the vendor and draft extensions are not read.
+  for (const char* env : {"EXT_lights_image_based", "KHR_environment_map"})
+    if (std::find(m.extensionsUsed.begin(), m.extensionsUsed.end(), env) != m.extensionsUsed.end())
+      warnings.push_back(std::string(env) + " (environment lighting) is not read; set a uniform sky with the job parameter sky (--sky R,G,B)");
   if (!m.skins.empty()) warnings.push_back("skins are ignored: meshes are baked in their bind pose");
   if (!m.animations.empty()) warnings.push_back("animations are ignored: the scene is baked as it stands");
 }
@@ -174,6 +175,78 @@ std::string place_nodes(const tinygltf::Model& m, std::vector<int>& order, std::
     const glm::dmat4 local = local_matrix(m.nodes[n]);
     world[n] = parent[n] >= 0 ? world[parent[n]] * local : local;
     if (!finite(world[n])) return "node " + std::to_string(n) + " has a transform that is not finite";
+  }
+  return {};
+}
+
+// ---- Lights: KHR_lights_punctual, placed by the nodes that refer to them ----
+
+std::string number_text(double x) {
+  if (x == std::floor(x) && std::abs(x) < 1e15) return std::to_string(static_cast<long long>(x));
+  return std::to_string(x);
+}
+
+std::string light_label(size_t index, const tinygltf::Light& l) {
+  return "light " + std::to_string(index) + (l.name.empty() ? std::string() : " ('" + l.name + "')");
+}
+
+// Light `index` of the file as the solver's light (placed at the origin, pointing down -Z), or
+// what is wrong with it.
+std::string read_light(const tinygltf::Model& m, size_t index, solver::Light& out) {
+  const tinygltf::Light& l = m.lights[index];
+  const std::string name = light_label(index, l);
+  if (l.type == "point") out.type = solver::Light::Type::kPoint;
+  else if (l.type == "spot") out.type = solver::Light::Type::kSpot;
+  else if (l.type == "directional") out.type = solver::Light::Type::kDirectional;
+  else return name + " has the unknown type '" + l.type + "' (KHR_lights_punctual has point, spot and directional)";
+  glm::dvec3 color(1.0);
+  if (!l.color.empty()) {
+    if (l.color.size() != 3) return name + ": color must have three numbers";
+    color = glm::dvec3(l.color[0], l.color[1], l.color[2]);
+  }
+  if (!finite(color) || glm::min(color.x, glm::min(color.y, color.z)) < 0.0)
+    return name + ": color must be three finite numbers, none negative";
+  if (!std::isfinite(l.intensity) || l.intensity < 0.0) return name + ": intensity must be a finite number, not negative";
+  // tinygltf reads an absent range as 0; the extension's range must be above 0.
+  if (!std::isfinite(l.range) || l.range < 0.0) return name + ": range must be a finite number above 0";
+  out.intensity = color * l.intensity;  // candela, or lux for a directional light, as given
+  out.range = out.type == solver::Light::Type::kDirectional ? 0.0 : l.range;
+  if (out.type == solver::Light::Type::kSpot) {
+    const double inner = l.spot.innerConeAngle, outer = l.spot.outerConeAngle;
+    if (!(inner >= 0.0 && inner < outer && outer <= std::numbers::pi / 2))
+      return name + ": the spot's cone angles (innerConeAngle " + std::to_string(inner) + ", outerConeAngle " +
+             std::to_string(outer) + ") must satisfy 0 <= inner < outer <= pi / 2";
+    out.inner_cone = inner;
+    out.outer_cone = outer;
+  }
+  return {};
+}
+
+// Every node of the scene with a light (a light used by several nodes shines from each): at the
+// node's world position, pointing along its world -Z (the node's scale does not change the light).
+std::string add_lights(SceneDocument& doc, const std::vector<int>& order) {
+  const tinygltf::Model& m = doc.model;
+  std::vector<solver::Light> lights(m.lights.size());
+  for (size_t i = 0; i < m.lights.size(); ++i)
+    if (std::string e = read_light(m, i, lights[i]); !e.empty()) return e;
+  for (int n : order) {
+    const auto it = m.nodes[n].extensions.find("KHR_lights_punctual");
+    if (it == m.nodes[n].extensions.end()) continue;
+    const tinygltf::Value& ref = it->second.Get("light");
+    const std::string where = "node " + std::to_string(n) + "'s KHR_lights_punctual";
+    if (!ref.IsInt() && !ref.IsNumber()) return where + " has no light index";
+    const double index = ref.GetNumberAsDouble();
+    if (!(index >= 0.0) || index != std::floor(index) || index >= static_cast<double>(m.lights.size()))
+      return where + " refers to light " + number_text(index) + ", which does not exist (the file has " +
+             std::to_string(m.lights.size()) + " lights)";
+    solver::Light light = lights[static_cast<size_t>(index)];
+    const glm::dmat4& world = doc.node_world[n];
+    light.position = glm::dvec3(world[3]);
+    const glm::dvec3 down_z = glm::dmat3(world) * glm::dvec3(0.0, 0.0, -1.0);
+    if (!(glm::length(down_z) > 1e-12))
+      return where + ": the node's transform has no direction for the light (a zero scale)";
+    light.direction = glm::normalize(down_z);
+    doc.scene.lights.push_back(light);
   }
   return {};
 }
@@ -423,7 +496,19 @@ void add_patch(const std::array<uint32_t, 4>& v, uint32_t count, const glm::dvec
   src.has_uv = !uv.empty();
   src.base = glm::clamp(base, 0.0, 1.0);
   patch.reflectance = glm::clamp(mat.reflectance_override.value_or(reflect), 0.0, kMaxReflectance);
-  patch.emission = mat.emission_override.value_or(emission);
+  // glTF's emission is a radiance (what three.js and the sample viewer add to the outgoing
+  // light); a Lambertian emitter of radiance L sends out the exitance pi L, the solver's unit.
+  // extras.hemibake.emission is given in the solver's unit already.
+  patch.emission = mat.emission_override.value_or(std::numbers::pi * emission);
+  // An emitter is shown in its emissive colour, not its base colour (the writer gives its material
+  // the emissive factor and texture as the unlit base colour): emissiveFactor's hue times the
+  // emissive texture's mean here, so that COLOR_0 carries the brightness.
+  if (patch.emission != glm::dvec3(0.0)) {
+    const glm::dvec3 shown = mat.emission_override ? *mat.emission_override : emission;
+    const double top = mat.emission_override ? std::max({shown.x, shown.y, shown.z})
+                                             : std::max({mat.emissive.x, mat.emissive.y, mat.emissive.z});
+    if (top > 0.0) src.base = glm::clamp(shown / top, 0.0, 1.0);
+  }
   patch.material = material;
   doc.scene.patches.push_back(patch);
   doc.sources.push_back(src);
@@ -588,14 +673,19 @@ const solver::Scene& scene_of(const SceneDocument& document) { return document.s
 uint64_t triangle_count(const SceneDocument& document) { return document.triangles; }
 
 std::string bake_error(const SceneDocument& document) {
-  // Radiosity is the light of emitting surfaces: without one, every bake is black.
+  // Radiosity is the light of emitting surfaces and lights: without one, every bake is black.
   const auto& patches = document.scene.patches;
+  if (!document.scene.lights.empty() && std::any_of(document.scene.lights.begin(), document.scene.lights.end(), [](const solver::Light& l) {
+        return l.intensity != glm::dvec3(0.0);
+      }))
+    return {};
+  if (document.scene.sky != glm::dvec3(0.0)) return {};
   if (std::any_of(patches.begin(), patches.end(), [](const solver::Patch& p) { return p.emission != glm::dvec3(0.0); }))
     return {};
-  std::string e = "the scene emits no light: give the light sources' materials an emissiveFactor (with "
-                  "KHR_materials_emissive_strength above 1), or set extras.hemibake.emission";
-  if (!document.model.lights.empty()) e += "; KHR_lights_punctual lights are not supported";
-  return e;
+  return "the scene emits no light: it has no emissive material (give the light sources' materials an "
+         "emissiveFactor, with KHR_materials_emissive_strength above 1, or set extras.hemibake.emission), no "
+         "KHR_lights_punctual light (point, spot or directional, with an intensity above 0), and no sky (set the "
+         "job parameter sky, --sky R,G,B)";
 }
 
 LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& base_dir, const LoadLimits& limits) {
@@ -608,6 +698,7 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
   if (failed(parse_document(bytes, base_dir, limits, *doc, result.warnings))) return result;
   std::vector<int> order;
   if (failed(place_nodes(doc->model, order, doc->node_world))) return result;
+  if (failed(add_lights(*doc, order))) return result;
   Tally tally;
   for (int n : order)
     if (failed(add_instance(*doc, n, limits, tally))) return result;

@@ -177,6 +177,36 @@ void make_unlit(tinygltf::Material& mat) {
   base.extensions = std::move(kept);
 }
 
+// An emitting material (emissiveFactor, or extras.hemibake.emission) gets its emission's hue and
+// texture as its base colour; the loader's PatchSource::base is the same colour, so that COLOR_0 =
+// exposure x radiosity / base gives base x COLOR_0 = exposure x radiosity.
+void show_emission(tinygltf::Material& mat) {
+  glm::dvec3 hue(0.0);
+  if (mat.emissiveFactor.size() == 3) hue = glm::dvec3(mat.emissiveFactor[0], mat.emissiveFactor[1], mat.emissiveFactor[2]);
+  bool textured = hue != glm::dvec3(0.0) && mat.emissiveTexture.index >= 0;
+  const Value& extras = mat.extras;
+  if (extras.IsObject() && extras.Has("hemibake") && extras.Get("hemibake").Has("emission")) {
+    const Value& e = extras.Get("hemibake").Get("emission");
+    if (e.IsArray() && e.ArrayLen() == 3) {
+      hue = glm::dvec3(e.Get(0).GetNumberAsDouble(), e.Get(1).GetNumberAsDouble(), e.Get(2).GetNumberAsDouble());
+      textured = false;  // the override replaces the texture's emission
+    }
+  }
+  const double top = std::max({hue.x, hue.y, hue.z});
+  if (!(top > 0.0)) return;
+  tinygltf::PbrMetallicRoughness& pbr = mat.pbrMetallicRoughness;
+  // Only TEXCOORD_0, the base colour texture's set, is written: an emissive texture on another set
+  // is left out (COLOR_0 still carries its mean over each element).
+  const int base_set = pbr.baseColorTexture.index >= 0 ? pbr.baseColorTexture.texCoord : 0;
+  pbr.baseColorFactor = {hue.x / top, hue.y / top, hue.z / top, 1.0};
+  pbr.baseColorTexture = tinygltf::TextureInfo();
+  if (textured && mat.emissiveTexture.texCoord == base_set) {
+    pbr.baseColorTexture.index = mat.emissiveTexture.index;
+    pbr.baseColorTexture.texCoord = mat.emissiveTexture.texCoord;
+    pbr.baseColorTexture.extensions = mat.emissiveTexture.extensions;
+  }
+}
+
 // Images keep their encoded bytes, now inside the GLB; one whose bytes were not kept becomes white.
 void embed_images(const SceneDocument& doc, tinygltf::Model& out) {
   out.images = doc.model.images;
@@ -222,9 +252,15 @@ tinygltf::Model copy_structure(const SceneDocument& doc) {
   for (auto& x : out.cameras) x.extensions.clear();
   for (auto& x : out.samplers) x.extensions.clear();
   for (auto& x : out.textures) x.extensions.clear();
-  // Shown unlit, so that base colour x COLOR_0 is exactly the baked light.
+  // Shown unlit, so that base colour x COLOR_0 is exactly the baked light. An emitting material
+  // shows its emission instead of its base colour (a dark stone with glowing veins would look
+  // like dark stone): the emissive factor's hue and texture become the base colour, and COLOR_0
+  // (scaled by the same exposure as every surface) its brightness.
   out.materials = in.materials;
-  for (auto& mat : out.materials) make_unlit(mat);
+  for (auto& mat : out.materials) {
+    show_emission(mat);
+    make_unlit(mat);
+  }
   embed_images(doc, out);
   return out;
 }
@@ -439,6 +475,12 @@ Value bake_record(Method method, const solver::Params& params, const solver::Sta
   Value::Object h;
   h["exposure"] = Value(exposure);
   h["colors"] = Value(std::string("COLOR_0 = exposure * radiosity / base colour, clamped to [0, 1]; _RADIOSITY = radiosity"));
+  // The units, for whoever turns _RADIOSITY into an engine's lightmap (README, "Units").
+  h["radiosity"] = Value(std::string(
+      "_RADIOSITY is exitance B: rho * E for a surface of irradiance E, pi * L for an emitter of "
+      "radiance L (emissiveFactor x emissive texture x emissive strength); "
+      "point and spot intensities are candela, directional lux, the sky a radiance, with no 683 lm/W factor. "
+      "three.js lightMap: E = B / rho; bevy and Godot lightmaps: E / pi"));
   h["parameters"] = Value(p);
   h["statistics"] = Value(s);
   Value::Object extras;

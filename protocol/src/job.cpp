@@ -5,6 +5,8 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <string>
+#include <vector>
 
 namespace hemibake::protocol {
 namespace {
@@ -73,6 +75,11 @@ const ParamInfo kParams[] = {
     {"color_bits", "color-bits", Kind::kWhole, 0, 30, "Draco colour quantization (0: lossless)",
      [](const JobSpec& s) { return static_cast<double>(s.write.color_bits); },
      [](JobSpec& s, double v) { s.write.color_bits = static_cast<int>(v); }},
+    {"sky", "sky", Kind::kColour, 0, kNoLimit,
+     "radiance of a uniform sky around the scene, R,G,B (or one number for grey; aa and classical)",
+     [](const JobSpec& s) { return (s.sky.x + s.sky.y + s.sky.z) / 3.0; },
+     [](JobSpec& s, double v) { s.sky = glm::dvec3(v); },
+     [](const JobSpec& s) { return s.sky; }, [](JobSpec& s, const glm::dvec3& v) { s.sky = v; }},
 };
 
 bool number(const std::string& text, double& out) {
@@ -128,9 +135,35 @@ solver::Params solver_params(const JobSpec& spec) {
 
 std::span<const ParamInfo> param_table() { return kParams; }
 
+std::string parse_colour_value(const ParamInfo& p, const std::string& text, glm::dvec3& value) {
+  std::vector<std::string> parts;
+  size_t start = 0;
+  while (true) {
+    const size_t comma = text.find(',', start);
+    parts.push_back(text.substr(start, comma == std::string::npos ? std::string::npos : comma - start));
+    if (comma == std::string::npos) break;
+    start = comma + 1;
+  }
+  const std::string wanted = "must be R,G,B or one number, each from " + shortest(p.min) +
+                             (p.max >= kNoLimit ? std::string(" up") : " to " + shortest(p.max)) + " (got '" + text + "')";
+  if (parts.size() != 1 && parts.size() != 3) return wanted;
+  for (size_t c = 0; c < 3; ++c) {
+    double v = 0.0;
+    if (!number(parts[parts.size() == 1 ? 0 : c], v) || v < p.min || v > p.max) return wanted;
+    value[static_cast<int>(c)] = v;
+  }
+  return "";
+}
+
 std::string parse_param_value(const ParamInfo& p, const std::string& text, double& value) {
   const std::string got = " (got '" + text + "')";
   switch (p.kind) {
+    case Kind::kColour: {
+      glm::dvec3 c(0.0);
+      if (std::string e = parse_colour_value(p, text, c); !e.empty()) return e;
+      value = (c.x + c.y + c.z) / 3.0;
+      return "";
+    }
     case Kind::kMethod:
       if (const auto m = method_from(text)) return value = static_cast<double>(*m), "";
       return "must be aa, classical, hr or reference" + got;
@@ -158,6 +191,12 @@ std::string apply_params(const std::map<std::string, std::string>& values, JobSp
   for (const auto& [key, value] : values) {
     const ParamInfo* p = find_param(key);
     if (p == nullptr) return "unknown parameter '" + key + "'";
+    if (p->kind == Kind::kColour) {
+      glm::dvec3 c(0.0);
+      if (std::string e = parse_colour_value(*p, value, c); !e.empty()) return key + " " + e;
+      p->set_colour(spec, c);
+      continue;
+    }
     double v = 0.0;
     if (std::string e = parse_param_value(*p, value, v); !e.empty()) return key + " " + e;
     p->set(spec, v);
@@ -174,6 +213,11 @@ std::string params_json(const JobSpec& spec) {
       case Kind::kFlag: j[p.name] = v != 0.0; break;
       case Kind::kWhole: j[p.name] = static_cast<uint64_t>(v); break;
       case Kind::kNumber: j[p.name] = v; break;
+      case Kind::kColour: {
+        const glm::dvec3 c = p.get_colour(spec);
+        j[p.name] = shortest(c.x) + "," + shortest(c.y) + "," + shortest(c.z);
+        break;
+      }
     }
   }
   return j.dump();
@@ -192,7 +236,10 @@ std::string parse_params_json(const std::string& text, JobSpec& spec) {
       char buf[64];
       std::snprintf(buf, sizeof buf, "%.17g", v.get<double>());
       values[key] = buf;
-    } else return "params." + key + " must be a string, number or boolean";
+    } else if (v.is_array() && v.size() == 3 && v[0].is_number() && v[1].is_number() && v[2].is_number()) {
+      // A colour as [r, g, b].
+      values[key] = shortest(v[0].get<double>()) + "," + shortest(v[1].get<double>()) + "," + shortest(v[2].get<double>());
+    } else return "params." + key + " must be a string, number, boolean or [r, g, b]";
   }
   return apply_params(values, spec);
 }
@@ -204,13 +251,18 @@ std::string params_usage() {
     const double v = p.get(defaults);
     std::string head = "  --";
     if (p.kind == Kind::kFlag && v != 0.0) head += std::string("no-") + p.flag;
-    else head += std::string(p.flag) + (p.kind == Kind::kMethod ? " M" : p.kind == Kind::kWhole ? " N" : " X");
+    else head += std::string(p.flag) + (p.kind == Kind::kMethod ? " M" : p.kind == Kind::kWhole ? " N" : p.kind == Kind::kColour ? " R,G,B" : " X");
     if (head.size() < 26) head.resize(26, ' ');
     else head += ' ';
     std::string def;
     switch (p.kind) {
       case Kind::kMethod: def = to_string(static_cast<Method>(v)); break;
       case Kind::kFlag: def = v != 0.0 ? "on" : "off"; break;
+      case Kind::kColour: {
+        const glm::dvec3 c = p.get_colour(defaults);
+        def = shortest(c.x) + "," + shortest(c.y) + "," + shortest(c.z);
+        break;
+      }
       default: def = shortest(v); break;
     }
     out += head + p.help + " (default " + def + ")\n";
@@ -246,6 +298,14 @@ std::string params_openapi_json() {
         schema["minimum"] = p.min;
         if (p.max < kNoLimit) schema["maximum"] = p.max;
         break;
+      case Kind::kColour: {
+        // "R,G,B" or one number; JSON bodies may also give [r, g, b].
+        const glm::dvec3 c = p.get_colour(defaults);
+        schema["type"] = "string";
+        schema["pattern"] = "^[^,]+(,[^,]+,[^,]+)?$";
+        schema["default"] = shortest(c.x) + "," + shortest(c.y) + "," + shortest(c.z);
+        break;
+      }
     }
     list.push_back({{"name", p.name}, {"in", "query"}, {"required", false}, {"description", p.help}, {"schema", schema}});
   }

@@ -530,7 +530,7 @@ Response Service::submit(const Request& req, const std::string& query) {
   limits.max_triangles = options_.max_triangles;
   const auto loaded = protocol::load_gltf_memory(std::span(reinterpret_cast<const uint8_t*>(scene.data()), scene.size()), "", limits);
   if (!loaded.document) return error(422, loaded.error);
-  if (std::string e = protocol::bake_error(*loaded.document); !e.empty()) return error(422, e);
+  if (std::string e = protocol::bake_error(*loaded.document, spec); !e.empty()) return error(422, e);
   const std::string params = protocol::params_json(spec);
   const std::string cache_key = sha256_hex(scene) + ":" + sha256_hex(params);
   // The same scene and parameters as a finished job: its answer at once.

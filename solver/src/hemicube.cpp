@@ -179,6 +179,31 @@ void Hemicube::place(const glm::dvec3& eye, const glm::dvec3& normal, const glm:
   }
 }
 
+size_t Hemicube::pixel_square(uint32_t pixel, std::array<double, 4>& square) const {
+  size_t f = 0;
+  while (f + 1 < faces_.size() && pixel >= faces_[f + 1].offset) ++f;
+  const uint32_t local = pixel - faces_[f].offset;
+  const double step = 2.0 / n_;
+  const double a0 = -1.0 + (local % n_) * step, b0 = faces_[f].b_min + (local / n_) * step;
+  square = {a0, a0 + step, b0, b0 + step};
+  return f;
+}
+
+glm::dvec3 Hemicube::pixel_direction(uint32_t pixel) const {
+  std::array<double, 4> sq;
+  const Face& face = faces_[pixel_square(pixel, sq)];
+  return face.right * (0.5 * (sq[0] + sq[1])) + face.up * (0.5 * (sq[2] + sq[3])) + face.forward;
+}
+
+double Hemicube::pixel_solid_angle(uint32_t pixel) const {
+  std::array<double, 4> sq;
+  pixel_square(pixel, sq);
+  // The solid angle of the rectangle [0, a] x [0, b] on the plane at distance 1, seen from a
+  // corner's foot, is atan(a b / sqrt(1 + a^2 + b^2)); a pixel is four such corners' difference.
+  auto corner = [](double a, double b) { return std::atan(a * b / std::sqrt(1.0 + a * a + b * b)); };
+  return corner(sq[1], sq[3]) - corner(sq[0], sq[3]) - corner(sq[1], sq[2]) + corner(sq[0], sq[2]);
+}
+
 void Hemicube::to_local(std::span<const glm::dvec3> polygon, ProjectScratch& s) const {
   s.local_n = 0;
   for (const glm::dvec3& p : polygon) {

@@ -93,6 +93,11 @@ class Hemicube {
   /// Exact form factor of each pixel from the hemicube's centre (they sum to 1).
   const std::vector<double>& delta_form_factors() const { return dff_; }
 
+  /// The world direction from the eye through the centre of pixel `pixel` (not unit), as placed.
+  glm::dvec3 pixel_direction(uint32_t pixel) const;
+  /// The solid angle pixel `pixel` subtends at the eye (they sum to 2 pi).
+  double pixel_solid_angle(uint32_t pixel) const;
+
   /// Places the hemicube at `eye` facing `normal` (unit); `up_hint` fixes the rotation about it.
   void place(const glm::dvec3& eye, const glm::dvec3& normal, const glm::dvec3& up_hint);
   const glm::dvec3& eye() const { return eye_; }
@@ -120,6 +125,8 @@ class Hemicube {
     uint32_t offset = 0;            // first global pixel index
   };
   void to_local(std::span<const glm::dvec3> polygon, ProjectScratch& scratch) const;
+  // The face of a pixel, and the pixel's (a, b) square on it, a0 a1 b0 b1.
+  size_t pixel_square(uint32_t pixel, std::array<double, 4>& square) const;
   // Clips to face f and maps to pixel coordinates; false when nothing is left. `inside`: every
   // corner is known to lie inside the face's frustum (only the near plane may still cut).
   bool clip_to_face(size_t face, ProjectScratch& scratch, bool inside) const;

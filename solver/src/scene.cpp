@@ -216,7 +216,7 @@ std::string validate(const Scene& scene) {
     }
     err.str("");
   }
-  return {};
+  return detail::validate_lights(scene);  // lights.cpp
 }
 
 namespace detail {

@@ -7,6 +7,7 @@
 #include <glm/vec3.hpp>
 
 #include <array>
+#include <string>
 #include <vector>
 
 namespace hemibake::solver::detail {
@@ -33,5 +34,8 @@ struct PreparedScene {
 
 /// Precondition: validate(scene) is empty.
 PreparedScene prepare(const Scene& scene);
+
+/// The lights' and the sky's part of validate(scene) (lights.cpp).
+std::string validate_lights(const Scene& scene);
 
 }  // namespace hemibake::solver::detail

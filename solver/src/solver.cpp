@@ -25,7 +25,8 @@
 // This file picks the shooter (step) and holds the public API. shooters.cpp cuts a shooter into
 // pieces (1); shoot_piece.cpp shoots one piece in stages, with shaft.cpp (what may hide the
 // receivers) and projection.cpp (2), refine.cpp (3) and shot_cache.cpp (records for replays);
-// near_field.cpp decides which receivers are too close to a piece for its hemicube.
+// near_field.cpp decides which receivers are too close to a piece for its hemicube. lights.cpp
+// shoots the punctual lights and the sky, once each, before the first patch.
 // element_tree.cpp, patch_bvh.cpp and clusters.cpp hold what they walk; mesh_export.cpp the result.
 #include "solver_impl.h"
 
@@ -76,6 +77,9 @@ Solver::Impl::Impl(const Scene& scene, const Params& p)
   scratch.resize(chunks);
   chunk_frags.resize(chunks);
   gather_chunks.resize(chunks);
+  lights = scene.lights;
+  sky = scene.sky;
+  prepare_lights();
 }
 
 // Element e takes rho dB F of a shot: radiosity and unshot radiosity alike, and the unshot power of
@@ -97,6 +101,8 @@ void Solver::Impl::receive(uint32_t e, const glm::dvec3& dB, double f) {
 // replay is exact, else afresh.
 bool Solver::Impl::step() {
   if (done) return false;
+  // Lights and the sky shoot first, each once (lights.cpp).
+  if (stats.shots < params.max_shots && shoot_next_light()) return true;
   if (stats.unshot_fraction < params.convergence || emitted_power <= 0.0) {
     stats.converged = true;
     done = true;

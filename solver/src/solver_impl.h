@@ -178,6 +178,21 @@ struct Solver::Impl {
     uint32_t child = kNone;       // children at child and child + 1
   };
 
+  // lights.cpp: punctual lights and the sky shoot first, each once, from projections of their own
+  // (a LightView: a hemicube at a point light, or a parallel projection along a direction).
+  struct LightView;
+  void prepare_lights();
+  bool shoot_next_light();
+  void light_views(const Light& light, std::vector<LightView>& views);
+  LightView parallel_view(const glm::dvec3& direction, uint32_t resolution) const;
+  void project_light_view(LightView& view, std::span<const uint32_t> elements);
+  void project_light_children(LightView& view, const std::vector<uint32_t>& parents);
+  void light_factors(const Light* light, const std::vector<LightView>& views, std::span<const uint32_t> elements);
+  void shoot_light(const Light& light);
+  std::vector<glm::dvec3> sky_factors(uint32_t directions_step, std::span<const uint32_t> elements);
+  void shoot_sky();
+  void light_receive(uint32_t e, const glm::dvec3& irradiance);
+
   // solver.cpp: set-up, and the Southwell step that picks the shooter.
   Impl(const Scene& scene, const Params& p);
   bool step();
@@ -357,6 +372,13 @@ struct Solver::Impl {
   uint64_t mark = 0;
   std::vector<double> e_exact;         // per element: exact F(element -> piece), for stamp e_exact_stamp
   std::vector<uint64_t> e_exact_stamp;
+
+  // Lights and the sky (lights.cpp): turn k < lights.size() shoots light k, the next the sky.
+  std::vector<Light> lights;
+  glm::dvec3 sky{0.0};
+  uint32_t light_turn = 0;
+  std::unique_ptr<detail::Hemicube> light_cube;  // at params.resolution, for lights' views
+  std::unique_ptr<detail::Hemicube> sky_cube;    // coarser, for the sky's many directions
 
   Stats stats;
   bool done = false;

@@ -9,6 +9,8 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <string>
 #include <unistd.h>
 #include <vector>
@@ -166,6 +168,31 @@ TEST(LocalBake, RefusesASceneWithoutLightAndAMissingFile) {
   Captured io2;
   EXPECT_EQ(run(no_out, io2.console), 2);
   EXPECT_NE(io2.err().find("-o OUT.glb"), std::string::npos);
+}
+
+// A file whose node refers to a light that does not exist: exit status 1, and the message names
+// the light; a sky that is not three numbers is bad usage naming --sky.
+TEST(LocalBake, BadLightExitsOneAndBadSkyIsNamed) {
+  std::ifstream in(HEMIBAKE_SOURCE_DIR "/data/lit-yard.gltf");
+  std::stringstream text;
+  text << in.rdbuf();
+  std::string gltf = text.str();
+  const std::string ref = "\"light\": 1\n";  // the bulb's node
+  const size_t at = gltf.find(ref);
+  ASSERT_NE(at, std::string::npos);
+  gltf.replace(at, ref.size(), "\"light\": 9\n");
+  const std::string path = (std::filesystem::temp_directory_path() / ("hemibake-badlight-" + std::to_string(getpid()) + ".gltf")).string();
+  std::ofstream(path) << gltf;
+  CommandLine cl;
+  ASSERT_EQ(parse({"bake", path, "-o", "/tmp/never-written.glb"}, cl), "");
+  Captured io;
+  EXPECT_EQ(run(cl, io.console), 1);
+  EXPECT_NE(io.err().find("light 9, which does not exist"), std::string::npos) << io.err();
+  std::filesystem::remove(path);
+  EXPECT_NE(error_of({"bake", "in.gltf", "-o", "x.glb", "--sky", "1,2"}).find("--sky"), std::string::npos);
+  CommandLine sky;
+  ASSERT_EQ(parse({"bake", "in.gltf", "-o", "x.glb", "--sky", "0.5,1,2"}, sky), "");
+  EXPECT_EQ(sky.spec.sky, glm::dvec3(0.5, 1.0, 2.0));
 }
 
 // Not on a terminal, a long job still shows progress as whole lines; on a terminal, one line is

@@ -14,6 +14,7 @@
 #include <glm/mat4x4.hpp>
 
 #include <cmath>
+#include <numbers>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -49,12 +50,13 @@ struct GltfBuilder {
     doc["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", off}, {"byteLength", size}});
     return static_cast<int>(doc["bufferViews"].size()) - 1;
   }
-  int material(const glm::dvec3& base, const glm::dvec3& emission) {
+  // `exitance` is the emitted radiosity; glTF's emission is its radiance, exitance / pi.
+  int material(const glm::dvec3& base, const glm::dvec3& exitance) {
     json m = {{"pbrMetallicRoughness", {{"baseColorFactor", {base.x, base.y, base.z, 1.0}}}}};
-    const double top = std::max({emission.x, emission.y, emission.z});
+    const double top = std::max({exitance.x, exitance.y, exitance.z});
     if (top > 0) {
-      m["emissiveFactor"] = {emission.x / top, emission.y / top, emission.z / top};
-      m["extensions"]["KHR_materials_emissive_strength"]["emissiveStrength"] = top;
+      m["emissiveFactor"] = {exitance.x / top, exitance.y / top, exitance.z / top};
+      m["extensions"]["KHR_materials_emissive_strength"]["emissiveStrength"] = top / std::numbers::pi;
     }
     doc["materials"].push_back(m);
     return static_cast<int>(doc["materials"].size()) - 1;
@@ -188,7 +190,8 @@ class ClosedBoxGltf : public ::testing::TestWithParam<bool> {};
 
 // A closed box, every wall emitting E and reflecting rho: _RADIOSITY = E / (1 - rho) everywhere,
 // as read back by Draco's decoder (or from plain accessors); COLOR_0 lies in [0, 1] and is
-// exposure * radiosity / base colour; the triangles cover the walls exactly.
+// exposure * radiosity / base colour (an emitter's: its emission's hue); the triangles cover the
+// walls exactly.
 TEST_P(ClosedBoxGltf, BakesToEOverOneMinusRhoReadBackIndependently) {
   const glm::dvec3 rho(0.5, 0.6, 0.4), e(0.3, 0.2, 0.1);
   GltfBuilder b;
@@ -205,12 +208,17 @@ TEST_P(ClosedBoxGltf, BakesToEOverOneMinusRhoReadBackIndependently) {
   const Decoded d = read_primitive(g, prim);
   ASSERT_GT(d.positions.size(), 0u);
   ASSERT_EQ(d.radiosity.size(), d.positions.size());
+  // Every wall emits, so the walls are shown by their emission: the base colour is the emission's
+  // hue (e over its largest channel), and COLOR_0 the brightness on it.
+  const json& base = g.doc["materials"][prim["material"].get<int>()]["pbrMetallicRoughness"]["baseColorFactor"];
+  const glm::dvec3 hue = e / std::max({e.x, e.y, e.z});
+  for (int c = 0; c < 3; ++c) ASSERT_NEAR(base[c].get<double>(), hue[c], 1e-9);
   for (size_t i = 0; i < d.radiosity.size(); ++i) {
     for (int c = 0; c < 3; ++c) {
       ASSERT_NEAR(d.radiosity[i][c] / expected[c], 1.0, 0.02) << "vertex " << i;
       ASSERT_GE(d.colors[i][c], 0.0);
       ASSERT_LE(d.colors[i][c], 1.0);
-      ASSERT_NEAR(d.colors[i][c], std::min(1.0, baked.exposure * d.radiosity[i][c] / rho[c]), 2e-3);
+      ASSERT_NEAR(d.colors[i][c], std::min(1.0, baked.exposure * d.radiosity[i][c] / hue[c]), 2e-3);
     }
   }
   // Node-local positions: the node's translation still applies, and the box is where it was.

@@ -8,6 +8,7 @@
 // with Draco's own decoder or straight from plain accessors.
 #include "gltf_builder.h"
 #include "glb_reader.h"
+#include "../solver/test_seed.h"
 
 #include "hemibake/protocol/bake.h"
 #include "hemibake/protocol/gltf.h"
@@ -28,8 +29,13 @@
 #include <glm/vec2.hpp>
 
 #include <algorithm>
+#include <fstream>
+#include <functional>
+#include <iterator>
+#include <random>
 #include <array>
 #include <cmath>
+#include <numbers>
 #include <limits>
 #include <cstring>
 #include <string>
@@ -139,12 +145,13 @@ json plain_material(const V& base, const std::string& name = "") {
   return m;
 }
 
-// A lamp: black (reflects nothing, so that only direct light is compared) and emitting `e`.
+// A lamp: black (reflects nothing, so that only direct light is compared) and emitting the
+// exitance `e` (glTF's emission is the radiance e / pi).
 json lamp_material(const V& e) {
   const double top = std::max({e.x, e.y, e.z});
   json m = plain_material(V(0.0), "lamp");
   m["emissiveFactor"] = {e.x / top, e.y / top, e.z / top};
-  m["extensions"]["KHR_materials_emissive_strength"]["emissiveStrength"] = top;
+  m["extensions"]["KHR_materials_emissive_strength"]["emissiveStrength"] = top / std::numbers::pi;
   return m;
 }
 
@@ -897,39 +904,343 @@ solver::Scene lamp_patches(const json& strength) {
   return r.document ? scene_of(*r.document) : solver::Scene{};
 }
 
-// JSON has one number type: "emissiveStrength": 3 is the same as 3.0 (emission = factor x 3).
+// JSON has one number type: "emissiveStrength": 3 is the same as 3.0 (radiance = factor x 3, so
+// the emitted exitance is pi times that).
 TEST(EmissiveStrengthFeature, IntegerStrengthWorksLikeTheSameRealNumber) {
   ASSERT_EQ(json(3).dump(), "3");
   ASSERT_EQ(json(3.0).dump(), "3.0");
   const solver::Scene as_int = lamp_patches(json(3)), as_real = lamp_patches(json(3.0));
   ASSERT_EQ(as_int.patches.size(), 1u);
   ASSERT_EQ(as_real.patches.size(), 1u);
-  EXPECT_EQ(as_int.patches[0].emission, V(3.0, 1.5, 0.75));
-  EXPECT_EQ(as_real.patches[0].emission, V(3.0, 1.5, 0.75));
+  const V exitance = std::numbers::pi * V(3.0, 1.5, 0.75);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_DOUBLE_EQ(as_int.patches[0].emission[c], exitance[c]);
+    EXPECT_DOUBLE_EQ(as_real.patches[0].emission[c], exitance[c]);
+  }
 }
 
-// A KHR_lights_punctual light is named as not supported in a warning; the file still loads, and the
-// output does not refer to the light (no extension on the node, none declared).
-TEST(PunctualLightsFeature, LightsAreReportedAsNotSupportedAndDropped) {
+// Lambert's formula: the form factor from a point with unit normal n to a polygon (no occlusion).
+double lambert_form_factor(const V& x, const V& n, const std::vector<V>& poly) {
+  double sum = 0.0;
+  for (size_t i = 0; i < poly.size(); ++i) {
+    const V a = glm::normalize(poly[i] - x), b = glm::normalize(poly[(i + 1) % poly.size()] - x);
+    const V c = glm::cross(a, b);
+    const double len = glm::length(c);
+    if (len == 0.0) continue;
+    sum += std::atan2(len, glm::dot(a, b)) * glm::dot(n, c) / len;
+  }
+  return std::abs(sum) / (2.0 * std::numbers::pi);
+}
+
+// KHR_lights_punctual lights are light sources: placed by their nodes, in candela and lux as
+// given. Measured as a viewer shows the output: vertex radiosity interpolated over the output's
+// triangles at random points.
+
+// Points spread uniformly by area over `tris`, with the radiosity interpolated there.
+std::vector<std::pair<V, V>> sample_tris(const std::vector<Tri>& tris, int count, std::mt19937_64& rng) {
+  std::vector<double> cumulative;
+  double total = 0.0;
+  for (const Tri& t : tris) cumulative.push_back(total += t.area());
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::vector<std::pair<V, V>> out;
+  for (int i = 0; i < count && total > 0.0; ++i) {
+    const size_t k = std::min(tris.size() - 1, static_cast<size_t>(std::lower_bound(cumulative.begin(), cumulative.end(), u(rng) * total) - cumulative.begin()));
+    double a = u(rng), b = u(rng);
+    if (a + b > 1.0) a = 1.0 - a, b = 1.0 - b;
+    const Tri& t = tris[k];
+    out.emplace_back((1 - a - b) * t.p[0] + a * t.p[1] + b * t.p[2], (1 - a - b) * t.b[0] + a * t.b[1] + b * t.b[2]);
+  }
+  return out;
+}
+
+// Median and 90th percentile of the relative error of channel c against `truth`.
+std::pair<double, double> errors_against(const std::vector<std::pair<V, V>>& samples, int c,
+                                         const std::function<V(const V&)>& truth) {
+  std::vector<double> err;
+  for (const auto& [x, b] : samples) err.push_back(std::abs(b[c] / truth(x)[c] - 1.0));
+  std::sort(err.begin(), err.end());
+  return {err[err.size() / 2], err[err.size() * 9 / 10]};
+}
+
+void add_lights(Doc& d, json lights) {
+  d.gltf["extensionsUsed"] = json::array({"KHR_lights_punctual"});
+  d.gltf["extensionsRequired"] = json::array({"KHR_lights_punctual"});  // as Blender's exporter writes it
+  d.gltf["extensions"]["KHR_lights_punctual"]["lights"] = std::move(lights);
+}
+
+json light_ref(int light) { return {{"KHR_lights_punctual", {{"light", light}}}}; }
+
+// A point light on a child of a scaled, translated node: at the child's world position, with the
+// colour times the intensity in candela (scale does not change it).
+TEST(PunctualLightsFeature, PointLightOnANestedNodeLightsAnOpenFloorAsIHOverDCubed) {
+  const uint64_t seed = test::test_seed();
+  std::mt19937_64 rng(seed);
   Doc d;
-  const int lamp = d.material(lamp_material(V(4.0)));
-  const int floor = d.quad_node(rect(0, 2, 0, 2, 0, true), d.material(plain_material(V(0.6))), {{"name", "floor"}});
-  d.quad_node(rect(0.5, 1.5, 0.5, 1.5, 1.0, false), lamp, {{"name", "lamp"}});
-  d.gltf["extensionsUsed"] = {"KHR_lights_punctual"};
-  d.gltf["extensions"]["KHR_lights_punctual"]["lights"] = json::array(
-      {json{{"type", "point"}, {"intensity", 10.0}, {"color", {1.0, 1.0, 1.0}}, {"name", "bulb"}}});
-  const int bulb = d.node({{"name", "bulb"}, {"translation", {1.0, 0.5, 1.0}}, {"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}});
+  const double rho = 0.6, intensity = 5.0;
+  const V colour(1.0, 0.5, 0.25);
+  const int floor = d.quad_node(rect(-1, 1, -1, 1, 0, true), d.material(plain_material(V(rho))), {{"name", "floor"}});
+  add_lights(d, json::array({json{{"type", "point"}, {"intensity", intensity}, {"color", {colour.x, colour.y, colour.z}}, {"name", "bulb"}}}));
+  const int child = d.node({{"name", "bulb"}, {"translation", {0.1, 0.4, -0.1}}, {"extensions", light_ref(0)}}, false);
+  d.node({{"name", "holder"}, {"translation", {0.2, 0.0, 0.0}}, {"scale", {2.0, 2.0, 2.0}}, {"children", {child}}});
+  const V pos(0.4, 0.8, -0.2);
+  solver::Params params;  // the defaults: the accuracy a user gets
+  const Baked b = bake(d.gltf_bytes(), false, params);
+  ASSERT_TRUE(b.loaded.document);
+  ASSERT_EQ(scene_of(*b.loaded.document).lights.size(), 1u);
+  const auto samples = sample_tris(all_of(baked_node(b.out, floor)), 3000, rng);
+  auto truth = [&](const V& x) {
+    const double dist = glm::length(pos - x);
+    return rho * intensity * colour * pos.y / (dist * dist * dist);
+  };
+  for (int c = 0; c < 3; ++c) {
+    const auto [median, p90] = errors_against(samples, c, truth);
+    EXPECT_LE(median, 0.02) << "channel " << c << ", " << test::seed_note(seed);
+    EXPECT_LE(p90, 0.05) << "channel " << c << ", " << test::seed_note(seed);
+  }
+  // The output bakes the light in and does not carry it (a viewer would light the floor twice).
+  const json used = b.out.doc.value("extensionsUsed", json::array());
+  EXPECT_EQ(std::find(used.begin(), used.end(), "KHR_lights_punctual"), used.end());
+  EXPECT_NE(b.out.doc["asset"]["extras"]["hemibake"]["radiosity"].get<std::string>().find("exitance"), std::string::npos);
+}
+
+// A spot light points along its node's -Z: a node turned -90 degrees about x points it down.
+TEST(PunctualLightsFeature, SpotLightPointsAlongItsNodesMinusZ) {
+  Doc d;
+  const double rho = 0.5;
+  const int floor = d.quad_node(rect(-1.5, 1.5, -1.5, 1.5, 0, true), d.material(plain_material(V(rho))), {{"name", "floor"}});
+  add_lights(d, json::array({json{{"type", "spot"}, {"intensity", 4.0}, {"spot", {{"innerConeAngle", 0.2}, {"outerConeAngle", 0.4}}}}}));
+  d.node({{"translation", {0.0, 1.0, 0.0}}, {"rotation", {-std::sqrt(0.5), 0.0, 0.0, std::sqrt(0.5)}}, {"extensions", light_ref(0)}});
   const Baked b = bake(d.gltf_bytes());
   ASSERT_TRUE(b.loaded.document);
-  EXPECT_TRUE(mentions(b.loaded.warnings, "KHR_lights_punctual")) << joined(b.loaded.warnings);
-  EXPECT_TRUE(mentions(b.loaded.warnings, "not supported")) << joined(b.loaded.warnings);
-  // The light adds nothing: the floor is lit by the lamp alone (checked to be lit at all).
-  EXPECT_GT(mean_radiosity(all_of(baked_node(b.out, floor))).x, 0.0);
-  const json& g = b.out.doc;
-  EXPECT_FALSE(g["nodes"][bulb].contains("extensions") && g["nodes"][bulb]["extensions"].contains("KHR_lights_punctual"));
-  const json used = g.value("extensionsUsed", json::array());
-  EXPECT_EQ(std::find(used.begin(), used.end(), "KHR_lights_punctual"), used.end());
+  const auto& lights = scene_of(*b.loaded.document).lights;
+  ASSERT_EQ(lights.size(), 1u);
+  EXPECT_NEAR(lights[0].direction.y, -1.0, 1e-9);
+  // Under the light, about rho I / h^2; a metre to the side (45 degrees off the axis), dark.
+  double centre = 0.0, side = 0.0;
+  for (const Tri& t : all_of(baked_node(b.out, floor)))
+    for (int k = 0; k < 3; ++k) {
+      const double r = std::hypot(t.p[k].x, t.p[k].z);
+      if (r < 0.05) centre = std::max(centre, t.b[k].x);
+      if (r > 1.0) side = std::max(side, t.b[k].x);
+    }
+  EXPECT_NEAR(centre / (rho * 4.0), 1.0, 0.05);
+  EXPECT_EQ(side, 0.0);
 }
+
+// An emissive panel of radiance L and a point light in one file: the floor gets
+// rho (pi L F(x -> panel) + I cos / d^2), the two in one unit.
+TEST(PunctualLightsFeature, EmissivePanelAndPointLightShareOneUnit) {
+  const uint64_t seed = test::test_seed();
+  std::mt19937_64 rng(seed);
+  Doc d;
+  const double rho = 0.5, exitance = 6.0, intensity = 1.5;
+  const int floor = d.quad_node(rect(-1, 1, -1, 1, 0, true), d.material(plain_material(V(rho))), {{"name", "floor"}});
+  d.quad_node(rect(-0.5, 0.5, -0.5, 0.5, 1.0, false), d.material(lamp_material(V(exitance))), {{"name", "panel"}});
+  add_lights(d, json::array({json{{"type", "point"}, {"intensity", intensity}}}));
+  const V pos(0.8, 0.6, 0.3);
+  d.node({{"translation", {pos.x, pos.y, pos.z}}, {"extensions", light_ref(0)}});
+  solver::Params params;
+  const Baked b = bake(d.gltf_bytes(), false, params);
+  ASSERT_TRUE(b.loaded.document);
+  const std::vector<V> panel = {V(-0.5, 1, -0.5), V(0.5, 1, -0.5), V(0.5, 1, 0.5), V(-0.5, 1, 0.5)};
+  auto truth = [&](const V& x) {
+    const double dist = glm::length(pos - x);
+    return V(rho * (exitance * lambert_form_factor(x, V(0, 1, 0), panel) + intensity * pos.y / (dist * dist * dist)));
+  };
+  const auto [median, p90] = errors_against(sample_tris(all_of(baked_node(b.out, floor)), 3000, rng), 0, truth);
+  // The panel's own share is as accurate as the patch solver makes it; a factor pi between the
+  // two would put the sum a quarter or more off.
+  EXPECT_LE(median, 0.05) << test::seed_note(seed);
+  EXPECT_LE(p90, 0.12) << test::seed_note(seed);
+}
+
+// An emitter with a dark base colour (lava: dark rock, glowing) is shown by its emission: its output
+// material's base colour is the emissive factor's hue, and base colour x COLOR_0 is exposure x
+// radiosity (clamped), as bright as the light it gives, brighter than the floor it lights.
+TEST(EmitterDisplayFeature, DarkEmitterShowsItsEmissionNotItsBaseColour) {
+  Doc d;
+  const int floor = d.quad_node(rect(-1, 1, -1, 1, 0, true), d.material(plain_material(V(0.6))), {{"name", "floor"}});
+  json lava = plain_material(V(0.05, 0.04, 0.04), "lava");
+  lava["emissiveFactor"] = {1.0, 0.3, 0.05};
+  lava["extensions"]["KHR_materials_emissive_strength"]["emissiveStrength"] = 2.0;
+  const int lava_mat = d.material(lava);
+  const int lamp = d.quad_node(rect(-0.3, 0.3, -0.3, 0.3, 0.8, false), lava_mat, {{"name", "lava"}});
+  const Baked b = bake(d.gltf_bytes());
+  const json& mat = b.out.doc["materials"][lava_mat];
+  const json factor = mat["pbrMetallicRoughness"]["baseColorFactor"];
+  EXPECT_NEAR(factor[0].get<double>(), 1.0, 1e-9);
+  EXPECT_NEAR(factor[1].get<double>(), 0.3, 1e-9);
+  EXPECT_NEAR(factor[2].get<double>(), 0.05, 1e-9);
+  const double exposure = b.out.doc["asset"]["extras"]["hemibake"]["exposure"].get<double>();
+  auto shown = [&](int node) {
+    std::vector<V> out;
+    const json& n = b.out.doc["nodes"][node];
+    for (const json& prim : b.out.doc["meshes"][n["mesh"].get<int>()]["primitives"]) {
+      const json base = b.out.doc["materials"][prim["material"].get<int>()]["pbrMetallicRoughness"]["baseColorFactor"];
+      const Primitive p = read_primitive(b.out, prim);
+      for (size_t i = 0; i < p.colors.size(); ++i) {
+        V v;
+        for (int c = 0; c < 3; ++c) v[c] = base[c].get<double>() * p.colors[i][c];
+        out.push_back(v);
+        for (int c = 0; c < 3; ++c)
+          EXPECT_NEAR(v[c], std::min(base[c].get<double>(), exposure * p.radiosity[i][c]), 2e-3) << "vertex " << i;
+      }
+    }
+    return out;
+  };
+  const std::vector<V> lava_shown = shown(lamp), floor_shown = shown(floor);
+  ASSERT_FALSE(lava_shown.empty());
+  double floor_max = 0.0;
+  for (const V& v : floor_shown) floor_max = std::max(floor_max, v.x);
+  for (const V& v : lava_shown) EXPECT_GE(v.x, floor_max);  // red channel: as bright as anything lit
+  EXPECT_NEAR(lava_shown[0].x, 1.0, 1e-3);                   // full red, where dark rock was 0.05
+}
+
+// A light used by two nodes shines from both: twice the light of one, where they stand together.
+TEST(PunctualLightsFeature, EveryNodeThatRefersToALightShines) {
+  auto floor_light = [](int copies) {
+    Doc d;
+    const int floor = d.quad_node(rect(-1, 1, -1, 1, 0, true), d.material(plain_material(V(0.5))), {{"name", "floor"}});
+    add_lights(d, json::array({json{{"type", "directional"}, {"intensity", 2.0}}}));
+    for (int i = 0; i < copies; ++i)
+      d.node({{"rotation", {-std::sqrt(0.5), 0.0, 0.0, std::sqrt(0.5)}}, {"extensions", light_ref(0)}});
+    const Baked b = bake(d.gltf_bytes());
+    return mean_radiosity(all_of(baked_node(b.out, floor))).x;
+  };
+  const double one = floor_light(1), two = floor_light(2);
+  EXPECT_NEAR(one / (0.5 * 2.0), 1.0, 0.01);  // rho E cos 0
+  EXPECT_NEAR(two / one, 2.0, 0.02);
+}
+
+// Environment lighting in a file is not read, and the warning says what to use instead.
+TEST(PunctualLightsFeature, ImageBasedLightingIsNamedAsNotRead) {
+  Doc d;
+  d.quad_node(rect(-1, 1, -1, 1, 0, true), d.material(lamp_material(V(1.0))));
+  d.gltf["extensionsUsed"] = json::array({"EXT_lights_image_based"});
+  const LoadResult r = load_gltf_memory(d.gltf_bytes(), ".");
+  ASSERT_TRUE(r.document) << r.error;
+  EXPECT_TRUE(mentions(r.warnings, "EXT_lights_image_based")) << joined(r.warnings);
+  EXPECT_TRUE(mentions(r.warnings, "sky")) << joined(r.warnings);
+}
+
+// Files from Blender's own exporter (tests/data, made by scripts/make_blender_lights.py with
+// Blender 3.4): Z-up scenes turned Y-up, lights on nodes turned to point along -Z, intensities
+// converted from watts by Blender's rule (point and spot: W / (4 pi) x 683 candela; sun:
+// W/m^2 x 683 lux; a spot's outer cone half its size, inner outer x (1 - blend)).
+TEST(BlenderExportFeature, LightsArePlacedAndScaledAsBlenderSetThem) {
+  const LoadResult r = load_gltf_file(HEMIBAKE_SOURCE_DIR "/tests/data/blender-lights.glb");
+  ASSERT_TRUE(r.document) << r.error;
+  const solver::Scene& scene = scene_of(*r.document);
+  ASSERT_EQ(scene.lights.size(), 3u);
+  // Blender (x, y, z) is glTF (x, z, -y).
+  auto gltf = [](const V& b) { return V(b.x, b.z, -b.y); };
+  const double pi = std::numbers::pi;
+  const solver::Light* point = nullptr;
+  const solver::Light* sun = nullptr;
+  const solver::Light* spot = nullptr;
+  for (const auto& l : scene.lights)
+    (l.type == solver::Light::Type::kPoint ? point : l.type == solver::Light::Type::kSpot ? spot : sun) = &l;
+  ASSERT_TRUE(point && sun && spot);
+  auto near = [](const V& a, const V& b, double tol) { return glm::length(a - b) < tol; };
+  EXPECT_TRUE(near(point->position, gltf(V(0.5, -0.5, 1.0)), 1e-6));
+  const double bulb = 100.0 / (4.0 * pi) * 683.0;
+  EXPECT_TRUE(near(point->intensity, bulb * V(1.0, 0.8, 0.6), 1e-3 * bulb));
+  // The sun turned by Blender's XYZ Euler angles (40, 0, 30) degrees shines along R (0, 0, -1).
+  const double ax = 40.0 * pi / 180.0, az = 30.0 * pi / 180.0;
+  const V rx(0.0, std::sin(ax), -std::cos(ax));
+  const V sun_dir(std::cos(az) * rx.x - std::sin(az) * rx.y, std::sin(az) * rx.x + std::cos(az) * rx.y, rx.z);
+  EXPECT_TRUE(near(sun->direction, gltf(sun_dir), 1e-5)) << sun->direction.x << " " << sun->direction.y << " " << sun->direction.z;
+  EXPECT_NEAR(sun->intensity.x, 3.0 * 683.0, 1e-6);
+  EXPECT_TRUE(near(spot->position, gltf(V(-1.0, 1.0, 2.0)), 1e-6));
+  EXPECT_TRUE(near(spot->direction, V(0.0, -1.0, 0.0), 1e-6));
+  EXPECT_NEAR(spot->intensity.x, 200.0 / (4.0 * pi) * 683.0, 1e-3);
+  EXPECT_NEAR(spot->outer_cone, 30.0 * pi / 180.0, 1e-6);
+  EXPECT_NEAR(spot->inner_cone, 30.0 * pi / 180.0 * 0.75, 1e-6);
+  // The lamp's material: emission (1, 0.5, 0.2) at strength 3 is a radiance; it emits pi times it.
+  bool lamp = false;
+  for (const auto& p : scene.patches)
+    if (p.emission != V(0.0)) {
+      lamp = true;
+      EXPECT_TRUE(near(p.emission, pi * 3.0 * V(1.0, 0.5, 0.2), 1e-5));
+    }
+  EXPECT_TRUE(lamp);
+  const LoadResult dark = load_gltf_file(HEMIBAKE_SOURCE_DIR "/tests/data/blender-point.glb");
+  ASSERT_TRUE(dark.document) << dark.error;
+  EXPECT_EQ(bake_error(*dark.document), "");  // lit by its light alone
+}
+
+// Blender's point light over Blender's (double-sided) floor: the top is rho I h / d^3 as a viewer
+// shows it; the underside is dark.
+TEST(BlenderExportFeature, PointLightLightsTheFloorAsIHOverDCubed) {
+  const uint64_t seed = test::test_seed();
+  std::mt19937_64 rng(seed);
+  std::ifstream in(HEMIBAKE_SOURCE_DIR "/tests/data/blender-point.glb", std::ios::binary);
+  const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const Baked b = bake(bytes, true, solver::Params{});
+  ASSERT_TRUE(b.loaded.document);
+  const V pos(0.3, 0.8, -0.2);  // Blender's (0.3, 0.2, 0.8)
+  const double intensity = 50.0 / (4.0 * std::numbers::pi) * 683.0, rho = 0.6;
+  std::vector<Tri> top, bottom;
+  for (const Tri& t : all_of(baked_node(b.out, 0))) (t.front.y > 0.0 ? top : bottom).push_back(t);
+  ASSERT_NEAR(total_area(top), 16.0, 1e-3);  // 4 m x 4 m
+  ASSERT_NEAR(total_area(bottom), 16.0, 1e-3);
+  auto truth = [&](const V& x) {
+    const double d = glm::length(pos - x);
+    return V(rho * intensity * pos.y / (d * d * d));
+  };
+  const auto [median, p90] = errors_against(sample_tris(top, 3000, rng), 0, truth);
+  EXPECT_LE(median, 0.02) << test::seed_note(seed);
+  EXPECT_LE(p90, 0.05) << test::seed_note(seed);
+  EXPECT_EQ(mean_radiosity(bottom), V(0.0));
+}
+
+// A scene with neither emitter, light nor sky is refused, and the message names all three.
+TEST(PunctualLightsFeature, DarkSceneMessageNamesEmittersLightsAndSky) {
+  Doc d;
+  d.quad_node(rect(-1, 1, -1, 1, 0, true), d.material(plain_material(V(0.5))));
+  const LoadResult r = load_gltf_memory(d.gltf_bytes(), ".");
+  ASSERT_TRUE(r.document) << r.error;
+  const std::string e = bake_error(*r.document);
+  for (const char* word : {"emissiveFactor", "KHR_lights_punctual", "sky"}) EXPECT_NE(e.find(word), std::string::npos) << e;
+  JobSpec spec;
+  spec.sky = V(1.0);
+  EXPECT_EQ(bake_error(*r.document, spec), "");
+  spec.method = Method::kHierarchical;
+  EXPECT_NE(bake_error(*r.document, spec).find("sky"), std::string::npos);
+}
+
+struct BadLight {
+  const char* name;
+  const char* lights;  // JSON of the lights array
+  int node_light;      // the node's light index
+  const char* expect;  // in the message
+};
+
+class MalformedLightsFeature : public ::testing::TestWithParam<BadLight> {};
+
+TEST_P(MalformedLightsFeature, IsRefusedWithAMessageNamingTheLight) {
+  Doc d;
+  d.quad_node(rect(-1, 1, -1, 1, 0, true), d.material(lamp_material(V(1.0))));
+  add_lights(d, json::parse(GetParam().lights));
+  d.node({{"translation", {0.0, 1.0, 0.0}}, {"extensions", light_ref(GetParam().node_light)}});
+  const LoadResult r = load_gltf_memory(d.gltf_bytes(), ".");
+  EXPECT_FALSE(r.document);
+  EXPECT_NE(r.error.find("light"), std::string::npos) << r.error;
+  EXPECT_NE(r.error.find(GetParam().expect), std::string::npos) << r.error;
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Protocol, MalformedLightsFeature,
+    ::testing::Values(
+        BadLight{"IndexOutOfRange", R"([{"type": "point"}])", 3, "light 3, which does not exist"},
+        BadLight{"UnknownType", R"([{"type": "area", "name": "softbox"}])", 0, "'softbox'"},
+        BadLight{"NegativeIntensity", R"([{"type": "point", "intensity": -2}])", 0, "intensity"},
+        BadLight{"NegativeColour", R"([{"type": "point", "color": [1, -0.5, 1]}])", 0, "color"},
+        BadLight{"ShortColour", R"([{"type": "point", "color": [1, 1]}])", 0, "color"},
+        BadLight{"NegativeRange", R"([{"type": "point", "range": -1}])", 0, "range"},
+        BadLight{"InnerNotBelowOuter", R"([{"type": "spot", "spot": {"innerConeAngle": 0.5, "outerConeAngle": 0.5}}])", 0, "cone"},
+        BadLight{"OuterPastRightAngle", R"([{"type": "spot", "spot": {"outerConeAngle": 2.0}}])", 0, "cone"}),
+    [](const auto& p) { return std::string(p.param.name); });
 
 // ---- 8. TEXCOORD_0 against the closed form ------------------------------------------------------
 

@@ -93,6 +93,7 @@ std::string other_value(const ParamInfo& p, const JobSpec& defaults) {
     case ParamInfo::Kind::kFlag: return v != 0.0 ? "false" : "true";
     case ParamInfo::Kind::kWhole: return std::to_string(static_cast<uint64_t>(v == p.max ? v - 2 : v + 2));
     case ParamInfo::Kind::kNumber: return std::to_string(v == 0.0 ? 0.25 : v * 0.5);
+    case ParamInfo::Kind::kColour: return v == 0.0 ? "0.5,0.25,1" : "0";
   }
   return {};
 }

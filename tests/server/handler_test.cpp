@@ -136,6 +136,77 @@ TEST(Handler, SceneWithoutLightIsRefused) {
   EXPECT_TRUE(json::parse(f.call("GET", "/v1/jobs").body)["jobs"].empty());
 }
 
+std::string lit_yard() {
+  std::ifstream in(HEMIBAKE_SOURCE_DIR "/data/lit-yard.gltf");
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// The job's final state, polled.
+json finished(Fixture& f, const std::string& id) {
+  json job;
+  for (int i = 0; i < 600; ++i) {
+    job = json::parse(f.call("GET", "/v1/jobs/" + id).body);
+    if (job["state"] != "queued" && job["state"] != "running") break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return job;
+}
+
+// A file with KHR_lights_punctual lights (and nothing else emitting but a small lamp) is baked; a
+// bad light is refused before it is queued, with a message that names it.
+TEST(Handler, FileWithLightsBakesAndABadLightIsNamed) {
+  Fixture f;
+  const std::map<std::string, std::string> type = {{"content-type", "model/gltf+json"}};
+  const Response posted = f.call("POST", "/v1/jobs?convergence=0.01", lit_yard(), type);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  EXPECT_EQ(finished(f, json::parse(posted.body)["id"])["state"], "succeeded");
+  json bad = json::parse(lit_yard());
+  bad["nodes"][1]["extensions"]["KHR_lights_punctual"]["light"] = 7;
+  const Response r = f.call("POST", "/v1/jobs", bad.dump(), type);
+  EXPECT_EQ(r.status, 422) << r.body;
+  EXPECT_NE(json::parse(r.body)["error"].get<std::string>().find("light 7"), std::string::npos) << r.body;
+  bad = json::parse(lit_yard());
+  bad["extensions"]["KHR_lights_punctual"]["lights"][2]["spot"]["innerConeAngle"] = 0.5;
+  const Response cone = f.call("POST", "/v1/jobs", bad.dump(), type);
+  EXPECT_EQ(cone.status, 422) << cone.body;
+  EXPECT_NE(json::parse(cone.body)["error"].get<std::string>().find("light 2 ('Spot')"), std::string::npos) << cone.body;
+}
+
+// The sky is a job parameter: an open yard with no light of its own is refused without it and
+// baked with it; a bad sky value is a bad parameter.
+TEST(Handler, JobWithASkyBakesAnUnlitScene) {
+  Fixture f;
+  json dark = json::parse(lit_yard());
+  dark.erase("extensions");
+  dark.erase("extensionsRequired");
+  dark["extensionsUsed"] = json::array();
+  for (auto& n : dark["nodes"]) n.erase("extensions");
+  for (auto& m : dark["materials"]) {
+    m.erase("emissiveFactor");
+    m.erase("extensions");
+  }
+  const std::map<std::string, std::string> type = {{"content-type", "model/gltf+json"}};
+  const Response refused = f.call("POST", "/v1/jobs", dark.dump(), type);
+  EXPECT_EQ(refused.status, 422) << refused.body;
+  const std::string why = json::parse(refused.body)["error"];
+  for (const char* word : {"emissive", "KHR_lights_punctual", "sky"}) EXPECT_NE(why.find(word), std::string::npos) << why;
+  const Response posted = f.call("POST", "/v1/jobs?sky=0.2,0.3,0.5&convergence=0.01", dark.dump(), type);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const json job = finished(f, json::parse(posted.body)["id"]);
+  EXPECT_EQ(job["state"], "succeeded");
+  EXPECT_EQ(job["params"]["sky"], "0.2,0.3,0.5");
+  for (const char* bad : {"-1", "1,2", "a,b,c", "1,2,3,4"}) {
+    const Response r = f.call("POST", std::string("/v1/jobs?sky=") + bad, dark.dump(), type);
+    EXPECT_EQ(r.status, 400) << bad << ": " << r.body;
+    EXPECT_NE(r.body.find("sky"), std::string::npos) << r.body;
+  }
+  // Lights and the sky are not baked by the baselines: refused, not silently left out.
+  const Response hr = f.call("POST", "/v1/jobs?sky=1&method=hr", dark.dump(), type);
+  EXPECT_EQ(hr.status, 422) << hr.body;
+}
+
 TEST(Handler, TokensProtectEverythingButHealthChecks) {
   ServiceOptions o;
   o.tokens = {"t0ken"};

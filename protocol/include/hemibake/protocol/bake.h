@@ -42,6 +42,14 @@ struct Solution {
   bool cancelled() const { return stats.cancelled; }
 };
 
+/// Empty when `spec` can bake the document: something gives light (an emitting surface, a light,
+/// or the spec's sky), and lights or a sky come with a method that bakes them (aa or classical;
+/// the baselines hr and reference know only emitting surfaces). Otherwise a message for the user.
+std::string bake_error(const SceneDocument& document, const JobSpec& spec);
+
+/// The scene a spec bakes: the document's, with the spec's sky.
+solver::Scene scene_with(const solver::Scene& scene, const JobSpec& spec);
+
 /// Solves `scene` (validate(scene) must be empty) with the spec's method and parameters
 /// (apply_params() has accepted them). Cancellation leaves a partial solution with
 /// stats.cancelled set.

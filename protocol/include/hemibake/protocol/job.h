@@ -7,6 +7,8 @@
 #include "hemibake/protocol/method.h"
 #include "hemibake/solver/solver.h"
 
+#include <glm/vec3.hpp>
+
 #include <map>
 #include <optional>
 #include <span>
@@ -22,6 +24,7 @@ struct JobSpec {
   WriteOptions write;      ///< the output file
   uint32_t rays = 4;       ///< hr: visibility rays per link
   uint32_t samples = 256;  ///< reference: paths per vertex
+  glm::dvec3 sky{0.0};     ///< radiance of a uniform sky around the scene (aa and classical)
 };
 
 /// The solver's parameters for `spec`, with the form-factor mode its method needs (reference bakes
@@ -30,7 +33,7 @@ solver::Params solver_params(const JobSpec& spec);
 
 /// One job parameter. Values are numbers (a method's index in Method, a flag's 0 or 1).
 struct ParamInfo {
-  enum class Kind : uint8_t { kMethod, kWhole, kNumber, kFlag };
+  enum class Kind : uint8_t { kMethod, kWhole, kNumber, kFlag, kColour };
   const char* name;     ///< on the wire: query, form field, JSON key
   const char* flag;     ///< on the command line, without the dashes; a kFlag that defaults on is
                         ///< turned off by --no-FLAG, any other parameter takes --FLAG VALUE
@@ -38,8 +41,11 @@ struct ParamInfo {
   double min, max;      ///< accepted range of a kWhole or kNumber (inclusive; the solver's own
                         ///< validate() adds what a range cannot say, such as an even resolution)
   const char* help;     ///< one line for --help and the API description
-  double (*get)(const JobSpec&);
-  void (*set)(JobSpec&, double);
+  double (*get)(const JobSpec&);  ///< a kColour: the mean of its channels
+  void (*set)(JobSpec&, double);  ///< a kColour: grey
+  /// A kColour ("R,G,B", or one number for grey; each channel in [min, max]): its channels.
+  glm::dvec3 (*get_colour)(const JobSpec&) = nullptr;
+  void (*set_colour)(JobSpec&, const glm::dvec3&) = nullptr;
 };
 
 /// Every parameter, in the fixed order of params_json.
@@ -48,9 +54,13 @@ std::span<const ParamInfo> param_table();
 /// The parameter with this wire name, or null.
 const ParamInfo* find_param(std::string_view name);
 
-/// Reads `text` as a value of `param` into `value`. Returns an empty string, or what is wrong
-/// for the user after the parameter's name ("must be a whole number from 1 to 1024 (got '0')").
+/// Reads `text` as a value of `param` into `value` (a kColour: the mean of its channels).
+/// Returns an empty string, or what is wrong for the user after the parameter's name ("must be a
+/// whole number from 1 to 1024 (got '0')").
 std::string parse_param_value(const ParamInfo& param, const std::string& text, double& value);
+
+/// Reads `text` as a kColour's value: "R,G,B" or one number for all three channels.
+std::string parse_colour_value(const ParamInfo& param, const std::string& text, glm::dvec3& value);
 
 /// Applies named values (wire names, text as typed: "aa", "0.001", "true"/"false"/"1"/"0"/"yes"/
 /// "no") to `spec`. Returns an empty string, or a message naming the first unknown or bad

@@ -30,9 +30,34 @@ struct Patch {
   uint32_t material = 0;                ///< vertex radiosity is never averaged across materials
 };
 
-/// The input: a list of patches. Patches that share corners and a plane form one smooth surface.
+/// A punctual light (as glTF's KHR_lights_punctual defines them). Lights shoot before any patch,
+/// each from a projection of the scene of its own: a whole cube around a point light, the
+/// hemicube facing a spot light's axis, one parallel projection over the scene for a directional
+/// light. A receiver at distance d, at angle theta to the light, gets the irradiance
+/// E = intensity * cos(theta) / d^2 (point, spot; times the spot's cone falloff and the range
+/// window) or E = intensity * cos(theta) (directional), and reflects rho * E.
+struct Light {
+  enum class Type : uint8_t { kPoint, kSpot, kDirectional };
+  Type type = Type::kPoint;
+  glm::dvec3 position{0.0};           ///< point and spot
+  glm::dvec3 direction{0.0, 0.0, -1.0};  ///< spot and directional: where the light travels (unit)
+  glm::dvec3 intensity{0.0};          ///< colour x intensity per channel, >= 0: candela (point,
+                                      ///< spot) or lux (directional), used as given (no 683 lm/W)
+  double range = 0.0;                 ///< point and spot: beyond it no light (window
+                                      ///< clamp(1 - (d / range)^4, 0, 1)); 0 = unlimited
+  double inner_cone = 0.0;            ///< spot: full intensity within this angle of the axis
+  double outer_cone = 0.7853981633974483;  ///< spot: none beyond it; 0 <= inner < outer <= pi / 2;
+                                      ///< between, t^2 with t = (cos a - cos outer) / (cos inner - cos outer)
+};
+
+/// The input: a list of patches, lights, and a uniform sky. Patches that share corners and a plane
+/// form one smooth surface.
 struct Scene {
   std::vector<Patch> patches;
+  std::vector<Light> lights;
+  /// Radiance of a uniform sky around the scene, per channel, >= 0: every direction in which a
+  /// surface sees no other surface brings it this radiance (an open floor gets E = pi * sky).
+  glm::dvec3 sky{0.0};
 };
 
 /// How form factors are computed.
@@ -73,7 +98,9 @@ std::string validate(const Params& params);
 
 /// Returns an empty string when the scene is usable, else a message naming the first bad patch
 /// and what is wrong with it (non-finite or degenerate corners, non-planar or non-convex quads,
-/// reflectance outside [0, 1), negative emission).
+/// reflectance outside [0, 1), negative emission), or the first bad light (non-finite or negative
+/// intensity, a direction that is not a unit vector, negative range, cone angles outside
+/// 0 <= inner < outer <= pi / 2), or a negative or non-finite sky.
 std::string validate(const Scene& scene);
 
 /// Reported between shots.
@@ -97,7 +124,10 @@ class CancelToken {
 
 /// Counters and timings of a solve.
 struct Stats {
-  uint64_t shots = 0;            ///< patch shots (Southwell steps)
+  uint64_t shots = 0;            ///< patch shots (Southwell steps), light and sky shots included
+  uint64_t light_shots = 0;      ///< ... of which lights' (each light once) and the sky's (once)
+  uint64_t light_projections = 0;  ///< projections of the scene for lights and the sky
+  double seconds_lights = 0.0;   ///< in the lights' and the sky's shots and their power estimate
   uint64_t hemicubes = 0;        ///< hemicubes placed (a patch shoots from one or more sub-areas)
   uint64_t replayed_shots = 0;   ///< shots that reused the form factors of the shooter's earlier shot
   uint64_t replays_reshot = 0;   ///< ... of which shot anew to the children of receivers split since
@@ -116,7 +146,8 @@ struct Stats {
   double seconds_projecting = 0.0;  ///< in those projections (incl. resolving pixel lists)
   double seconds_reusing = 0.0;     ///< in evaluating children from their parent's pixels
   double unshot_fraction = 1.0;     ///< unshot power / emitted power
-  double emitted_power = 0.0;       ///< sum over patches of emission (RGB summed) times area
+  double emitted_power = 0.0;       ///< sum over patches of emission (RGB summed) times area,
+                                    ///< plus the power lights and the sky bring to the surfaces
   bool converged = false;
   bool cancelled = false;
   bool shot_limit = false;

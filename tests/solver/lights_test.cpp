@@ -1,0 +1,458 @@
+// Punctual lights and the sky against analytic truth, measured as a viewer shows the result: the
+// mesh's vertex radiosity interpolated linearly over each element's triangles (its boundary loop,
+// fanned), at random points on the surfaces, never only at element centres.
+#include "hemibake/solver/scenes.h"
+#include "hemibake/solver/solver.h"
+#include "test_seed.h"
+
+#include <gtest/gtest.h>
+#include <glm/geometric.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <numbers>
+#include <random>
+#include <vector>
+
+namespace hemibake::solver {
+namespace {
+
+using V = glm::dvec3;
+constexpr double kPi = std::numbers::pi;
+
+// A quad from four corners, counter-clockwise seen from the front.
+Patch quad(V a, V b, V c, V d, V rho, V emission = V(0.0)) {
+  Patch p;
+  p.corners = {a, b, c, d};
+  p.corner_count = 4;
+  p.reflectance = rho;
+  p.emission = emission;
+  return p;
+}
+
+// The floor y = 0 over [x0, x1] x [z0, z1], facing up, cut into n x n patches.
+void add_floor(Scene& s, double x0, double x1, double z0, double z1, int n, V rho, uint32_t material = 0) {
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) {
+      const double xa = x0 + (x1 - x0) * i / n, xb = x0 + (x1 - x0) * (i + 1) / n;
+      const double za = z0 + (z1 - z0) * j / n, zb = z0 + (z1 - z0) * (j + 1) / n;
+      Patch p = quad(V(xa, 0, za), V(xa, 0, zb), V(xb, 0, zb), V(xb, 0, za), rho);
+      p.material = material;
+      s.patches.push_back(p);
+    }
+}
+
+// Lambert's formula: the form factor from a point with unit normal n to a polygon (no occlusion).
+double lambert(const V& x, const V& n, const std::vector<V>& poly) {
+  double sum = 0.0;
+  for (size_t i = 0; i < poly.size(); ++i) {
+    const V a = glm::normalize(poly[i] - x), b = glm::normalize(poly[(i + 1) % poly.size()] - x);
+    const V c = glm::cross(a, b);
+    const double len = glm::length(c);
+    if (len == 0.0) continue;
+    sum += std::atan2(len, glm::dot(a, b)) * glm::dot(n, c) / len;
+  }
+  return std::abs(sum) / (2.0 * kPi);
+}
+
+// A point on the mesh, with the radiosity a viewer shows there.
+struct Sample {
+  V position;
+  V radiosity;
+  uint32_t patch;
+};
+
+// `count` points spread uniformly by area over the elements of the patches `keep` accepts: each
+// element's boundary loop (corners and the vertices of finer neighbours) is fanned into triangles
+// and the vertex radiosity interpolated barycentrically, as the output's triangles show it.
+std::vector<Sample> sample_mesh(const Mesh& mesh, int count, std::mt19937_64& rng,
+                                const std::function<bool(uint32_t)>& keep) {
+  struct Tri {
+    uint32_t a, b, c, patch;
+    double area;
+  };
+  std::vector<Tri> tris;
+  std::vector<double> cumulative;
+  double total = 0.0;
+  for (const auto& el : mesh.elements) {
+    if (!keep(el.patch)) continue;
+    const uint32_t first = mesh.boundary[el.boundary_begin];
+    for (uint32_t k = el.boundary_begin + 1; k + 1 < el.boundary_end; ++k) {
+      const uint32_t b = mesh.boundary[k], c = mesh.boundary[k + 1];
+      const double a = 0.5 * glm::length(glm::cross(mesh.positions[b] - mesh.positions[first],
+                                                    mesh.positions[c] - mesh.positions[first]));
+      if (a <= 0.0) continue;
+      tris.push_back({first, b, c, el.patch, a});
+      total += a;
+      cumulative.push_back(total);
+    }
+  }
+  std::vector<Sample> out;
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (int i = 0; i < count && !tris.empty(); ++i) {
+    const size_t t = std::min(tris.size() - 1, static_cast<size_t>(std::lower_bound(cumulative.begin(), cumulative.end(), u(rng) * total) - cumulative.begin()));
+    double r1 = u(rng), r2 = u(rng);
+    if (r1 + r2 > 1.0) {
+      r1 = 1.0 - r1;
+      r2 = 1.0 - r2;
+    }
+    const Tri& tr = tris[t];
+    const double w0 = 1.0 - r1 - r2;
+    out.push_back({w0 * mesh.positions[tr.a] + r1 * mesh.positions[tr.b] + r2 * mesh.positions[tr.c],
+                   w0 * mesh.radiosity[tr.a] + r1 * mesh.radiosity[tr.b] + r2 * mesh.radiosity[tr.c], tr.patch});
+  }
+  return out;
+}
+
+// Relative errors of the samples against `truth` (first channel), where `use` accepts the sample.
+struct Errors {
+  double median = 0.0, p90 = 0.0, worst = 0.0;
+  size_t count = 0;
+};
+
+Errors relative_errors(const std::vector<Sample>& samples, const std::function<double(const V&)>& truth,
+                       const std::function<bool(const Sample&)>& use) {
+  std::vector<double> err;
+  for (const Sample& s : samples) {
+    if (!use(s)) continue;
+    const double t = truth(s.position);
+    err.push_back(std::abs(s.radiosity.x - t) / t);
+  }
+  Errors e;
+  e.count = err.size();
+  if (err.empty()) return e;
+  std::sort(err.begin(), err.end());
+  e.median = err[err.size() / 2];
+  e.p90 = err[err.size() * 9 / 10];
+  e.worst = err.back();
+  return e;
+}
+
+Mesh solve(const Scene& scene, Params params = {}) {
+  EXPECT_EQ(validate(scene), "");
+  Solver solver(scene, params);
+  const Stats& st = solver.run();
+  EXPECT_TRUE(st.converged);
+  return solver.mesh();
+}
+
+// ---- Point light over an open floor: E = I h / d^3 ---------------------------------------------
+
+TEST(PointLight, OpenFloorMatchesIrradianceIHOverDCubed) {
+  const uint64_t seed = test::test_seed();
+  std::mt19937_64 rng(seed);
+  const double rho = 0.5, h = 1.0, intensity = 10.0;
+  Scene scene;
+  add_floor(scene, -2, 2, -2, 2, 1, V(rho));
+  Light light;
+  light.type = Light::Type::kPoint;
+  light.position = V(0.3, h, -0.2);
+  light.intensity = V(intensity);
+  scene.lights.push_back(light);
+  const Mesh mesh = solve(scene);
+  const auto samples = sample_mesh(mesh, 4000, rng, [](uint32_t) { return true; });
+  auto truth = [&](const V& x) {
+    const double d = glm::length(light.position - x);
+    return rho * intensity * h / (d * d * d);
+  };
+  const Errors e = relative_errors(samples, truth, [](const Sample&) { return true; });
+  EXPECT_LE(e.median, 0.02) << test::seed_note(seed) << " elements " << mesh.elements.size();
+  EXPECT_LE(e.p90, 0.05) << test::seed_note(seed);
+  RecordProperty("median", std::to_string(e.median));
+  RecordProperty("p90", std::to_string(e.p90));
+}
+
+// The light's power over the whole floor: rho * I * (solid angle of the floor), in closed form
+// for a rectangle seen from above one of its points.
+TEST(PointLight, EnergyOnTheFloorMatchesItsSolidAngle) {
+  const double rho = 0.6, h = 0.7;
+  Scene scene;
+  add_floor(scene, -1, 1, -1, 1, 2, V(rho));
+  Light light;
+  light.position = V(0.0, h, 0.0);
+  light.intensity = V(3.0, 2.0, 1.0);
+  scene.lights.push_back(light);
+  const Mesh mesh = solve(scene);
+  V power(0.0);
+  for (const auto& el : mesh.elements) power += el.radiosity * el.area;
+  // Four quarters [0, 1] x [0, 1], each seen from height h above its corner: a rectangle a x b
+  // subtends atan(a b / (h sqrt(h^2 + a^2 + b^2))) there.
+  const double omega = 4.0 * std::atan(1.0 / (h * std::sqrt(h * h + 2.0)));
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(power[c] / (rho * light.intensity[c] * omega), 1.0, 0.005) << "channel " << c;
+}
+
+// ---- Range window --------------------------------------------------------------------------------
+
+TEST(PointLight, RangeWindowFollowsTheExtensionsFormula) {
+  const uint64_t seed = test::test_seed();
+  std::mt19937_64 rng(seed);
+  const double rho = 0.5, h = 0.5, range = 1.5;
+  Scene scene;
+  add_floor(scene, -2, 2, -2, 2, 1, V(rho));
+  Light light;
+  light.position = V(0.0, h, 0.0);
+  light.intensity = V(4.0);
+  light.range = range;
+  scene.lights.push_back(light);
+  const Mesh mesh = solve(scene);
+  const auto samples = sample_mesh(mesh, 4000, rng, [](uint32_t) { return true; });
+  auto window = [&](double d) { return std::clamp(1.0 - std::pow(d / range, 4.0), 0.0, 1.0); };
+  auto truth = [&](const V& x) {
+    const double d = glm::length(light.position - x);
+    return rho * 4.0 * h / (d * d * d) * window(d);
+  };
+  // Where the window is well above zero, and beyond the range nothing at all.
+  const Errors e = relative_errors(samples, truth, [&](const Sample& s) { return window(glm::length(light.position - s.position)) > 0.2; });
+  EXPECT_GT(e.count, 500u);
+  EXPECT_LE(e.median, 0.02) << test::seed_note(seed);
+  EXPECT_LE(e.p90, 0.05) << test::seed_note(seed);
+  // Beyond the range, dark: at most a trace where a vertex blends the element that straddles it.
+  double outside = 0.0;
+  for (const Sample& s : samples)
+    if (glm::length(light.position - s.position) > range * 1.1) outside = std::max(outside, s.radiosity.x);
+  EXPECT_LT(outside, 1e-4 * rho * 4.0 / (h * h)) << test::seed_note(seed);
+}
+
+// ---- Spot light: the cone profile ---------------------------------------------------------------
+
+TEST(SpotLight, ConeProfileFollowsTheSmoothFalloffAndIsDarkOutside) {
+  const uint64_t seed = test::test_seed();
+  std::mt19937_64 rng(seed);
+  const double rho = 0.5, h = 1.0;
+  Scene scene;
+  add_floor(scene, -1, 1, -1, 1, 1, V(rho));
+  Light light;
+  light.type = Light::Type::kSpot;
+  light.position = V(0.0, h, 0.0);
+  light.direction = glm::normalize(V(0.2, -1.0, 0.0));
+  light.intensity = V(5.0);
+  light.inner_cone = 0.3;
+  light.outer_cone = 0.5;
+  scene.lights.push_back(light);
+  const Mesh mesh = solve(scene);
+  const auto samples = sample_mesh(mesh, 6000, rng, [](uint32_t) { return true; });
+  const double cos_outer = std::cos(light.outer_cone), cos_inner = std::cos(light.inner_cone);
+  auto falloff = [&](const V& x) {
+    const double c = glm::dot(glm::normalize(x - light.position), light.direction);
+    const double t = std::clamp((c - cos_outer) / (cos_inner - cos_outer), 0.0, 1.0);
+    return t * t;
+  };
+  auto truth = [&](const V& x) {
+    const double d = glm::length(light.position - x);
+    return rho * 5.0 * h / (d * d * d) * falloff(x);
+  };
+  // Inside the cone, away from its outer edge (where the truth goes to zero).
+  const Errors e = relative_errors(samples, truth, [&](const Sample& s) { return falloff(s.position) > 0.25; });
+  EXPECT_GT(e.count, 500u);
+  EXPECT_LE(e.median, 0.02) << test::seed_note(seed);
+  EXPECT_LE(e.p90, 0.05) << test::seed_note(seed);
+  // Outside the outer cone (beyond a margin for the vertex averaging of the boundary elements),
+  // dark.
+  double outside = 0.0, peak = 0.0;
+  for (const Sample& s : samples) {
+    const double angle = std::acos(std::clamp(glm::dot(glm::normalize(s.position - light.position), light.direction), -1.0, 1.0));
+    if (angle > light.outer_cone + 0.1) outside = std::max(outside, s.radiosity.x);
+    peak = std::max(peak, s.radiosity.x);
+  }
+  EXPECT_EQ(outside, 0.0) << test::seed_note(seed);
+  EXPECT_GT(peak, 0.5 * rho * 5.0 / (h * h));
+}
+
+// ---- Directional light and a box's shadow -------------------------------------------------------
+
+// A black box (no reflection: the floor's truth is direct light alone) standing on a floor.
+void add_black_box(Scene& s, V lo, V hi) {
+  const V k(0.0);
+  s.patches.push_back(quad(V(lo.x, hi.y, lo.z), V(lo.x, hi.y, hi.z), V(hi.x, hi.y, hi.z), V(hi.x, hi.y, lo.z), k));  // top
+  s.patches.push_back(quad(V(lo.x, lo.y, lo.z), V(lo.x, hi.y, lo.z), V(hi.x, hi.y, lo.z), V(hi.x, lo.y, lo.z), k));  // -z
+  s.patches.push_back(quad(V(hi.x, lo.y, hi.z), V(hi.x, hi.y, hi.z), V(lo.x, hi.y, hi.z), V(lo.x, lo.y, hi.z), k));  // +z
+  s.patches.push_back(quad(V(lo.x, lo.y, hi.z), V(lo.x, hi.y, hi.z), V(lo.x, hi.y, lo.z), V(lo.x, lo.y, lo.z), k));  // -x
+  s.patches.push_back(quad(V(hi.x, lo.y, lo.z), V(hi.x, hi.y, lo.z), V(hi.x, hi.y, hi.z), V(hi.x, lo.y, hi.z), k));  // +x
+}
+
+// Whether the ray from x towards `to_light` hits the box (slab test).
+bool hits_box(const V& x, const V& to_light, const V& lo, const V& hi) {
+  double t0 = 1e-9, t1 = 1e300;
+  for (int a = 0; a < 3; ++a) {
+    if (std::abs(to_light[a]) < 1e-15) {
+      if (x[a] < lo[a] || x[a] > hi[a]) return false;
+      continue;
+    }
+    double ta = (lo[a] - x[a]) / to_light[a], tb = (hi[a] - x[a]) / to_light[a];
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+  }
+  return t0 <= t1;
+}
+
+TEST(DirectionalLight, BoxShadowIsDarkAndTheOpenFloorGetsRhoECosTheta) {
+  const uint64_t seed = test::test_seed();
+  std::mt19937_64 rng(seed);
+  const double rho = 0.6, illuminance = 3.0;
+  Scene scene;
+  add_floor(scene, -1.5, 1.5, -1.5, 1.5, 1, V(rho));
+  const V lo(-0.4, 0.0, -0.3), hi(0.4, 0.6, 0.3);
+  add_black_box(scene, lo, hi);
+  Light sun;
+  sun.type = Light::Type::kDirectional;
+  sun.direction = glm::normalize(V(1.0, -1.5, 0.5));
+  sun.intensity = V(illuminance);
+  scene.lights.push_back(sun);
+  const Mesh mesh = solve(scene);
+  const auto samples = sample_mesh(mesh, 6000, rng, [](uint32_t p) { return p == 0; });
+  const double cos_theta = -sun.direction.y;
+  const V to_light = -sun.direction;
+  // Away from the shadow's edges: the points within `margin` around give the same answer (the
+  // smallest elements, at the default aeps, are about 0.04 wide; vertex values blend two).
+  const double margin = 0.1;
+  auto shadowed = [&](const V& x) { return hits_box(x, to_light, lo, hi); };
+  auto settled = [&](const V& x) {
+    const bool s = shadowed(x);
+    for (const V& o : {V(margin, 0, 0), V(-margin, 0, 0), V(0, 0, margin), V(0, 0, -margin)})
+      if (shadowed(x + o) != s) return false;
+    return true;
+  };
+  size_t lit = 0, umbra = 0;
+  double worst_umbra = 0.0;
+  std::vector<double> err;
+  for (const Sample& s : samples) {
+    if (!settled(s.position)) continue;
+    if (shadowed(s.position)) {
+      ++umbra;
+      worst_umbra = std::max(worst_umbra, s.radiosity.x);
+    } else {
+      ++lit;
+      err.push_back(std::abs(s.radiosity.x / (rho * illuminance * cos_theta) - 1.0));
+    }
+  }
+  ASSERT_GT(umbra, 50u);
+  ASSERT_GT(lit, 1000u);
+  std::sort(err.begin(), err.end());
+  EXPECT_LE(err[err.size() / 2], 0.02) << test::seed_note(seed);
+  EXPECT_LE(err[err.size() * 9 / 10], 0.05) << test::seed_note(seed);
+  EXPECT_LE(worst_umbra, 0.02 * rho * illuminance * cos_theta) << test::seed_note(seed);
+}
+
+// ---- Sky ----------------------------------------------------------------------------------------
+
+TEST(Sky, OpenFloorGetsRhoPiS) {
+  const uint64_t seed = test::test_seed();
+  std::mt19937_64 rng(seed);
+  const V rho(0.5, 0.4, 0.3), sky(1.0, 2.0, 3.0);
+  Scene scene;
+  add_floor(scene, -1, 1, -1, 1, 2, rho);
+  scene.sky = sky;
+  const Mesh mesh = solve(scene);
+  for (const Sample& s : sample_mesh(mesh, 500, rng, [](uint32_t) { return true; }))
+    for (int c = 0; c < 3; ++c) ASSERT_NEAR(s.radiosity[c] / (rho[c] * kPi * sky[c]), 1.0, 1e-3) << test::seed_note(seed);
+}
+
+// A floor at the bottom of a square well of black walls (no reflection) of depth `depth`: a point
+// sees the sky through the opening only, E = pi S F(point -> opening) by Lambert's formula.
+TEST(Sky, FloorOfAWellGetsLambertsFormulaForTheOpening) {
+  const uint64_t seed = test::test_seed();
+  std::mt19937_64 rng(seed);
+  const double rho = 0.5, depth = 1.0, s = 2.0;
+  Scene scene;
+  add_floor(scene, -1, 1, -1, 1, 1, V(rho));
+  // Walls facing inwards, from y = 0 to depth.
+  const V k(0.0);
+  const double y = depth;
+  scene.patches.push_back(quad(V(-1, 0, -1), V(1, 0, -1), V(1, y, -1), V(-1, y, -1), k));
+  scene.patches.push_back(quad(V(1, 0, 1), V(-1, 0, 1), V(-1, y, 1), V(1, y, 1), k));
+  scene.patches.push_back(quad(V(-1, 0, 1), V(-1, 0, -1), V(-1, y, -1), V(-1, y, 1), k));
+  scene.patches.push_back(quad(V(1, 0, -1), V(1, 0, 1), V(1, y, 1), V(1, y, -1), k));
+  scene.sky = V(s);
+  const Mesh mesh = solve(scene);
+  const std::vector<V> opening = {V(-1, depth, -1), V(1, depth, -1), V(1, depth, 1), V(-1, depth, 1)};
+  auto truth = [&](const V& x) { return rho * kPi * s * lambert(x, V(0, 1, 0), opening); };
+  const auto samples = sample_mesh(mesh, 3000, rng, [](uint32_t p) { return p == 0; });
+  const Errors e = relative_errors(samples, truth, [](const Sample&) { return true; });
+  EXPECT_LE(e.median, 0.02) << test::seed_note(seed) << " elements " << mesh.elements.size();
+  EXPECT_LE(e.p90, 0.05) << test::seed_note(seed);
+  RecordProperty("median", std::to_string(e.median));
+  RecordProperty("p90", std::to_string(e.p90));
+}
+
+// A closed room gets nothing from the sky: a closed box of emitting walls stays E / (1 - rho).
+TEST(Sky, ClosedRoomIsUnchanged) {
+  const V rho(0.5), e(1.0);
+  Scene scene = make_closed_box(2.0, 2, rho, e, false);
+  Params params;
+  params.convergence = 1e-4;
+  const Mesh without = solve(scene, params);
+  scene.sky = V(5.0);
+  const Mesh with = solve(scene, params);
+  ASSERT_EQ(with.radiosity.size(), without.radiosity.size());
+  for (size_t v = 0; v < with.radiosity.size(); ++v)
+    ASSERT_NEAR(with.radiosity[v].x, without.radiosity[v].x, 1e-9 * (1.0 + without.radiosity[v].x)) << "vertex " << v;
+}
+
+// ---- An emissive panel and a point light in one scene -------------------------------------------
+
+// A black panel of exitance M over a floor and a point light beside it: the floor gets
+// rho (M F(x -> panel) + I cos / d^2), the two in one unit.
+TEST(PointLight, AddsToAnEmissivePanelInTheSameUnits) {
+  const uint64_t seed = test::test_seed();
+  std::mt19937_64 rng(seed);
+  const double rho = 0.5, m = 6.0, intensity = 1.5;
+  Scene scene;
+  add_floor(scene, -1, 1, -1, 1, 1, V(rho));
+  const double ph = 1.0;
+  // Facing down.
+  scene.patches.push_back(quad(V(-0.5, ph, -0.5), V(0.5, ph, -0.5), V(0.5, ph, 0.5), V(-0.5, ph, 0.5), V(0.0), V(m)));
+  Light light;
+  light.position = V(0.8, 0.6, 0.3);
+  light.intensity = V(intensity);
+  scene.lights.push_back(light);
+  const Mesh mesh = solve(scene);
+  const std::vector<V> panel = {V(-0.5, ph, -0.5), V(0.5, ph, -0.5), V(0.5, ph, 0.5), V(-0.5, ph, 0.5)};
+  auto truth = [&](const V& x) {
+    const double d = glm::length(light.position - x);
+    return rho * (m * lambert(x, V(0, 1, 0), panel) + light.intensity.x * light.position.y / (d * d * d));
+  };
+  const auto samples = sample_mesh(mesh, 4000, rng, [](uint32_t p) { return p == 0; });
+  const Errors e = relative_errors(samples, truth, [](const Sample&) { return true; });
+  // The panel's own direct light is as accurate as the patch solver makes it (alone, on this
+  // floor: median 4.5 %, p90 17 %); the light's share is what a unit mistake would show (a factor
+  // pi on either side puts the sum a quarter or more off).
+  EXPECT_LE(e.median, 0.05) << test::seed_note(seed);
+  EXPECT_LE(e.p90, 0.12) << test::seed_note(seed);
+  RecordProperty("median", std::to_string(e.median));
+  RecordProperty("p90", std::to_string(e.p90));
+}
+
+// ---- Validation ---------------------------------------------------------------------------------
+
+TEST(LightValidation, BadLightsAreNamed) {
+  Scene base;
+  add_floor(base, 0, 1, 0, 1, 1, V(0.5));
+  auto error_with = [&](const std::function<void(Light&)>& change) {
+    Scene s = base;
+    s.lights.resize(2);
+    s.lights[1].type = Light::Type::kSpot;
+    s.lights[1].intensity = V(1.0);
+    change(s.lights[1]);
+    return validate(s);
+  };
+  EXPECT_EQ(error_with([](Light&) {}), "");
+  for (const auto& change : std::vector<std::function<void(Light&)>>{
+           [](Light& l) { l.intensity.y = -1.0; },
+           [](Light& l) { l.intensity.z = std::nan(""); },
+           [](Light& l) { l.direction = V(0, 0, -2); },
+           [](Light& l) { l.range = -1.0; },
+           [](Light& l) { l.inner_cone = 0.9; },
+           [](Light& l) { l.outer_cone = 2.0; },
+           [](Light& l) { l.position.x = INFINITY; }}) {
+    const std::string e = error_with(change);
+    EXPECT_NE(e.find("light 1"), std::string::npos) << e;
+  }
+  Scene s = base;
+  s.sky = V(1.0, -1.0, 0.0);
+  EXPECT_NE(validate(s).find("sky"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace hemibake::solver
