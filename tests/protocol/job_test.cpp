@@ -160,6 +160,30 @@ TEST(JobParams, OpenApiListsEveryParameterWithItsDefaultAndRange) {
   }
 }
 
+// The sky is a colour: "R,G,B" or one number for grey on the command line and in query strings,
+// also [r, g, b] in a JSON body; negative, non-numeric or two-channel values are refused by name.
+TEST(JobParams, SkyTakesAColourInEveryForm) {
+  JobSpec a, b, c;
+  ASSERT_EQ(apply_params({{"sky", "0.5,1,2.25"}}, a), "");
+  EXPECT_EQ(a.sky, glm::dvec3(0.5, 1.0, 2.25));
+  ASSERT_EQ(apply_params({{"sky", "3"}}, b), "");
+  EXPECT_EQ(b.sky, glm::dvec3(3.0));
+  ASSERT_EQ(parse_params_json(R"({"sky": [0.5, 1, 2.25]})", c), "");
+  EXPECT_EQ(c.sky, a.sky);
+  EXPECT_EQ(params_json(c), params_json(a));
+  JobSpec back;
+  ASSERT_EQ(parse_params_json(params_json(a), back), "");
+  EXPECT_EQ(back.sky, a.sky);
+  for (const char* bad : {"-1", "1,2", "1,2,3,4", "1,x,2", "", "1,,2", "inf"}) {
+    JobSpec s;
+    const std::string e = apply_params({{"sky", bad}}, s);
+    EXPECT_NE(e.find("sky"), std::string::npos) << "'" << bad << "': " << e;
+  }
+  JobSpec s;
+  EXPECT_NE(parse_params_json(R"({"sky": [1, 2]})", s), "");
+  EXPECT_NE(parse_params_json(R"({"sky": [1, -2, 3]})", s).find("sky"), std::string::npos);
+}
+
 TEST(JobProgressJson, RoundTrips) {
   JobProgress p;
   p.phase = "gathering";
