@@ -87,7 +87,7 @@ std::vector<uint32_t> Solver::Impl::too_coarse(const glm::dvec3& dB, double weig
     // (c) the shot's radiosity jumps across one of its corners.
     for (uint32_t k = 0; k < corner_count(e) && !split_it; ++k) {
       const uint32_t vert = e_corner[e][k];
-      split_it = vmax[vert] - vmin[vert] > tolerance;
+      split_it = vmax[vert] - vmin[vert] > tolerance && (!sharp_only || vmax[vert] > kSharpRatio * vmin[vert]);
       stats.splits_gradient += split_it;
     }
     if (split_it) to_split.push_back(e);
@@ -109,7 +109,8 @@ double Solver::Impl::split_headroom(const glm::dvec3& dB, double weight, const s
         lower_headroom(room, tolerance, shot_radiosity(e, dB, f_open[e]) - shot_b[e]);
     }
     for (uint32_t k = 0; k < corner_count(e); ++k)
-      lower_headroom(room, tolerance, vmax[e_corner[e][k]] - vmin[e_corner[e][k]]);
+      if (!sharp_only || vmax[e_corner[e][k]] > kSharpRatio * vmin[e_corner[e][k]])
+        lower_headroom(room, tolerance, vmax[e_corner[e][k]] - vmin[e_corner[e][k]]);
   }
   return room;
 }

@@ -95,6 +95,9 @@ constexpr double kUnevenShare = 0.5;
 // hung 1 mm under a ceiling, bright above the lamp and dark beside it, the edge of a contact shadow.
 constexpr double kSharpAreaFactor = 256.0;
 constexpr double kSharpJump = 10.0;
+// ... and only where the light on one side is at least this many times the other's: an edge, not a
+// steep but smooth falloff (a spot's cone), which graded elements would only make uneven.
+constexpr double kSharpRatio = 4.0;
 // Lengths under this share of the scene's diagonal are rounding. An eye that near a patch's plane
 // sees it edge-on: project() leaves such patches out and projects backs beyond it, and
 // absorber_close, which predicts which absorbing backs the hemicube will see, must draw the same
