@@ -129,6 +129,12 @@ function makeField(p) {
   } else if (schema.type === 'boolean') {
     input = document.createElement('input');
     input.type = 'checkbox';
+  } else if (schema.type === 'string') {
+    // A colour as R,G,B (the sky): text, checked by the server.
+    input = document.createElement('input');
+    input.type = 'text';
+    input.spellcheck = false;
+    if (schema.pattern) input.pattern = schema.pattern;
   } else {
     input = document.createElement('input');
     input.type = 'number';
