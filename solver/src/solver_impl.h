@@ -295,7 +295,11 @@ struct Solver::Impl {
                        std::vector<uint32_t>& accepted, std::vector<uint32_t>& seen);
   // A split makes four children, none smaller than aeps_area.
   double min_split_area() const { return 4.0 * aeps_area; }
-  double min_sharp_split_area() const { return min_split_area() / kSharpAreaFactor; }
+  // The classical hemicube's point samples make every small element's light jump (aliasing), so
+  // only the anti-aliased one refines edges under AEPS.
+  double min_sharp_split_area() const {
+    return params.method == Method::kAntiAliased ? min_split_area() / kSharpAreaFactor : min_split_area();
+  }
 
   // shot_cache.cpp: records and replays.
   bool replay(uint32_t unit);
