@@ -126,17 +126,18 @@ class Session : public std::enable_shared_from_this<Session> {
 
   // Server-Sent Events: every event since Last-Event-ID, then new ones as they come, a heartbeat
   // comment when idle, and the end of the stream after the job's final event.
-  // The store is read on the service's lookup pool, never on an I/O thread: each read's answer
-  // comes back to this session's strand.
+  // The store is read on the service's lookup pool, never on an I/O thread, and only when the job
+  // has a new event (the service wakes the stream): each read's answer comes back to this
+  // session's strand.
   void start_events(const Request& req, const std::string& id) {
     if (auto denied = service_.check_auth(req)) return send(*denied);
     job_ = id;
     if (auto it = req.headers.find("last-event-id"); it != req.headers.end()) last_ = std::strtoull(it->second.c_str(), nullptr, 10);
-    read_events(&Session::on_first_events);
+    read_events(&Session::on_first_events, std::chrono::milliseconds(0));
   }
 
-  void read_events(void (Session::*then)(EventBatch)) {
-    service_.events_async(job_, last_, [self = shared_from_this(), then, strand = tracked()](EventBatch b) {
+  void read_events(void (Session::*then)(EventBatch), std::chrono::milliseconds wait) {
+    service_.events_async(job_, last_, wait, [self = shared_from_this(), then, strand = tracked()](EventBatch b) {
       net::post(strand, [self, then, b = std::move(b)]() mutable { ((*self).*then)(std::move(b)); });
     });
   }
@@ -162,7 +163,6 @@ class Session : public std::enable_shared_from_this<Session> {
         "HTTP/1.1 200 OK\r\nServer: hemibake\r\nContent-Type: text/event-stream\r\nCache-Control: no-cache\r\n"
         "Connection: close\r\nX-Accel-Buffering: no\r\n\r\n");
     append(*out_, batch);
-    idle_ = std::chrono::steady_clock::now();
     watch_peer();
     write_events();
   }
@@ -192,6 +192,7 @@ class Session : public std::enable_shared_from_this<Session> {
       }
       self->gone_ = true;
       self->timer_.cancel();
+      self->close();  // the slot is free now; a wait for the job's next event ends in nothing
     });
   }
 
@@ -199,31 +200,27 @@ class Session : public std::enable_shared_from_this<Session> {
     stream_.expires_after(seconds(options_.read_timeout));
     net::async_write(stream_, net::buffer(*out_), [self = shared_from_this(), keep = out_](beast::error_code ec, size_t) {
       if (ec || self->done_) return self->close();
-      self->timer_.expires_after(std::chrono::milliseconds(200));
-      self->timer_.async_wait([self](beast::error_code) { self->poll_events(); });
+      self->wait_events();
     });
   }
 
-  void poll_events() {
+  void wait_events() {
     if (gone_) return close();
-    read_events(&Session::on_events);
+    read_events(&Session::on_events, std::chrono::duration_cast<std::chrono::milliseconds>(seconds(options_.heartbeat)));
   }
 
-  // A busy server's batch (503) has nothing: the stream asks again after the usual pause.
+  // Nothing new after the wait: a heartbeat. A busy server's batch (503) has nothing either: the
+  // stream asks again after a pause.
   void on_events(EventBatch batch) {
     if (gone_) return close();
+    if (batch.status == 503) {
+      timer_.expires_after(std::chrono::seconds(1));
+      timer_.async_wait([self = shared_from_this()](beast::error_code) { self->wait_events(); });
+      return;
+    }
     auto out = std::make_shared<std::string>();
     append(*out, batch);
-    const auto now = std::chrono::steady_clock::now();
-    if (out->empty() && !done_) {
-      if (now - idle_ < seconds(options_.heartbeat)) {
-        timer_.expires_after(std::chrono::milliseconds(200));
-        timer_.async_wait([self = shared_from_this()](beast::error_code) { self->poll_events(); });
-        return;
-      }
-      *out = ": heartbeat\n\n";
-    }
-    idle_ = now;
+    if (out->empty() && !done_) *out = ": heartbeat\n\n";
     out_ = out;
     write_events();
   }
@@ -254,7 +251,6 @@ class Session : public std::enable_shared_from_this<Session> {
   bool gone_ = false;  // the client closed its end
   bool counted_ = false;
   std::shared_ptr<std::string> out_;
-  std::chrono::steady_clock::time_point idle_;
 };
 
 }  // namespace

@@ -229,9 +229,14 @@ std::map<std::string, std::string> parse_query(const std::string& query) {
 Service::Service(const ServiceOptions& o) : options_(o) {}
 
 std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::string& err) {
+  auto store = Store::open(options.data_dir, err);
+  if (!store) return nullptr;
+  return start(options, std::move(store), err);
+}
+
+std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::unique_ptr<Store> store, std::string&) {
   std::unique_ptr<Service> s(new Service(options));
-  s->store_ = Store::open(options.data_dir, err);
-  if (!s->store_) return nullptr;
+  s->store_ = std::move(store);
   // An accepted job is never lost: what a crash left running runs again (up to max_attempts).
   s->store_->recover(options.max_attempts);
   s->store_->expire(options.expire_seconds);
@@ -251,6 +256,7 @@ Service::~Service() { stop(); }
 
 void Service::stop() {
   std::vector<Reply> waiting;
+  std::vector<std::function<void(EventBatch)>> streams;
   {
     std::lock_guard lock(mutex_);
     if (!running_) return;
@@ -263,8 +269,12 @@ void Service::stop() {
     for (auto& [id, waits] : unregistered_)
       for (auto& w : waits) waiting.push_back(std::move(w.reply));
     unregistered_.clear();
+    for (auto& [id, waits] : event_waits_)
+      for (auto& w : waits) streams.push_back(std::move(w.reply));
+    event_waits_.clear();
   }
   for (auto& reply : waiting) reply(stopping());
+  for (auto& reply : streams) reply(EventBatch{503, {}, false});
   wake_.notify_all();
   clock_wake_.notify_all();
   if (clock_.joinable()) clock_.join();
@@ -304,9 +314,25 @@ void Service::clock_loop() {
       });
       it = it->second.empty() ? unregistered_.erase(it) : std::next(it);
     }
-    if (!due.empty()) {
+    // Event streams that waited long enough: time for a heartbeat.
+    std::vector<std::function<void(EventBatch)>> heartbeats;
+    for (auto it = event_waits_.begin(); it != event_waits_.end();) {
+      auto& waits = it->second;
+      for (auto w = waits.begin(); w != waits.end();) {
+        if (w->until <= now) {
+          heartbeats.push_back(std::move(w->reply));
+          w = waits.erase(w);
+        } else {
+          next = std::min(next, w->until);
+          ++w;
+        }
+      }
+      it = waits.empty() ? event_waits_.erase(it) : std::next(it);
+    }
+    if (!due.empty() || !heartbeats.empty()) {
       lock.unlock();
       for (auto& [reply, response] : due) reply(std::move(response));
+      for (auto& reply : heartbeats) reply(EventBatch{});
       lock.lock();
       continue;
     }
@@ -352,14 +378,14 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
   } unregister{this, id};
   if (const auto rec = store_->get(id); rec && rec->state == JobState::kCancelled) {
     // Cancelled between the claim and the registration, when no token could be reached.
-    store_->add_event(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
+    emit(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
     return;
   }
-  store_->add_event(id, "state", json{{"state", "running"}}.dump(-1, ' ', false, kReplaceInvalid));
+  emit(id, "state", json{{"state", "running"}}.dump(-1, ' ', false, kReplaceInvalid));
   protocol::JobSpec spec;
   if (std::string e = protocol::parse_params_json(params, spec); !e.empty()) {
     store_->fail(id, e);
-    store_->add_event(id, "state", json{{"state", "failed"}, {"error", e}}.dump(-1, ' ', false, kReplaceInvalid));
+    emit(id, "state", json{{"state", "failed"}, {"error", e}}.dump(-1, ' ', false, kReplaceInvalid));
     return;
   }
   spec.params.threads = options_.solver_threads;
@@ -373,7 +399,7 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
       std::span(reinterpret_cast<const uint8_t*>(scene.data()), scene.size()), "", limits);
   if (!loaded.document) {
     store_->fail(id, loaded.error);
-    store_->add_event(id, "state", json{{"state", "failed"}, {"error", loaded.error}}.dump(-1, ' ', false, kReplaceInvalid));
+    emit(id, "state", json{{"state", "failed"}, {"error", loaded.error}}.dump(-1, ' ', false, kReplaceInvalid));
     return;
   }
   bool over_budget = false;
@@ -393,7 +419,7 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
     timed.elapsed_seconds = elapsed;  // since the job started, loading included
     const std::string text = protocol::progress_json(timed);
     store_->set_progress(id, text);
-    store_->add_event(id, "progress", text);
+    emit(id, "progress", text);
   };
   hooks.previews_possible = [&](bool on) { set_previews(id, on); };
   hooks.preview_wanted = [&] { return take_preview_request(id); };
@@ -405,22 +431,22 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
     if (over_budget) {
       const std::string e = "the bake exceeded its time budget of " + std::to_string(options_.job_seconds) + " s";
       store_->fail(id, e);
-      store_->add_event(id, "state", json{{"state", "failed"}, {"error", e}}.dump(-1, ' ', false, kReplaceInvalid));
+      emit(id, "state", json{{"state", "failed"}, {"error", e}}.dump(-1, ' ', false, kReplaceInvalid));
     } else if (!running_) {
       store_->requeue(id);  // shutting down: the job runs again after the restart
     } else {
-      store_->add_event(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
+      emit(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
     }
     return;
   }
   if (!baked.error.empty()) {
     store_->fail(id, baked.error);
-    store_->add_event(id, "state", json{{"state", "failed"}, {"error", baked.error}}.dump(-1, ' ', false, kReplaceInvalid));
+    emit(id, "state", json{{"state", "failed"}, {"error", baked.error}}.dump(-1, ' ', false, kReplaceInvalid));
     return;
   }
   const std::string glb(baked.glb.begin(), baked.glb.end());
   store_->succeed(id, glb, "\"" + sha256_hex(glb) + "\"");
-  store_->add_event(id, "state", json{{"state", "succeeded"}}.dump(-1, ' ', false, kReplaceInvalid));
+  emit(id, "state", json{{"state", "succeeded"}}.dump(-1, ' ', false, kReplaceInvalid));
   std::lock_guard lock(metrics_mutex_);
   ++bakes_;
   bake_seconds_sum_ += seconds;
@@ -554,13 +580,16 @@ Response Service::submit(const Request& req, const std::string& query) {
     r.headers.emplace_back("Retry-After", "30");
     return r;
   }
-  bool existed = false;
-  const std::string id = store_->create(scene, content_type, params, cache_key, idem, existed);
-  if (id.empty()) return error(500, "the job could not be stored");
+  const Created created = store_->create(scene, content_type, params, cache_key, idem);
+  if (created.id.empty()) {
+    std::fprintf(stderr, "hemibake-server: a job could not be stored: %s\n", created.error.c_str());
+    return error(500, "the job could not be stored");
+  }
+  const std::string& id = created.id;
   wake_.notify_one();
   auto rec = store_->get(id);
   if (!rec) return error(500, "the job could not be read back");
-  Response r = job_json(*rec, existed ? 200 : 202);
+  Response r = job_json(*rec, created.existed ? 200 : 202);
   r.headers.emplace_back("Location", "/v1/jobs/" + id);
   for (const auto& w : loaded.warnings) r.headers.emplace_back("Warning", "199 hemibake " + quoted_string(w));
   return r;
@@ -779,8 +808,23 @@ Response Service::handle(const Request& request) {
   return answered.get();
 }
 
-void Service::events_async(const std::string& id, uint64_t after, std::function<void(EventBatch)> reply) {
-  auto work = [this, id, after, reply] {
+void Service::events_async(const std::string& id, uint64_t after, std::chrono::milliseconds wait,
+                           std::function<void(EventBatch)> reply) {
+  const auto until = std::chrono::steady_clock::now() + wait;
+  auto work = [this, id, after, until, reply] { read_events(id, after, until, reply); };
+  if (!lookups_->post(std::move(work), [reply] { reply(EventBatch{503, {}, false}); })) reply(EventBatch{503, {}, false});
+}
+
+// Reads the events after `after`; with none, and the job still going, waits for the next (the
+// stream's end is an event too). No stream polls the store: each read follows an event.
+void Service::read_events(const std::string& id, uint64_t after, std::chrono::steady_clock::time_point until,
+                          std::function<void(EventBatch)> reply) {
+  for (;;) {
+    uint64_t written = 0;
+    {
+      std::lock_guard lock(mutex_);
+      written = events_written_;
+    }
     EventBatch b;
     try {
       b.events = store_->events_after(id, after, 100);
@@ -792,9 +836,36 @@ void Service::events_async(const std::string& id, uint64_t after, std::function<
       std::fprintf(stderr, "hemibake-server: reading the events of %s failed: %s\n", id.c_str(), e.what());
       b = EventBatch{503, {}, false};
     }
-    reply(std::move(b));
-  };
-  if (!lookups_->post(std::move(work), [reply] { reply(EventBatch{503, {}, false}); })) reply(EventBatch{503, {}, false});
+    if (b.status != 200 || !b.events.empty() || b.end || std::chrono::steady_clock::now() >= until) return reply(std::move(b));
+    std::unique_lock lock(mutex_);
+    if (!running_) {
+      lock.unlock();
+      return reply(EventBatch{503, {}, false});
+    }
+    // An event stored after the read above and before this lock would wake no one: read again.
+    if (events_written_ != written) continue;
+    event_waits_[id].push_back({until, after, std::move(reply)});
+    lock.unlock();
+    clock_wake_.notify_one();
+    return;
+  }
+}
+
+void Service::emit(const std::string& id, const std::string& type, const std::string& data) {
+  store_->add_event(id, type, data);
+  std::vector<EventWait> waits;
+  {
+    std::lock_guard lock(mutex_);
+    ++events_written_;
+    if (auto it = event_waits_.find(id); it != event_waits_.end()) {
+      waits = std::move(it->second);
+      event_waits_.erase(it);
+    }
+  }
+  for (auto& w : waits) {
+    auto work = [this, id, w] { read_events(id, w.after, w.until, w.reply); };
+    if (!lookups_->post(std::move(work), [reply = w.reply] { reply(EventBatch{503, {}, false}); })) w.reply(EventBatch{503, {}, false});
+  }
 }
 
 // The requests that read or write the store (not submissions, not previews), on the lookup pool.
@@ -846,7 +917,7 @@ Response Service::route(const Request& req, const std::string& path, const std::
           std::lock_guard lock(mutex_);
           if (auto it = active_.find(id); it != active_.end()) it->second.token->cancel();
         }
-        if (rec->state == JobState::kQueued) store_->add_event(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
+        if (rec->state == JobState::kQueued) emit(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
         return job_json(*store_->get(id), 200);
       }
       return not_allowed("GET, HEAD, DELETE");

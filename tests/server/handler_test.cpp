@@ -2,9 +2,11 @@
 #include "hemibake/server/service.h"
 
 #include "dark_glb.h"
+#include "faulty_store.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+#include <sqlite3.h>
 
 #include <atomic>
 #include <chrono>
@@ -26,13 +28,22 @@ using nlohmann::json;
 struct Fixture {
   std::string dir;
   std::unique_ptr<Service> service;
-  explicit Fixture(ServiceOptions o = {}) {
+  test::FaultyStore* store = nullptr;  // with a `fault`: the service's store
+  explicit Fixture(ServiceOptions o = {}, test::FaultyStore::Fault fault = nullptr) {
     dir = (std::filesystem::temp_directory_path() / ("hemibake-handler-" + std::to_string(getpid()))).string();
     std::filesystem::remove_all(dir);
     o.data_dir = dir;
     o.workers = 1;
     std::string error;
-    service = Service::start(o, error);
+    if (fault) {
+      auto real = Store::open(dir, error);
+      EXPECT_TRUE(real) << error;
+      auto faulty = std::make_unique<test::FaultyStore>(std::move(real), std::move(fault));
+      store = faulty.get();
+      service = Service::start(o, std::move(faulty), error);
+    } else {
+      service = Service::start(o, error);
+    }
     EXPECT_TRUE(service) << error;
   }
   ~Fixture() {
@@ -310,6 +321,103 @@ TEST(Handler, InvalidUtf8InARequestGetsItsProperStatus) {
   const Response type = f.call("POST", "/v1/jobs", cornell(), {{"content-type", "text/\xc3\x28"}});
   EXPECT_EQ(type.status, 415);
   EXPECT_TRUE(json::parse(type.body, nullptr, false).is_object()) << type.body;
+}
+
+// Never fails a write: for tests that only count reads.
+std::string no_fault(const std::string&, const std::string&) { return {}; }
+
+// Streams of a job with nothing new wait for its next event without reading the store (they read
+// it five times a second each), and that event reaches all of them at once.
+TEST(Handler, WaitingEventStreamsReadTheStoreOnlyWhenAnEventComes) {
+  Fixture f({}, no_fault);
+  const std::string slow = start_slow_job(f);
+  const Response posted = f.call("POST", "/v1/jobs?convergence=0.3", cornell(), {{"content-type", "model/gltf+json"}});
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = json::parse(posted.body)["id"];
+  ASSERT_EQ(json::parse(posted.body)["state"], "queued");
+  std::mutex mutex;
+  std::condition_variable changed;
+  std::vector<EventBatch> batches;
+  for (int i = 0; i < 16; ++i)
+    f.service->events_async(id, 0, std::chrono::milliseconds(30'000), [&](EventBatch b) {
+      std::lock_guard lock(mutex);
+      batches.push_back(std::move(b));
+      changed.notify_all();
+    });
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // each has read once, and waits
+  const uint64_t before = f.store->reads.load();
+  std::this_thread::sleep_for(std::chrono::seconds(1));
+  EXPECT_EQ(f.store->reads.load(), before) << "waiting streams read the store";
+  {
+    std::lock_guard lock(mutex);
+    EXPECT_TRUE(batches.empty());
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  ASSERT_EQ(f.call("DELETE", "/v1/jobs/" + id).status, 200);
+  std::unique_lock lock(mutex);
+  ASSERT_TRUE(changed.wait_for(lock, std::chrono::seconds(10), [&] { return batches.size() == 16; }));
+  std::printf("16 waiting streams had the event %.1f ms after the DELETE was sent\n",
+              std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  for (const EventBatch& b : batches) {
+    EXPECT_EQ(b.status, 200);
+    ASSERT_EQ(b.events.size(), 1u);
+    EXPECT_EQ(json::parse(b.events[0].data)["state"], "cancelled");
+  }
+  lock.unlock();
+  f.call("DELETE", "/v1/jobs/" + slow);
+}
+
+// A data directory of the older layout (the scene and the result in the job's row) is converted at
+// start: the jobs, their scenes, results and events are all still there.
+TEST(Handler, StoreOfTheOlderLayoutIsConverted) {
+  const std::string dir = (std::filesystem::temp_directory_path() / ("hemibake-layout1-" + std::to_string(getpid()))).string();
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  {
+    sqlite3* db = nullptr;
+    ASSERT_EQ(sqlite3_open((dir + "/hemibake.db").c_str(), &db), SQLITE_OK);
+    const char* layout1 =
+        "PRAGMA journal_mode=WAL;"
+        "CREATE TABLE jobs (id TEXT PRIMARY KEY, state TEXT NOT NULL, params TEXT NOT NULL, cache_key TEXT NOT NULL,"
+        "  idempotency_key TEXT UNIQUE, scene BLOB NOT NULL, content_type TEXT NOT NULL,"
+        "  result BLOB, etag TEXT, error TEXT, progress TEXT, attempts INTEGER NOT NULL DEFAULT 0,"
+        "  created REAL NOT NULL, started REAL NOT NULL DEFAULT 0, finished REAL NOT NULL DEFAULT 0,"
+        "  event_seq INTEGER NOT NULL DEFAULT 0);"
+        "CREATE INDEX jobs_state ON jobs(state, created);"
+        "CREATE INDEX jobs_cache ON jobs(cache_key, state);"
+        "CREATE TABLE events (job TEXT NOT NULL, seq INTEGER NOT NULL, type TEXT NOT NULL,"
+        "  data TEXT NOT NULL, PRIMARY KEY (job, seq));"
+        "INSERT INTO jobs (id, state, params, cache_key, idempotency_key, scene, content_type, result, etag, created,"
+        "  finished, event_seq) VALUES ('done', 'succeeded', '{}', 'k1', 'key', x'0102030405', 'model/gltf-binary',"
+        "  x'0a0b0c', '\"e\"', 1, 2, 1);"
+        "INSERT INTO jobs (id, state, params, cache_key, scene, content_type, created)"
+        "  VALUES ('waiting', 'queued', '{\"resolution\":64}', 'k2', x'0607', 'model/gltf+json', 3);"
+        "INSERT INTO events VALUES ('done', 1, 'state', '{\"state\":\"succeeded\"}');";
+    ASSERT_EQ(sqlite3_exec(db, layout1, nullptr, nullptr, nullptr), SQLITE_OK) << sqlite3_errmsg(db);
+    sqlite3_close(db);
+  }
+  std::string error;
+  auto store = Store::open(dir, error);
+  ASSERT_TRUE(store) << error;
+  const auto done = store->get("done");
+  ASSERT_TRUE(done);
+  EXPECT_EQ(done->state, JobState::kSucceeded);
+  EXPECT_EQ(done->scene_bytes, 5u);
+  EXPECT_EQ(done->result_bytes, 3u);
+  EXPECT_EQ(done->etag, "\"e\"");
+  EXPECT_EQ(done->last_event, 1u);
+  EXPECT_EQ(store->result("done"), std::string("\x0a\x0b\x0c"));
+  EXPECT_EQ(store->events_after("done", 0, 10).size(), 1u);
+  EXPECT_EQ(store->find_idempotent("key")->first, "done");
+  EXPECT_EQ(store->find_cached("k1"), std::string("done"));
+  std::string id, scene, params;
+  ASSERT_TRUE(store->claim(id, scene, params));
+  EXPECT_EQ(id, "waiting");
+  EXPECT_EQ(scene, std::string("\x06\x07"));
+  EXPECT_EQ(params, "{\"resolution\":64}");
+  store.reset();
+  ASSERT_TRUE(Store::open(dir, error)) << error;  // converted once; the new layout opens as it is
+  std::filesystem::remove_all(dir);
 }
 
 TEST(Handler, QueryStringsDecode) {

@@ -813,4 +813,58 @@ TEST(Server, HealthzAnswersWhilePreviewsWaitAndALargeSceneIsChecked) {
   request(port, http::verb::delete_, "/v1/jobs/" + id);
 }
 
+// Bytes a process has read through read calls (files and pipes), from /proc/PID/io.
+uint64_t bytes_read(pid_t pid) {
+  std::istringstream io(read_file("/proc/" + std::to_string(pid) + "/io"));
+  for (std::string key; io >> key;) {
+    uint64_t value = 0;
+    io >> value;
+    if (key == "rchar:") return value;
+  }
+  return 0;
+}
+
+// A running job with long shots (1024² hemicubes, none replayed), so that the next one stays queued.
+std::string start_slow_job(unsigned short port) {
+  const Reply posted = request(port, http::verb::post, "/v1/jobs?resolution=1024&reuse=false&convergence=0.00001", cornell(), kGltf);
+  EXPECT_EQ(posted.status, 202) << posted.body;
+  const std::string id = posted.js()["id"];
+  for (int i = 0; i < 200 && request(port, http::verb::get, "/v1/jobs/" + id).js()["state"] != "running"; ++i)
+    std::this_thread::sleep_for(20ms);
+  return id;
+}
+
+// Status reads, lists and event streams touch only a job's small columns: with 16 streams watching
+// a job whose scene is 48 MB, and status and list requests for it, the server reads next to
+// nothing from its store (it read the whole scene for each, 5 times a second per stream).
+TEST(Server, StatusListsAndStreamsDoNotReadScenes) {
+  ServerProcess server(temp_dir("small-reads"), {"--workers", "1"});
+  ASSERT_NE(server.port(), 0);
+  const unsigned short port = server.port();
+  const std::string slow = start_slow_job(port);
+  const Reply big = request(port, http::verb::post, "/v1/jobs", hemibake::test::glb_with_padding(cornell(), 48u << 20),
+                            {{"Content-Type", "model/gltf-binary"}});
+  ASSERT_EQ(big.status, 202) << big.body;
+  const std::string id = big.js()["id"];
+  ASSERT_EQ(big.js()["state"], "queued");
+  net::io_context io;
+  std::vector<tcp::socket> streams;
+  for (int i = 0; i < 16; ++i) {
+    streams.emplace_back(io);
+    streams.back().connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
+    net::write(streams.back(), net::buffer("GET /v1/jobs/" + id + "/events HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n"));
+  }
+  std::this_thread::sleep_for(500ms);
+  const uint64_t before = bytes_read(server.pid());
+  for (int i = 0; i < 10; ++i) EXPECT_EQ(request(port, http::verb::get, "/v1/jobs/" + id).js()["scene_bytes"].get<uint64_t>() >> 20, 48u);
+  for (int i = 0; i < 3; ++i) EXPECT_EQ(request(port, http::verb::get, "/v1/jobs").status, 200);
+  std::this_thread::sleep_for(2s);
+  const uint64_t read = bytes_read(server.pid()) - before;
+  std::printf("read %.1f MB in 2 s with 16 streams, 10 status and 3 list requests\n", read / 1e6);
+  EXPECT_LT(read, 4u << 20);
+  streams.clear();
+  request(port, http::verb::delete_, "/v1/jobs/" + id);
+  request(port, http::verb::delete_, "/v1/jobs/" + slow);
+}
+
 }  // namespace

@@ -73,6 +73,9 @@ class Service {
  public:
   /// Opens the store in options.data_dir, re-queues jobs a crash left running, starts the workers.
   static std::unique_ptr<Service> start(const ServiceOptions& options, std::string& error);
+  /// The same on a store already open (options.data_dir is not used): another implementation, or
+  /// one that fails on purpose in tests.
+  static std::unique_ptr<Service> start(const ServiceOptions& options, std::unique_ptr<Store> store, std::string& error);
   ~Service();
 
   /// Answers one request (everything but event streams) through `reply`, without ever blocking
@@ -84,8 +87,11 @@ class Service {
   /// handle_async, waited for: for tests and tools without an event loop.
   Response handle(const Request& request);
   /// For event streams: the events of job `id` after sequence number `after`, read on the lookup
-  /// pool and given to `reply` (which, like a Reply, must not block).
-  void events_async(const std::string& id, uint64_t after, std::function<void(EventBatch)> reply);
+  /// pool and given to `reply` (which, like a Reply, must not block). If there are none yet and the
+  /// job has not finished, the request waits (as an entry, not a thread) until the job's next event
+  /// or until `wait` has passed, then an empty batch says that it is time for a heartbeat.
+  void events_async(const std::string& id, uint64_t after, std::chrono::milliseconds wait,
+                    std::function<void(EventBatch)> reply);
 
   /// For event streams: the job id if `request` is GET /v1/jobs/{id}/events, else empty.
   static std::string events_job(const Request& request);
@@ -104,6 +110,11 @@ class Service {
   void worker_loop();
   void clock_loop();
   void bake(const std::string& id, const std::string& scene, const std::string& params);
+  /// Stores an event of job `id` and wakes the streams that wait for one.
+  void emit(const std::string& id, const std::string& type, const std::string& data);
+  /// events_async's work on a lookup thread: reads, and waits if there is nothing to read.
+  void read_events(const std::string& id, uint64_t after, std::chrono::steady_clock::time_point until,
+                   std::function<void(EventBatch)> reply);
   std::optional<Response> answer_at_once(const Request& request, const std::string& path) const;
   Response route(const Request& request, const std::string& path, const std::string& query);
   Response submit(const Request& request, const std::string& query);
@@ -137,6 +148,16 @@ class Service {
     std::vector<PreviewWait> waits;
   };
   std::map<std::string, Active> active_;
+  // Event streams with nothing to send, waiting for their job's next event, or for `until` (then
+  // the clock answers them with an empty batch, for a heartbeat).
+  struct EventWait {
+    std::chrono::steady_clock::time_point until;
+    uint64_t after = 0;
+    std::function<void(EventBatch)> reply;
+  };
+  std::map<std::string, std::vector<EventWait>> event_waits_;
+  uint64_t events_written_ = 0;  // events stored so far (under mutex_): a wait set up after a read
+                                 // checks that none came between the two
   // Previews of jobs claimed by a worker that has not registered them yet.
   std::map<std::string, std::vector<PreviewWait>> unregistered_;
   std::condition_variable clock_wake_;  // a new deadline, or the stop
