@@ -384,8 +384,7 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
   emit(id, "state", json{{"state", "running"}}.dump(-1, ' ', false, kReplaceInvalid));
   protocol::JobSpec spec;
   if (std::string e = protocol::parse_params_json(params, spec); !e.empty()) {
-    store_->fail(id, e);
-    emit(id, "state", json{{"state", "failed"}, {"error", e}}.dump(-1, ' ', false, kReplaceInvalid));
+    end_job(id, nullptr, e);
     return;
   }
   spec.params.threads = options_.solver_threads;
@@ -398,8 +397,7 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
   const auto loaded = protocol::load_gltf_memory(
       std::span(reinterpret_cast<const uint8_t*>(scene.data()), scene.size()), "", limits);
   if (!loaded.document) {
-    store_->fail(id, loaded.error);
-    emit(id, "state", json{{"state", "failed"}, {"error", loaded.error}}.dump(-1, ' ', false, kReplaceInvalid));
+    end_job(id, nullptr, loaded.error);
     return;
   }
   bool over_budget = false;
@@ -429,9 +427,7 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (st.cancelled) {
     if (over_budget) {
-      const std::string e = "the bake exceeded its time budget of " + std::to_string(options_.job_seconds) + " s";
-      store_->fail(id, e);
-      emit(id, "state", json{{"state", "failed"}, {"error", e}}.dump(-1, ' ', false, kReplaceInvalid));
+      end_job(id, nullptr, "the bake exceeded its time budget of " + std::to_string(options_.job_seconds) + " s");
     } else if (!running_) {
       store_->requeue(id);  // shutting down: the job runs again after the restart
     } else {
@@ -440,13 +436,11 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
     return;
   }
   if (!baked.error.empty()) {
-    store_->fail(id, baked.error);
-    emit(id, "state", json{{"state", "failed"}, {"error", baked.error}}.dump(-1, ' ', false, kReplaceInvalid));
+    end_job(id, nullptr, baked.error);
     return;
   }
   const std::string glb(baked.glb.begin(), baked.glb.end());
-  store_->succeed(id, glb, "\"" + sha256_hex(glb) + "\"");
-  emit(id, "state", json{{"state", "succeeded"}}.dump(-1, ' ', false, kReplaceInvalid));
+  if (!end_job(id, &glb, {})) return;
   std::lock_guard lock(metrics_mutex_);
   ++bakes_;
   bake_seconds_sum_ += seconds;
@@ -457,6 +451,53 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
     shots_ += st.shots;
     shot_seconds_ += st.seconds;
   }
+}
+
+// The end of running job `id`: succeeded with `result` when it is given, else failed with `failure`.
+// The store's change is one atomic step from "running", so a DELETE that came first wins: the
+// stream is then told "cancelled" (the DELETE of a running job leaves that to the worker), and the
+// result is dropped. A result the store cannot write (a full disk) fails the job with the reason;
+// a failure is a small write, tried again for a few seconds, so that no job stays running with no
+// worker. Returns true if the job succeeded.
+bool Service::end_job(const std::string& id, const std::string* result, std::string failure) {
+  auto state_event = [](const char* state, const std::string& why) {
+    json j = {{"state", state}};
+    if (!why.empty()) j["error"] = why;
+    return j.dump(-1, ' ', false, kReplaceInvalid);
+  };
+  Change c;
+  if (result) {
+    c = store_->succeed(id, *result, "\"" + sha256_hex(*result) + "\"");
+    if (c.made) {
+      emit(id, "state", state_event("succeeded", {}));
+      return true;
+    }
+    if (!c.error.empty()) {
+      std::fprintf(stderr, "hemibake-server: the result of %s could not be stored: %s\n", id.c_str(), c.error.c_str());
+      failure = "the result could not be stored: " + c.error;
+    }
+  }
+  if (!result || !c.error.empty()) {
+    for (int attempt = 0;; ++attempt) {
+      c = store_->fail(id, failure);
+      if (c.made) {
+        emit(id, "state", state_event("failed", failure));
+        return false;
+      }
+      if (c.error.empty() || attempt == 3) break;
+      std::unique_lock lock(mutex_);
+      if (wake_.wait_for(lock, std::chrono::seconds(1 << attempt), [&] { return !running_.load(); })) break;
+    }
+  }
+  if (!c.error.empty()) {
+    // Not even the failure could be written: the store has the job running, and the next start
+    // re-queues it.
+    std::fprintf(stderr, "hemibake-server: job %s could not be marked failed (%s); it runs again after a restart\n",
+                 id.c_str(), c.error.c_str());
+  } else if (const auto rec = store_->get(id); rec && rec->state == JobState::kCancelled) {
+    emit(id, "state", state_event("cancelled", {}));
+  }
+  return false;
 }
 
 std::optional<Response> Service::check_auth(const Request& request) const {
@@ -910,14 +951,27 @@ Response Service::route(const Request& req, const std::string& path, const std::
     if (sub.empty()) {
       if (req.method == "GET") return job_json(*rec, 200);
       if (req.method == "DELETE") {
-        if (finished(rec->state))
-          return error(409, std::string("the job ") + (rec->state == JobState::kCancelled ? "is already cancelled" : std::string("has already ") + to_string(rec->state)));
-        store_->cancel(id);
+        auto over = [](JobState s) {
+          return error(409, std::string("the job ") + (s == JobState::kCancelled ? "is already cancelled" : std::string("has already ") + to_string(s)));
+        };
+        if (finished(rec->state)) return over(rec->state);
+        // One step in the store decides between this and the worker's end of the job.
+        const Change c = store_->cancel(id);
+        if (!c.error.empty()) {
+          Response r = error(503, "the cancellation could not be stored; retry: " + c.error);
+          r.headers.emplace_back("Retry-After", "5");
+          return r;
+        }
+        if (!c.made) {
+          rec = store_->get(id);
+          return rec ? over(rec->state) : error(404, "no job " + id);
+        }
         {
           std::lock_guard lock(mutex_);
           if (auto it = active_.find(id); it != active_.end()) it->second.token->cancel();
         }
-        if (rec->state == JobState::kQueued) emit(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
+        // A running job's worker tells its stream, once the bake has stopped.
+        if (c.from == JobState::kQueued) emit(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
         return job_json(*store_->get(id), 200);
       }
       return not_allowed("GET, HEAD, DELETE");

@@ -14,6 +14,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <mutex>
 #include <sstream>
 #include <thread>
@@ -365,6 +366,98 @@ TEST(Handler, WaitingEventStreamsReadTheStoreOnlyWhenAnEventComes) {
   }
   lock.unlock();
   f.call("DELETE", "/v1/jobs/" + slow);
+}
+
+// A job's event stream read to its end (or for `limit`), as a stream client reads it.
+std::vector<Event> read_stream(Service& service, const std::string& id, std::chrono::seconds limit, bool* ended) {
+  std::vector<Event> all;
+  *ended = false;
+  const auto until = std::chrono::steady_clock::now() + limit;
+  while (std::chrono::steady_clock::now() < until) {
+    std::promise<EventBatch> got;
+    service.events_async(id, all.empty() ? 0 : all.back().seq, std::chrono::milliseconds(1000),
+                         [&got](EventBatch b) { got.set_value(std::move(b)); });
+    EventBatch b = got.get_future().get();
+    all.insert(all.end(), b.events.begin(), b.events.end());
+    if (b.end || b.status == 404) {
+      *ended = b.end;
+      break;
+    }
+  }
+  return all;
+}
+
+// The state named by the last state event.
+std::string last_state(const std::vector<Event>& events) {
+  std::string state;
+  for (const Event& e : events)
+    if (e.type == "state") state = json::parse(e.data)["state"];
+  return state;
+}
+
+json wait_finished(Fixture& f, const std::string& id) {
+  json job;
+  for (int i = 0; i < 600; ++i) {
+    job = json::parse(f.call("GET", "/v1/jobs/" + id).body);
+    if (job["state"] != "queued" && job["state"] != "running") break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return job;
+}
+
+// A result the store cannot write (a full disk) fails the job with the reason: it does not stay
+// running for ever. Its stream ends, and its worker takes the next job, which succeeds once the
+// store can write again.
+TEST(Handler, ResultThatCannotBeStoredFailsTheJob) {
+  std::atomic<bool> full{true};
+  Fixture f({}, [&](const std::string& write, const std::string&) {
+    return full && write == "succeed" ? std::string("database or disk is full") : std::string();
+  });
+  const std::map<std::string, std::string> gltf = {{"content-type", "model/gltf+json"}};
+  const Response posted = f.call("POST", "/v1/jobs?convergence=0.2", cornell(), gltf);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = json::parse(posted.body)["id"];
+  bool ended = false;
+  const auto events = read_stream(*f.service, id, std::chrono::seconds(60), &ended);
+  EXPECT_TRUE(ended) << "the stream did not end";
+  EXPECT_EQ(last_state(events), "failed");
+  const json job = json::parse(f.call("GET", "/v1/jobs/" + id).body);
+  EXPECT_EQ(job["state"], "failed");
+  EXPECT_NE(job.value("error", "").find("database or disk is full"), std::string::npos) << job.dump();
+  EXPECT_NE(job.value("error", "").find("result could not be stored"), std::string::npos) << job.dump();
+  full = false;
+  const Response next = f.call("POST", "/v1/jobs?convergence=0.21", cornell(), gltf);
+  ASSERT_EQ(next.status, 202) << next.body;
+  EXPECT_EQ(wait_finished(f, json::parse(next.body)["id"])["state"], "succeeded");
+}
+
+// A DELETE that lands while the result is written: one of the two wins, and the job's state, its
+// stream and its result all say the same (the state said cancelled while the stream said succeeded).
+TEST(Handler, CancelDuringTheResultWriteEndsTheJobOneWay) {
+  Fixture* fixture = nullptr;
+  std::atomic<int> deleted{0};
+  Fixture f({}, [&](const std::string& write, const std::string& id) {
+    if (write == "succeed" && deleted == 0) deleted = fixture->call("DELETE", "/v1/jobs/" + id).status;
+    return std::string();
+  });
+  fixture = &f;
+  const Response posted = f.call("POST", "/v1/jobs?convergence=0.2", cornell(), {{"content-type", "model/gltf+json"}});
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = json::parse(posted.body)["id"];
+  bool ended = false;
+  const auto events = read_stream(*f.service, id, std::chrono::seconds(60), &ended);
+  EXPECT_TRUE(ended);
+  const json job = json::parse(f.call("GET", "/v1/jobs/" + id).body);
+  const int result = f.call("GET", "/v1/jobs/" + id + "/result").status;
+  EXPECT_EQ(last_state(events), job["state"]) << "the stream and the job disagree";
+  if (job["state"] == "cancelled") {
+    EXPECT_EQ(deleted.load(), 200);
+    EXPECT_EQ(result, 409);
+  } else {
+    EXPECT_EQ(job["state"], "succeeded");
+    EXPECT_EQ(deleted.load(), 409);
+    EXPECT_EQ(result, 200);
+  }
 }
 
 // A data directory of the older layout (the scene and the result in the job's row) is converted at

@@ -110,6 +110,8 @@ class Service {
   void worker_loop();
   void clock_loop();
   void bake(const std::string& id, const std::string& scene, const std::string& params);
+  /// Ends running job `id`: succeeded with `result`, or failed with `failure` if there is none.
+  bool end_job(const std::string& id, const std::string* result, std::string failure);
   /// Stores an event of job `id` and wakes the streams that wait for one.
   void emit(const std::string& id, const std::string& type, const std::string& data);
   /// events_async's work on a lookup thread: reads, and waits if there is nothing to read.
