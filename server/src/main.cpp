@@ -30,6 +30,10 @@ void usage(FILE* out) {
       "  --max-body BYTES        largest scene accepted (default 268435456)\n"
       "  --max-queue N           queued jobs before 429 (default 100)\n"
       "  --max-streams N         concurrent event streams (default 64)\n"
+      "  --idle-timeout S        close a connection idle for S seconds, or a request body paused that long (default 60)\n"
+      "  --header-timeout S      408 if a request line and headers take longer than S seconds (default 10)\n"
+      "  --min-rate BYTES        408 if a request body arrives slower than this many bytes per second on\n"
+      "                          average, counted after --header-timeout seconds (default 16384; 0: any)\n"
       "  --check-threads N       threads that load and check submitted scenes (default: half the cores)\n"
       "  --max-checks N          submitted scenes waiting for a check thread before 503 (default 4)\n"
       "  --job-seconds S         time budget per job (default 3600)\n"
@@ -55,7 +59,7 @@ int main(int argc, char** argv) {
       return 0;
     }
     static const char* const kOptions[] = {"--listen", "--data", "--workers", "--solver-threads", "--tokens", "--max-body",
-                                           "--max-queue", "--max-streams", "--check-threads", "--max-checks",
+                                           "--max-queue", "--max-streams", "--idle-timeout", "--header-timeout", "--min-rate", "--check-threads", "--max-checks",
                                            "--job-seconds", "--max-elements",
                                            "--max-shot-cache-mb", "--max-triangles", "--max-attempts", "--expire-hours"};
     if (std::find(std::begin(kOptions), std::end(kOptions), opt) == std::end(kOptions)) {
@@ -105,6 +109,9 @@ int main(int argc, char** argv) {
     else if (opt == "--max-body") so.max_body_bytes = ho.max_body_bytes = static_cast<uint64_t>(need_count(1e15));
     else if (opt == "--max-queue") so.max_queue = static_cast<size_t>(need_count(1e9));
     else if (opt == "--max-streams") ho.max_streams = static_cast<size_t>(need_count(1e6));
+    else if (opt == "--idle-timeout") ho.idle_timeout = std::max(0.001, need_num());
+    else if (opt == "--header-timeout") ho.header_timeout = std::max(0.001, need_num());
+    else if (opt == "--min-rate") ho.min_rate = need_num();
     else if (opt == "--check-threads") so.check_threads = static_cast<unsigned>(need_count(1024));
     else if (opt == "--max-checks") so.max_checks = static_cast<size_t>(need_count(1e6));
     else if (opt == "--job-seconds") so.job_seconds = need_num();

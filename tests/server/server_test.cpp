@@ -22,6 +22,7 @@
 #include <set>
 #include <sstream>
 #include <string>
+#include <poll.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <thread>
@@ -61,7 +62,10 @@ class ServerProcess {
         setrlimit(RLIMIT_NOFILE, &limit);
       }
       for (const auto& e : env) putenv(const_cast<char*>(e.c_str()));
-      std::vector<std::string> args = {HEMIBAKE_SERVER, "--listen", "127.0.0.1:0", "--data", data_dir};
+      // HEMIBAKE_TEST_SERVER runs the tests against another build of the server (an older one, to see a
+      // regression test fail).
+      const char* binary = std::getenv("HEMIBAKE_TEST_SERVER") ? std::getenv("HEMIBAKE_TEST_SERVER") : HEMIBAKE_SERVER;
+      std::vector<std::string> args = {binary, "--listen", "127.0.0.1:0", "--data", data_dir};
       args.insert(args.end(), extra.begin(), extra.end());
       std::vector<char*> argv;
       for (auto& a : args) argv.push_back(a.data());
@@ -120,6 +124,7 @@ Reply request(unsigned short port, http::verb method, const std::string& target,
   beast::flat_buffer buffer;
   http::response_parser<http::string_body> parser;
   parser.body_limit(1ull << 30);
+  parser.skip(method == http::verb::head);  // the GET's Content-Length, and no body
   http::read(stream, buffer, parser);
   Reply r;
   r.status = static_cast<int>(parser.get().result_int());
@@ -508,17 +513,41 @@ TEST(Client, BakesOnTheServerAndReportsErrors) {
   EXPECT_NE(std::system(unreachable.c_str()), 0);
 }
 
-// Everything the server sends on one connection for `raw` requests, until it closes.
-std::string exchange(unsigned short port, const std::string& raw) {
+// What arrives on `socket` until the peer closes it or `limit` has passed (then `timed_out` is set).
+// Beast's stream timeouts do not apply to blocking reads, so this waits with poll().
+std::string read_until_closed(tcp::socket& socket, std::chrono::seconds limit, bool* timed_out) {
+  const auto until = std::chrono::steady_clock::now() + limit;
+  std::string all;
+  char buf[4096];
+  if (timed_out) *timed_out = false;
+  for (;;) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(until - std::chrono::steady_clock::now()).count();
+    pollfd p{socket.native_handle(), POLLIN, 0};
+    if (left <= 0 || poll(&p, 1, static_cast<int>(left)) == 0) {
+      if (timed_out) *timed_out = true;
+      return all;
+    }
+    const ssize_t n = ::recv(socket.native_handle(), buf, sizeof buf, 0);
+    if (n <= 0) return all;
+    all.append(buf, static_cast<size_t>(n));
+  }
+}
+
+// Everything the server sends on one connection for `raw` requests, until it closes (or `limit`
+// has passed: then `timed_out` is set, if given).
+std::string exchange(unsigned short port, const std::string& raw, std::chrono::seconds limit = 30s, bool* timed_out = nullptr) {
   net::io_context io;
   tcp::socket socket(io);
   socket.connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
   net::write(socket, net::buffer(raw));
-  std::string all;
-  char buf[4096];
-  beast::error_code ec;
-  while (!ec) all.append(buf, socket.read_some(net::buffer(buf), ec));
-  return all;
+  return read_until_closed(socket, limit, timed_out);
+}
+
+// How many responses `all` holds (status lines; bodies here are JSON, without "HTTP/1.1 ").
+size_t responses(const std::string& all) {
+  size_t n = 0;
+  for (size_t at = all.find("HTTP/1.1 "); at != std::string::npos; at = all.find("HTTP/1.1 ", at + 1)) ++n;
+  return n;
 }
 
 // A HEAD response has the GET's headers and no body, so a request pipelined after it is answered
@@ -865,6 +894,133 @@ TEST(Server, StatusListsAndStreamsDoNotReadScenes) {
   streams.clear();
   request(port, http::verb::delete_, "/v1/jobs/" + id);
   request(port, http::verb::delete_, "/v1/jobs/" + slow);
+}
+
+// A Transfer-Encoding whose last coding is not chunked, or that names chunked twice, leaves the
+// body's length unknown to one reader and known to another (RFC 9112, section 6.3): refused with
+// 400 and the connection closed, so that a request hidden in the body never runs (a DELETE did).
+// A coding before chunked that the server cannot decode is 501.
+TEST(Server, TransferEncodingsThatHideARequestAreRefused) {
+  ServerProcess server(temp_dir("smuggle"), {"--workers", "1"});
+  ASSERT_NE(server.port(), 0);
+  const std::string slow = start_slow_job(server.port());
+  ASSERT_EQ(request(server.port(), http::verb::get, "/v1/jobs/" + slow).js()["state"], "running");
+  const std::string hidden = "DELETE /v1/jobs/" + slow + " HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"Transfer-Encoding: gzip\r\n", "400"},
+      {"Transfer-Encoding: chunked, chunked\r\n", "400"},
+      {"Transfer-Encoding: chunked\r\nTransfer-Encoding: chunked\r\n", "400"},
+      {"Transfer-Encoding: chunked, identity\r\n", "400"},
+      {"Transfer-Encoding: CHUNKED , gzip\r\n", "400"},
+      {"Transfer-Encoding: gzip, chunked\r\n", "501"},
+  };
+  for (const auto& [te, status] : cases) {
+    bool timed_out = false;
+    const std::string all = exchange(server.port(),
+                                     "POST /v1/jobs HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: model/gltf+json\r\n" + te +
+                                         "\r\n" + hidden,
+                                     10s, &timed_out);
+    EXPECT_EQ(all.rfind("HTTP/1.1 " + status, 0), 0u) << te << all;
+    EXPECT_EQ(responses(all), 1u) << te << all;
+    EXPECT_FALSE(timed_out) << te << ": the connection stayed open";
+    EXPECT_NE(all.find("Connection: close"), std::string::npos) << te << all;
+  }
+  EXPECT_EQ(request(server.port(), http::verb::get, "/v1/jobs/" + slow).js()["state"], "running");
+  // Chunked alone is a body like any other.
+  const std::string chunked = exchange(server.port(),
+                                       "POST /v1/jobs?convergence=0.3 HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: model/gltf+json\r\n"
+                                       "Transfer-Encoding: chunked\r\nConnection: close\r\n\r\n" +
+                                           [] {
+                                             std::ostringstream hex;
+                                             hex << std::hex << cornell().size();
+                                             return hex.str();
+                                           }() + "\r\n" + cornell() + "\r\n0\r\n\r\n",
+                                       10s);
+  EXPECT_EQ(chunked.rfind("HTTP/1.1 202", 0), 0u) << chunked;
+  request(server.port(), http::verb::delete_, "/v1/jobs/" + slow);
+}
+
+// The token is checked from the headers: a request without one gets 401 at once and the
+// connection is closed, before any of its body is read (four unauthenticated 256 MB uploads held
+// 1 GB of memory).
+TEST(Server, TokenIsCheckedBeforeTheBodyIsRead) {
+  ServerProcess server(temp_dir("auth-first"), {"--workers", "1"}, {"HEMIBAKE_TOKENS=s3cret"});
+  ASSERT_NE(server.port(), 0);
+  bool timed_out = false;
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::string all = exchange(server.port(),
+                                   "POST /v1/jobs HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: model/gltf-binary\r\n"
+                                   "Content-Length: 200000000\r\n\r\nglTF",
+                                   10s, &timed_out);
+  EXPECT_FALSE(timed_out) << "no answer before the body";
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 5s);
+  EXPECT_EQ(all.rfind("HTTP/1.1 401", 0), 0u) << all;
+  EXPECT_NE(all.find("WWW-Authenticate: Bearer"), std::string::npos) << all;
+  // With the token, the same headers wait for the body.
+  const std::string allowed = exchange(server.port(),
+                                       "POST /v1/jobs HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: model/gltf-binary\r\n"
+                                       "Authorization: Bearer s3cret\r\nContent-Length: 200000000\r\n\r\nglTF",
+                                       2s, &timed_out);
+  EXPECT_TRUE(timed_out) << allowed;
+  EXPECT_EQ(allowed, "");
+}
+
+// Sends `body` after `head` at `rate` bytes per second (what is due every 50 ms, so that a late
+// wake-up on a busy machine does not slow it), stopping early if an answer comes; then reads the
+// answer.
+std::string upload_slowly(unsigned short port, const std::string& head, const std::string& body, double rate) {
+  net::io_context io;
+  tcp::socket socket(io);
+  socket.connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
+  net::write(socket, net::buffer(head));
+  const auto t0 = std::chrono::steady_clock::now();
+  beast::error_code ec;
+  for (size_t sent = 0; sent < body.size() && !ec;) {
+    std::this_thread::sleep_for(50ms);
+    pollfd p{socket.native_handle(), POLLIN, 0};
+    if (poll(&p, 1, 0) > 0) break;  // answered already
+    const double due = rate * std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const size_t target = std::min(body.size(), static_cast<size_t>(due));
+    if (target <= sent) continue;
+    net::write(socket, net::buffer(body.data() + sent, target - sent), ec);
+    sent = target;
+  }
+  return read_until_closed(socket, 60s, nullptr);
+}
+
+// Timeouts: an idle connection is closed, headers that do not arrive in time and a body that
+// arrives too slowly are answered 408; a slow but steady upload that takes longer than 30 s (once
+// the limit for a whole request) is accepted.
+TEST(Server, SlowButSteadyUploadsSucceedAndTooSlowOnesGet408) {
+  ServerProcess strict(temp_dir("timeouts"), {"--workers", "1", "--idle-timeout", "1", "--header-timeout", "1",
+                                              "--min-rate", "20000"});
+  ASSERT_NE(strict.port(), 0);
+  bool timed_out = false;
+  auto t0 = std::chrono::steady_clock::now();
+  EXPECT_EQ(exchange(strict.port(), "", 10s, &timed_out), "");  // idle: closed without a word
+  EXPECT_FALSE(timed_out);
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 3s);
+  t0 = std::chrono::steady_clock::now();
+  const std::string header = exchange(strict.port(), "GET /healthz HTTP/1.1\r\nHo", 10s, &timed_out);
+  EXPECT_EQ(header.rfind("HTTP/1.1 408", 0), 0u) << header;
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 3s);
+  const std::string scene = hemibake::test::glb_with_padding(cornell(), 600'000);
+  const std::string head = "POST /v1/jobs HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\nContent-Type: model/gltf-binary\r\nContent-Length: " +
+                           std::to_string(scene.size()) + "\r\n\r\n";
+  t0 = std::chrono::steady_clock::now();
+  const std::string slow = upload_slowly(strict.port(), head, scene, 10'000);
+  EXPECT_EQ(slow.rfind("HTTP/1.1 408", 0), 0u) << slow;
+  EXPECT_NE(slow.find("20000 bytes per second"), std::string::npos) << slow;
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 10s);
+
+  // The defaults (at least 16 KB/s on average): 600 KB at 19 KB/s, for more than 30 s.
+  ServerProcess server(temp_dir("steady"), {"--workers", "1"});
+  t0 = std::chrono::steady_clock::now();
+  const std::string steady = upload_slowly(server.port(), head, scene, 19'000);
+  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("%zu bytes uploaded in %.1f s\n", scene.size(), took);
+  EXPECT_GT(took, 30.0);
+  EXPECT_EQ(steady.rfind("HTTP/1.1 202", 0), 0u) << steady;
 }
 
 }  // namespace
