@@ -504,9 +504,19 @@ std::optional<Response> Service::check_auth(const Request& request) const {
   if (options_.tokens.empty()) return std::nullopt;
   const std::string path = request.target.substr(0, request.target.find('?'));
   if (path == "/healthz" || path == "/readyz") return std::nullopt;
+  // "Bearer" in any case, then one or more spaces (RFC 9110, section 11.1; RFC 6750, section 2.1).
   const auto it = request.headers.find("authorization");
   std::string given;
-  if (it != request.headers.end() && it->second.rfind("Bearer ", 0) == 0) given = it->second.substr(7);
+  if (it != request.headers.end()) {
+    const std::string& value = it->second;
+    const size_t space = value.find(' ');
+    std::string scheme = value.substr(0, space);
+    std::transform(scheme.begin(), scheme.end(), scheme.begin(), ::tolower);
+    if (space != std::string::npos && scheme == "bearer") {
+      given = value.substr(std::min(value.size(), value.find_first_not_of(' ', space)));
+      given.erase(given.find_last_not_of(' ') + 1);
+    }
+  }
   bool ok = false;
   for (const auto& t : options_.tokens) ok = same(given, t) || ok;  // no early exit
   if (ok) return std::nullopt;
@@ -599,6 +609,17 @@ Response Service::submit(const Request& req, const std::string& query) {
   if (std::string e = protocol::bake_error(*loaded.document); !e.empty()) return error(422, e);
   const std::string params = protocol::params_json(spec);
   const std::string cache_key = sha256_hex(scene) + ":" + sha256_hex(params);
+  const auto key_it = req.headers.find("idempotency-key");
+  const std::string idem = key_it == req.headers.end() ? "" : key_it->second;
+  if (idem.size() > 200) return error(400, "the Idempotency-Key is longer than 200 characters");
+  // A key names one submission: the same key with another scene or other parameters is a client's
+  // mistake, not a retry (IETF draft-ietf-httpapi-idempotency-key-header, section 2.7).
+  auto reused = [&](const std::string& job) {
+    return error(422, "the Idempotency-Key was sent before with another scene or other parameters (job " + job +
+                          "); a new submission needs a new key");
+  };
+  const auto held = idem.empty() ? std::nullopt : store_->find_idempotent(idem);
+  if (held && held->second != cache_key) return reused(held->first);
   // The same scene and parameters as a finished job: its answer at once.
   if (auto cached = store_->find_cached(cache_key)) {
     auto rec = store_->get(*cached);
@@ -609,13 +630,10 @@ Response Service::submit(const Request& req, const std::string& query) {
       return r;
     }
   }
-  const auto key_it = req.headers.find("idempotency-key");
-  const std::string idem = key_it == req.headers.end() ? "" : key_it->second;
-  if (idem.size() > 200) return error(400, "the Idempotency-Key is longer than 200 characters");
   // A retry of an accepted submission gets its job even when the queue has filled since; any other
   // submission counts against the queue, with a key or without (a fresh key per request used to
   // skip the limit).
-  const bool retry = !idem.empty() && store_->find_idempotent(idem).has_value();
+  const bool retry = held.has_value();
   if (!retry && store_->count(JobState::kQueued) >= options_.max_queue) {
     Response r = error(429, "the queue is full (" + std::to_string(options_.max_queue) + " jobs); retry later");
     r.headers.emplace_back("Retry-After", "30");
@@ -626,6 +644,7 @@ Response Service::submit(const Request& req, const std::string& query) {
     std::fprintf(stderr, "hemibake-server: a job could not be stored: %s\n", created.error.c_str());
     return error(500, "the job could not be stored");
   }
+  if (created.existed && created.cache_key != cache_key) return reused(created.id);  // taken meanwhile
   const std::string& id = created.id;
   wake_.notify_one();
   auto rec = store_->get(id);
@@ -999,7 +1018,15 @@ Response Service::route(const Request& req, const std::string& path, const std::
       r.headers.emplace_back("Content-Disposition", "attachment; filename=\"" + id + ".glb\"");
       return r;
     }
-    if (sub == "result" || sub == "preview" || sub == "events") return not_allowed("GET");  // events: GET is the session's
+    // GET of an event stream is the session's; what comes here is a HEAD (or a test's GET): the
+    // stream's status and type, without the stream.
+    if (sub == "events" && req.method == "GET") {
+      Response r;
+      r.content_type = "text/event-stream";
+      r.headers.emplace_back("Cache-Control", "no-cache");
+      return r;
+    }
+    if (sub == "result" || sub == "preview" || sub == "events") return not_allowed("GET");
     return error(404, "no such resource: " + path);
   }
   return error(404, "no such resource: " + path);

@@ -513,6 +513,25 @@ TEST(Handler, StoreOfTheOlderLayoutIsConverted) {
   std::filesystem::remove_all(dir);
 }
 
+// An Idempotency-Key names one submission: the same key with another scene or other parameters is
+// refused with 422 (as the IETF Idempotency-Key draft asks), not answered with the first job.
+TEST(Handler, IdempotencyKeyReusedForAnotherSubmissionIsRefused) {
+  Fixture f;
+  const std::map<std::string, std::string> h = {{"content-type", "model/gltf+json"}, {"idempotency-key", "k-1"}};
+  const Response first = f.call("POST", "/v1/jobs?convergence=0.3", cornell(), h);
+  ASSERT_EQ(first.status, 202) << first.body;
+  const Response again = f.call("POST", "/v1/jobs?convergence=0.3", cornell(), h);
+  EXPECT_EQ(again.status, 200) << again.body;
+  EXPECT_EQ(json::parse(again.body)["id"], json::parse(first.body)["id"]);
+  const Response params = f.call("POST", "/v1/jobs?convergence=0.25", cornell(), h);
+  EXPECT_EQ(params.status, 422) << params.body;
+  EXPECT_NE(json::parse(params.body)["error"].get<std::string>().find("Idempotency-Key"), std::string::npos) << params.body;
+  json other = json::parse(cornell());
+  other["materials"][0]["name"] = "another";
+  const Response scene = f.call("POST", "/v1/jobs?convergence=0.3", other.dump(), h);
+  EXPECT_EQ(scene.status, 422) << scene.body;
+}
+
 TEST(Handler, QueryStringsDecode) {
   const auto q = parse_query("a=1&b=x%20y&c=&d&e=%2F%2f+z");
   EXPECT_EQ(q.at("a"), "1");

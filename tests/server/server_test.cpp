@@ -1023,4 +1023,51 @@ TEST(Server, SlowButSteadyUploadsSucceedAndTooSlowOnesGet408) {
   EXPECT_EQ(steady.rfind("HTTP/1.1 202", 0), 0u) << steady;
 }
 
+// Smaller things from a probe: Expect: 100-continue is answered before the body is sent; HEAD on
+// an event stream has the GET's status and type; the Bearer scheme is matched in any case
+// (RFC 9110, section 11.1); a Last-Event-ID that is not a whole number replays from the start.
+TEST(Server, ContinueHeadOnEventsBearerCaseAndBadLastEventId) {
+  ServerProcess server(temp_dir("small"), {"--workers", "1"}, {"HEMIBAKE_TOKENS=s3cret"});
+  ASSERT_NE(server.port(), 0);
+  const std::map<std::string, std::string> auth = {{"Authorization", "bearer s3cret"}};
+  EXPECT_EQ(request(server.port(), http::verb::get, "/v1/jobs", "", auth).status, 200);
+  EXPECT_EQ(request(server.port(), http::verb::get, "/v1/jobs", "", {{"Authorization", "BEARER   s3cret"}}).status, 200);
+  EXPECT_EQ(request(server.port(), http::verb::get, "/v1/jobs", "", {{"Authorization", "Basic s3cret"}}).status, 401);
+
+  bool timed_out = false;
+  const std::string cont = exchange(server.port(),
+                                    "POST /v1/jobs HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: model/gltf+json\r\n"
+                                    "Authorization: Bearer s3cret\r\nExpect: 100-continue\r\nContent-Length: 5618\r\n\r\n",
+                                    3s, &timed_out);
+  EXPECT_EQ(cont, "HTTP/1.1 100 Continue\r\n\r\n");
+  // Refused from the headers: no 100, the final answer at once.
+  const std::string refused = exchange(server.port(),
+                                       "POST /v1/jobs HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: model/gltf+json\r\n"
+                                       "Expect: 100-continue\r\nContent-Length: 5618\r\n\r\n",
+                                       3s, &timed_out);
+  EXPECT_EQ(refused.rfind("HTTP/1.1 401", 0), 0u) << refused;
+
+  const Reply posted = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.3", cornell(),
+                               {{"Content-Type", "model/gltf+json"}, {"Authorization", "Bearer s3cret"}});
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = posted.js()["id"];
+  const Reply head = request(server.port(), http::verb::head, "/v1/jobs/" + id + "/events", "", auth);
+  EXPECT_EQ(head.status, 200);
+  EXPECT_EQ(head.headers.count("content-type") ? head.headers.at("content-type") : "", "text/event-stream");
+  EXPECT_EQ(request(server.port(), http::verb::head, "/v1/jobs/nope/events", "", auth).status, 404);
+
+  for (int i = 0; i < 200 && request(server.port(), http::verb::get, "/v1/jobs/" + id, "", auth).js()["state"] != "succeeded"; ++i)
+    std::this_thread::sleep_for(50ms);
+  auto first_id = [&](const std::string& last) {
+    const std::string all = exchange(server.port(), "GET /v1/jobs/" + id + "/events HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+                                     "Authorization: Bearer s3cret\r\nLast-Event-ID: " + last + "\r\n\r\n", 10s);
+    const size_t at = all.find("\nid: ");
+    return at == std::string::npos ? std::string("none") : all.substr(at + 5, all.find('\n', at + 5) - at - 5);
+  };
+  EXPECT_EQ(first_id("-5"), "1");
+  EXPECT_EQ(first_id("abc"), "1");
+  EXPECT_EQ(first_id("99999999999999999999999"), "1");
+  EXPECT_EQ(first_id("1"), "2");
+}
+
 }  // namespace
