@@ -40,6 +40,9 @@ void usage(FILE* out) {
       "  --max-elements N        element budget per job (default 2000000)\n"
       "  --max-shot-cache-mb N   memory per job for replayed shots (default 256; caps the job's shot_cache_mb)\n"
       "  --max-triangles N       largest scene in triangles (default 2000000)\n"
+      "  --max-job-mb N          memory a job may need (hemicubes, elements, images, shot cache, scene),\n"
+      "                          estimated at submit; more is refused with 422 (default 2048)\n"
+      "  --max-image-pixels N    decoded texture pixels per job, all images together (default 67108864)\n"
       "  --max-attempts N        restarts of a job interrupted by a crash (default 3)\n"
       "  --expire-hours H        delete finished jobs and results after H hours (default 168)\n",
       out);
@@ -61,7 +64,7 @@ int main(int argc, char** argv) {
     static const char* const kOptions[] = {"--listen", "--data", "--workers", "--solver-threads", "--tokens", "--max-body",
                                            "--max-queue", "--max-streams", "--idle-timeout", "--header-timeout", "--min-rate", "--check-threads", "--max-checks",
                                            "--job-seconds", "--max-elements",
-                                           "--max-shot-cache-mb", "--max-triangles", "--max-attempts", "--expire-hours"};
+                                           "--max-shot-cache-mb", "--max-triangles", "--max-job-mb", "--max-image-pixels", "--max-attempts", "--expire-hours"};
     if (std::find(std::begin(kOptions), std::end(kOptions), opt) == std::end(kOptions)) {
       std::fprintf(stderr, "hemibake-server: unknown option '%s' (try --help)\n", opt.c_str());
       return 2;
@@ -118,6 +121,8 @@ int main(int argc, char** argv) {
     else if (opt == "--max-elements") so.max_elements = static_cast<uint64_t>(need_count(1e12));
     else if (opt == "--max-shot-cache-mb") so.max_shot_cache_mb = static_cast<uint32_t>(std::min(need_num(), 1048576.0));
     else if (opt == "--max-triangles") so.max_triangles = static_cast<uint64_t>(need_count(1e12));
+    else if (opt == "--max-job-mb") so.max_job_bytes = static_cast<uint64_t>(need_count(1e9)) << 20;
+    else if (opt == "--max-image-pixels") so.max_image_pixels = static_cast<uint64_t>(need_count(1e15));
     else if (opt == "--max-attempts") so.max_attempts = static_cast<int>(need_count(1e6));
     else if (opt == "--expire-hours") so.expire_seconds = need_num() * 3600.0;
     else {

@@ -91,6 +91,37 @@ constexpr auto kRegisterWait = std::chrono::seconds(5);
 constexpr unsigned kLookupThreads = 2;
 constexpr size_t kMaxLookups = 1024;
 
+// What a job's bake may hold in memory, by part, in bytes. The factors are measured (peak RSS of
+// `hemibake bake`, Release, Cornell box): the hemicubes take about 220 bytes per pixel of the top
+// face for each solver thread (resolution 1024: 247 MB; 2048: 926 MB; 1024 on two threads:
+// 487 MB), an element about 1 KB with the output written (400 000: 436 MB). Leaves are at least
+// aeps of the scene's area, so there are at most 1/aeps of them besides patches that are smaller.
+// hr's links and the reference tracer's paths are not counted.
+struct JobMemory {
+  uint64_t hemicubes = 0, elements = 0, element_count = 0, images = 0, shot_cache = 0, scene = 0;
+  uint64_t total() const { return hemicubes + elements + images + shot_cache + scene; }
+};
+
+JobMemory job_memory(const protocol::JobSpec& spec, const protocol::SceneDocument& document, uint64_t scene_bytes,
+                     unsigned threads) {
+  constexpr uint64_t kCubeBytesPerPixel = 240, kElementBytes = 1100;
+  constexpr uint64_t kFinerResolution = 400;  // shoot_piece's finer hemicube, for low resolutions
+  JobMemory m;
+  const uint64_t n = spec.params.resolution;
+  const uint64_t finer = std::min(2 * n, kFinerResolution);
+  m.hemicubes = kCubeBytesPerPixel * (n * n + (finer > n ? finer * finer : 0)) * std::max(1u, threads);
+  const double by_area = spec.params.aeps > 0 ? std::ceil(1.0 / spec.params.aeps) : 1e18;
+  m.element_count = std::min<uint64_t>(spec.params.max_elements,
+                                       static_cast<uint64_t>(std::min(by_area, 1e18)) + protocol::scene_of(document).patches.size());
+  m.elements = kElementBytes * m.element_count;
+  m.images = 4 * protocol::image_pixel_count(document);
+  m.shot_cache = static_cast<uint64_t>(spec.params.shot_cache_mb) << 20;
+  m.scene = 3 * scene_bytes;  // as stored, as loaded, as written
+  return m;
+}
+
+std::string megabytes(uint64_t bytes) { return std::to_string((bytes + (1u << 19)) >> 20) + " MB"; }
+
 Response preview_missed() {
   Response r = error(409, "the job finished (or is between long shots) before a preview was made; ask again or fetch the result");
   r.headers.emplace_back("Retry-After", "1");
@@ -390,10 +421,7 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
   spec.params.threads = options_.solver_threads;
   spec.params.max_elements = std::min<uint64_t>(spec.params.max_elements, options_.max_elements);
   spec.params.shot_cache_mb = std::min(spec.params.shot_cache_mb, options_.max_shot_cache_mb);
-  protocol::LoadLimits limits;
-  limits.allow_external_files = false;
-  limits.max_file_bytes = options_.max_body_bytes;
-  limits.max_triangles = options_.max_triangles;
+  const protocol::LoadLimits limits = load_limits();
   const auto loaded = protocol::load_gltf_memory(
       std::span(reinterpret_cast<const uint8_t*>(scene.data()), scene.size()), "", limits);
   if (!loaded.document) {
@@ -500,6 +528,16 @@ bool Service::end_job(const std::string& id, const std::string* result, std::str
   return false;
 }
 
+protocol::LoadLimits Service::load_limits() const {
+  protocol::LoadLimits limits;
+  limits.allow_external_files = false;
+  limits.max_file_bytes = options_.max_body_bytes;
+  limits.max_triangles = options_.max_triangles;
+  limits.max_image_pixels = static_cast<uint32_t>(std::min<uint64_t>(options_.max_image_pixels, 0xffffffffu));
+  limits.max_total_image_pixels = options_.max_image_pixels;
+  return limits;
+}
+
 std::optional<Response> Service::check_auth(const Request& request) const {
   if (options_.tokens.empty()) return std::nullopt;
   const std::string path = request.target.substr(0, request.target.find('?'));
@@ -600,13 +638,24 @@ Response Service::submit(const Request& req, const std::string& query) {
   if (scene.size() > options_.max_body_bytes) return error(413, "the scene is larger than " + std::to_string(options_.max_body_bytes) + " bytes");
   if (std::string e = protocol::apply_params(values, spec); !e.empty()) return error(400, e);
   // The scene is checked before it is accepted: a bad file is refused now, not in the queue.
-  protocol::LoadLimits limits;
-  limits.allow_external_files = false;
-  limits.max_file_bytes = options_.max_body_bytes;
-  limits.max_triangles = options_.max_triangles;
-  const auto loaded = protocol::load_gltf_memory(std::span(reinterpret_cast<const uint8_t*>(scene.data()), scene.size()), "", limits);
+  const auto loaded = protocol::load_gltf_memory(std::span(reinterpret_cast<const uint8_t*>(scene.data()), scene.size()), "",
+                                                 load_limits());
   if (!loaded.document) return error(422, loaded.error);
   if (std::string e = protocol::bake_error(*loaded.document); !e.empty()) return error(422, e);
+  // The memory the bake will ask for, with the server's caps applied as the worker applies them.
+  {
+    protocol::JobSpec capped = spec;
+    capped.params.max_elements = std::min<uint64_t>(capped.params.max_elements, options_.max_elements);
+    capped.params.shot_cache_mb = std::min(capped.params.shot_cache_mb, options_.max_shot_cache_mb);
+    const JobMemory m = job_memory(capped, *loaded.document, scene.size(), options_.solver_threads);
+    if (m.total() > options_.max_job_bytes)
+      return error(422, "the job would need about " + megabytes(m.total()) + " of memory (hemicubes at resolution " +
+                            std::to_string(capped.params.resolution) + ": " + megabytes(m.hemicubes) + "; up to " +
+                            std::to_string(m.element_count) + " elements: " + megabytes(m.elements) + "; images: " +
+                            megabytes(m.images) + "; shot cache: " + megabytes(m.shot_cache) + "; scene: " + megabytes(m.scene) +
+                            "), more than the server's limit of " + megabytes(options_.max_job_bytes) +
+                            " per job (hemibake-server --max-job-mb); lower resolution, max_elements, aeps or shot_cache_mb");
+  }
   const std::string params = protocol::params_json(spec);
   const std::string cache_key = sha256_hex(scene) + ":" + sha256_hex(params);
   const auto key_it = req.headers.find("idempotency-key");

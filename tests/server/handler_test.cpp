@@ -7,6 +7,9 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 #include <sqlite3.h>
+#define STB_IMAGE_WRITE_STATIC
+#define STB_IMAGE_WRITE_IMPLEMENTATION
+#include <stb_image_write.h>
 
 #include <atomic>
 #include <chrono>
@@ -530,6 +533,57 @@ TEST(Handler, IdempotencyKeyReusedForAnotherSubmissionIsRefused) {
   other["materials"][0]["name"] = "another";
   const Response scene = f.call("POST", "/v1/jobs?convergence=0.3", other.dump(), h);
   EXPECT_EQ(scene.status, 422) << scene.body;
+}
+
+// A PNG of w x h grey pixels as a data URI.
+std::string png_uri(int w, int h) {
+  std::vector<unsigned char> pixels(static_cast<size_t>(w) * h * 3, 128);
+  std::string png;
+  stbi_write_png_to_func([](void* out, void* data, int size) { static_cast<std::string*>(out)->append(static_cast<char*>(data), size); },
+                         &png, w, h, 3, pixels.data(), w * 3);
+  static const char* abc = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string b64;
+  for (size_t i = 0; i < png.size(); i += 3) {
+    uint32_t v = static_cast<unsigned char>(png[i]) << 16;
+    if (i + 1 < png.size()) v |= static_cast<unsigned char>(png[i + 1]) << 8;
+    if (i + 2 < png.size()) v |= static_cast<unsigned char>(png[i + 2]);
+    b64 += abc[(v >> 18) & 63];
+    b64 += abc[(v >> 12) & 63];
+    b64 += i + 1 < png.size() ? abc[(v >> 6) & 63] : '=';
+    b64 += i + 2 < png.size() ? abc[v & 63] : '=';
+  }
+  return "data:image/png;base64," + b64;
+}
+
+// Memory a job asks for is budgeted at submit, naming the limit: a 4096² hemicube (3.7 GB) is
+// refused by default, a small job under a small budget is not; the decoded pixels of all images
+// together are limited (the limit was per image).
+TEST(Handler, JobsThatNeedMoreMemoryThanTheBudgetAreRefusedAtSubmit) {
+  const std::map<std::string, std::string> gltf = {{"content-type", "model/gltf+json"}};
+  {
+    Fixture f;
+    const Response huge = f.call("POST", "/v1/jobs?resolution=4096", cornell(), gltf);
+    EXPECT_EQ(huge.status, 422) << huge.body;
+    EXPECT_NE(huge.body.find("limit of 2048 MB per job (hemibake-server --max-job-mb)"), std::string::npos) << huge.body;
+    EXPECT_NE(huge.body.find("hemicubes at resolution 4096"), std::string::npos) << huge.body;
+  }
+  ServiceOptions o;
+  o.max_job_bytes = 64u << 20;
+  o.max_image_pixels = 100;
+  Fixture f(o);
+  const Response big = f.call("POST", "/v1/jobs?resolution=1024&shot_cache_mb=0", cornell(), gltf);
+  EXPECT_EQ(big.status, 422) << big.body;
+  EXPECT_NE(big.body.find("limit of 64 MB"), std::string::npos) << big.body;
+  const Response cache = f.call("POST", "/v1/jobs?shot_cache_mb=200", cornell(), gltf);
+  EXPECT_EQ(cache.status, 422) << cache.body;
+  EXPECT_EQ(f.call("POST", "/v1/jobs?resolution=100&shot_cache_mb=0&convergence=0.3", cornell(), gltf).status, 202);
+  json scene = json::parse(cornell());
+  scene["images"] = json::array({{{"uri", png_uri(8, 8)}}});
+  EXPECT_EQ(f.call("POST", "/v1/jobs?shot_cache_mb=0&convergence=0.31", scene.dump(), gltf).status, 202);
+  scene["images"].push_back({{"uri", png_uri(8, 8)}});
+  const Response images = f.call("POST", "/v1/jobs?shot_cache_mb=0&convergence=0.32", scene.dump(), gltf);
+  EXPECT_EQ(images.status, 422) << images.body;
+  EXPECT_NE(images.body.find("more than 100 pixels in all"), std::string::npos) << images.body;
 }
 
 TEST(Handler, QueryStringsDecode) {

@@ -3,6 +3,7 @@
 // is tested without a network (through handle(), which waits for it).
 #pragma once
 
+#include "hemibake/protocol/gltf.h"
 #include "hemibake/server/store.h"
 
 #include <atomic>
@@ -37,6 +38,9 @@ struct ServiceOptions {
   uint64_t max_elements = 2'000'000;  ///< per-job element budget (caps the parameter)
   uint32_t max_shot_cache_mb = 256;   ///< per-job memory for replayed shots (caps the parameter)
   uint64_t max_triangles = 2'000'000;
+  uint64_t max_job_bytes = 2048ull << 20;  ///< memory a job's bake may need (hemicubes, elements, images,
+                                           ///< shot cache, scene); more is refused at submit (422)
+  uint64_t max_image_pixels = 8192ull * 8192;  ///< decoded texture pixels per job, all images together
   unsigned check_threads = 0;       ///< threads that load and check submitted scenes; 0 = half the cores (at least 1)
   size_t max_checks = 4;            ///< submitted scenes waiting for a check thread before 503 (each
                                     ///< holds its body, up to max_body_bytes, in memory)
@@ -110,6 +114,8 @@ class Service {
   void worker_loop();
   void clock_loop();
   void bake(const std::string& id, const std::string& scene, const std::string& params);
+  /// How submitted scenes are loaded and checked (the same at submit and in the worker).
+  protocol::LoadLimits load_limits() const;
   /// Ends running job `id`: succeeded with `result`, or failed with `failure` if there is none.
   bool end_job(const std::string& id, const std::string* result, std::string failure);
   /// Stores an event of job `id` and wakes the streams that wait for one.
