@@ -15,6 +15,8 @@ if [[ "${1:-}" == "--test" ]]; then
   # Chromium for the three.js render check; Node.js and npm for the independent glTF checks in
   # tests/e2e (a newer node already on the machine is kept).
   packages+=(chromium)
+  # clang and libFuzzer for the fuzz targets in tests/fuzz.
+  packages+=(clang-14 libclang-rt-14-dev)
   if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
     packages+=(nodejs npm)
   fi

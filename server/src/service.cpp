@@ -203,8 +203,22 @@ bool same(const std::string& a, const std::string& b) {
   return diff == 0;
 }
 
-// The parts of a multipart/form-data body by field name: (content type, data). `repeated` is set to
-// the name of a field given twice.
+}  // namespace
+
+std::map<std::string, std::string> parse_query(const std::string& query) {
+  std::map<std::string, std::string> out;
+  size_t start = 0;
+  while (start < query.size()) {
+    size_t end = query.find('&', start);
+    if (end == std::string::npos) end = query.size();
+    const std::string pair = query.substr(start, end - start);
+    const size_t eq = pair.find('=');
+    if (!pair.empty()) out[percent_decode(pair.substr(0, eq))] = eq == std::string::npos ? "" : percent_decode(pair.substr(eq + 1));
+    start = end + 1;
+  }
+  return out;
+}
+
 std::map<std::string, std::pair<std::string, std::string>> parse_multipart(const std::string& body, const std::string& boundary,
                                                                            std::string& repeated) {
   std::map<std::string, std::pair<std::string, std::string>> parts;
@@ -239,22 +253,6 @@ std::map<std::string, std::pair<std::string, std::string>> parse_multipart(const
     pos = next + 2;
   }
   return parts;
-}
-
-}  // namespace
-
-std::map<std::string, std::string> parse_query(const std::string& query) {
-  std::map<std::string, std::string> out;
-  size_t start = 0;
-  while (start < query.size()) {
-    size_t end = query.find('&', start);
-    if (end == std::string::npos) end = query.size();
-    const std::string pair = query.substr(start, end - start);
-    const size_t eq = pair.find('=');
-    if (!pair.empty()) out[percent_decode(pair.substr(0, eq))] = eq == std::string::npos ? "" : percent_decode(pair.substr(eq + 1));
-    start = end + 1;
-  }
-  return out;
 }
 
 Service::Service(const ServiceOptions& o) : options_(o) {}

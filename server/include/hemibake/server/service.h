@@ -186,4 +186,9 @@ class Service {
 /// Splits "a=1&b=x%20y" into decoded pairs.
 std::map<std::string, std::string> parse_query(const std::string& query);
 
+/// The parts of a multipart/form-data body by field name: (content type in lower case, data).
+/// `repeated` is set to the name of a field given twice (the last one is kept).
+std::map<std::string, std::pair<std::string, std::string>> parse_multipart(const std::string& body, const std::string& boundary,
+                                                                           std::string& repeated);
+
 }  // namespace hemibake::server
