@@ -21,6 +21,7 @@
 #include <mutex>
 #include <sstream>
 #include <thread>
+#include <sys/resource.h>
 #include <unistd.h>
 #include <vector>
 
@@ -584,6 +585,24 @@ TEST(Handler, JobsThatNeedMoreMemoryThanTheBudgetAreRefusedAtSubmit) {
   const Response images = f.call("POST", "/v1/jobs?shot_cache_mb=0&convergence=0.32", scene.dump(), gltf);
   EXPECT_EQ(images.status, 422) << images.body;
   EXPECT_NE(images.body.find("more than 100 pixels in all"), std::string::npos) << images.body;
+}
+
+// Found by gltf_fuzz: a baked GLB (7 KB) whose Draco primitive has an accessor of componentType
+// 5127, which glTF does not define. tinygltf sized the decoded buffer by a component size of -1
+// and allocated 4 GB for the submission. It is refused from the JSON, with the accessor named.
+TEST(Handler, UndefinedComponentTypeIsRefusedBeforeDracoDecoding) {
+  Fixture f;
+  std::ifstream in(HEMIBAKE_SOURCE_DIR "/tests/fuzz/corpus/gltf/draco-bad-component-type.glb", std::ios::binary);
+  const std::string glb((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_EQ(glb.size(), 6796u);
+  rusage before{};
+  getrusage(RUSAGE_SELF, &before);
+  const Response r = f.call("POST", "/v1/jobs", glb, {{"content-type", "model/gltf-binary"}});
+  rusage after{};
+  getrusage(RUSAGE_SELF, &after);
+  EXPECT_EQ(r.status, 422) << r.body;
+  EXPECT_NE(r.body.find("accessor 4.componentType must be"), std::string::npos) << r.body;
+  EXPECT_LT(after.ru_maxrss - before.ru_maxrss, 512 * 1024) << "peak memory grew by " << (after.ru_maxrss - before.ru_maxrss) << " KB";
 }
 
 TEST(Handler, QueryStringsDecode) {
