@@ -22,6 +22,7 @@
 #include <set>
 #include <sstream>
 #include <string>
+#include <fcntl.h>
 #include <poll.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
@@ -48,15 +49,20 @@ std::string read_file(const std::string& path) {
 // A hemibake-server process on a free loopback port.
 class ServerProcess {
  public:
-  // `max_files` > 0 sets the server's limit of open file descriptors.
+  // `max_files` > 0 sets the server's limit of open file descriptors. `prefix` runs the server
+  // through another program (which ends by executing it); `errors` receives its stderr.
   ServerProcess(const std::string& data_dir, std::vector<std::string> extra = {}, std::vector<std::string> env = {},
-                rlim_t max_files = 0) {
+                rlim_t max_files = 0, std::vector<std::string> prefix = {}, const std::string& errors = {}) {
     int fds[2];
     if (pipe(fds) != 0) std::abort();
     pid_ = fork();
     if (pid_ == 0) {
       dup2(fds[1], STDOUT_FILENO);
       close(fds[0]);
+      if (!errors.empty()) {
+        const int fd = ::open(errors.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        dup2(fd, STDERR_FILENO);
+      }
       if (max_files > 0) {
         const rlimit limit{max_files, max_files};
         setrlimit(RLIMIT_NOFILE, &limit);
@@ -65,7 +71,9 @@ class ServerProcess {
       // HEMIBAKE_TEST_SERVER runs the tests against another build of the server (an older one, to see a
       // regression test fail).
       const char* binary = std::getenv("HEMIBAKE_TEST_SERVER") ? std::getenv("HEMIBAKE_TEST_SERVER") : HEMIBAKE_SERVER;
-      std::vector<std::string> args = {binary, "--listen", "127.0.0.1:0", "--data", data_dir};
+      std::vector<std::string> args = prefix;
+      for (const std::string& a : {std::string(binary), std::string("--listen"), std::string("127.0.0.1:0"), std::string("--data"), data_dir})
+        args.push_back(a);
       args.insert(args.end(), extra.begin(), extra.end());
       std::vector<char*> argv;
       for (auto& a : args) argv.push_back(a.data());
@@ -1068,6 +1076,54 @@ TEST(Server, ContinueHeadOnEventsBearerCaseAndBadLastEventId) {
   EXPECT_EQ(first_id("abc"), "1");
   EXPECT_EQ(first_id("99999999999999999999999"), "1");
   EXPECT_EQ(first_id("1"), "2");
+}
+
+// A real full disk: the data directory on an 8 MB tmpfs of the server's own (a user and mount
+// namespace, so no privilege is needed), filled up while a job bakes. The result cannot be
+// written: once space is back, the job is failed with the reason (not left running), its stream
+// has ended, and the next job succeeds.
+TEST(Server, FullDiskDuringABakeFailsTheJobAndTheServerRecovers) {
+  if (std::system("unshare -rm sh -c 'mount -t tmpfs -o size=1m tmpfs /tmp' 2>/dev/null") != 0)
+    GTEST_SKIP() << "no user and mount namespaces here (unshare -rm)";
+  const std::string dir = temp_dir("full-disk");
+  std::filesystem::create_directories(dir);
+  const std::string errors = dir + "-stderr.log";
+  ServerProcess server(dir, {"--workers", "1"}, {}, 0,
+                       {"/usr/bin/unshare", "-rm", "sh", "-c", "mount -t tmpfs -o size=8m tmpfs \"$4\" && exec \"$0\" \"$@\""}, errors);
+  ASSERT_NE(server.port(), 0) << read_file(errors);
+  const unsigned short port = server.port();
+  // The server's view of its data directory (its mount namespace).
+  const std::string inside = "/proc/" + std::to_string(server.pid()) + "/root" + dir;
+  ASSERT_TRUE(std::filesystem::exists(inside + "/hemibake.db"));
+  const std::string id = request(port, http::verb::post, "/v1/jobs?resolution=512&reuse=false&max_shots=10", cornell(), kGltf).js()["id"];
+  for (int i = 0; i < 200 && request(port, http::verb::get, "/v1/jobs/" + id).js()["state"] != "running"; ++i)
+    std::this_thread::sleep_for(20ms);
+  {
+    std::ofstream ballast(inside + "/ballast", std::ios::binary);
+    const std::string mb(1 << 20, 'x');
+    for (int i = 0; i < 16 && ballast.write(mb.data(), static_cast<std::streamsize>(mb.size())); ++i) {}
+  }
+  // Full: a submission is refused cleanly, with nothing queued.
+  const Reply refused = request(port, http::verb::post, "/v1/jobs?convergence=0.3", cornell(), kGltf);
+  EXPECT_EQ(refused.status, 500) << refused.body;
+  EXPECT_TRUE(refused.js().contains("error")) << refused.body;
+  // Space comes back once the worker has found that the result cannot be written.
+  bool seen = false;
+  for (int i = 0; i < 600 && !(seen = read_file(errors).find("the result of " + id + " could not be stored") != std::string::npos); ++i)
+    std::this_thread::sleep_for(100ms);
+  EXPECT_TRUE(seen) << read_file(errors);
+  std::filesystem::remove(inside + "/ballast");
+  const json job = wait_finished(port, id, 30s);
+  EXPECT_EQ(job["state"], "failed") << job.dump() << "\n" << read_file(errors);
+  EXPECT_NE(job.value("error", "").find("the result could not be stored"), std::string::npos) << job.dump();
+  EXPECT_NE(job.value("error", "").find("full"), std::string::npos) << job.dump();
+  const auto evs = events(port, id);  // returns only once the stream has ended
+  ASSERT_FALSE(evs.empty());
+  EXPECT_EQ(json::parse(std::get<2>(evs.back())).value("state", ""), "failed");
+  const Reply next = request(port, http::verb::post, "/v1/jobs?convergence=0.2", cornell(), kGltf);
+  ASSERT_EQ(next.status, 202) << next.body;
+  EXPECT_EQ(wait_finished(port, next.js()["id"])["state"], "succeeded");
+  std::filesystem::remove(errors);
 }
 
 }  // namespace
