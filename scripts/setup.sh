@@ -21,6 +21,8 @@ fi
 if [[ "${1:-}" == "--test" ]]; then
   # Chromium for the three.js render checks and the web page's browser tests.
   packages+=(chromium)
+  # clang and libFuzzer for the fuzz targets in tests/fuzz.
+  packages+=(clang-14 libclang-rt-14-dev)
 fi
 
 missing=()

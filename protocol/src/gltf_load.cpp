@@ -101,7 +101,8 @@ std::string parse_document(std::span<const uint8_t> bytes, const std::string& ba
   if (bytes.size() > 0xffffffffull) return "the file is too large";  // tinygltf takes an unsigned int
   PrecheckResult pre;
   if (std::string e = precheck_gltf(bytes, limits.allow_external_files, pre); !e.empty()) return e;
-  const ParseOptions options{base_dir, limits.allow_external_files, limits.max_file_bytes, limits.max_image_pixels};
+  const ParseOptions options{base_dir, limits.allow_external_files, limits.max_file_bytes, limits.max_image_pixels,
+                             limits.max_total_image_pixels};
   std::string err;
   bool ok = false;
   try {
@@ -110,6 +111,7 @@ std::string parse_document(std::span<const uint8_t> bytes, const std::string& ba
     ok = false;
     err = e.what();
   }
+  if (!ok && err.rfind(kTooManyImagePixels, 0) == 0) return err;
   if (!ok) {
     while (!err.empty() && (err.back() == '\n' || err.back() == ' ')) err.pop_back();
     if (err.size() > 300) err = err.substr(0, 300) + "...";
@@ -671,6 +673,12 @@ std::string add_baked_primitive(const tinygltf::Model& m, int mesh, size_t pi, c
 
 const solver::Scene& scene_of(const SceneDocument& document) { return document.scene; }
 uint64_t triangle_count(const SceneDocument& document) { return document.triangles; }
+
+uint64_t image_pixel_count(const SceneDocument& document) {
+  uint64_t n = 0;
+  for (const auto& image : document.model.images) n += static_cast<uint64_t>(image.image.size() / 4);
+  return n;
+}
 
 std::string bake_error(const SceneDocument& document) {
   // Radiosity is the light of emitting surfaces and lights: without one, every bake is black.

@@ -20,6 +20,9 @@ struct LoaderContext {
   bool allow_external = false;
   uint64_t max_bytes = 0;
   uint32_t max_image_pixels = 0;
+  uint64_t max_total_image_pixels = 0;
+  uint64_t total_image_pixels = 0;  // decoded so far
+  std::string fatal;                // an error that ends the load
   SceneDocument* doc = nullptr;
   std::vector<std::string>* warnings = nullptr;
 };
@@ -102,6 +105,15 @@ bool load_image(tinygltf::Image* image, const int index, std::string*, std::stri
                              std::to_string(h) + ") is larger than the limit; its texture counts as white");
     return true;
   }
+  // Decoded images take 4 bytes a pixel: all of them together are limited, checked before the
+  // decoding (eight 8192² PNGs in a 2 MB file decoded to 2 GB, and a bake of 4.2 GB).
+  ctx->total_image_pixels += static_cast<uint64_t>(w) * static_cast<uint64_t>(h);
+  if (ctx->total_image_pixels > ctx->max_total_image_pixels) {
+    ctx->fatal = std::string(kTooManyImagePixels) + std::to_string(ctx->max_total_image_pixels) +
+                 " pixels in all (image " + std::to_string(index) + " is " + std::to_string(w) + " x " + std::to_string(h) +
+                 "): that is the limit; use smaller textures";
+    return false;
+  }
   unsigned char* pixels = stbi_load_from_memory(bytes, size, &w, &h, &comp, 4);
   if (!pixels) {
     ctx->warnings->push_back("image " + std::to_string(index) + " cannot be decoded; its texture counts as white");
@@ -126,6 +138,7 @@ bool parse_gltf(std::span<const uint8_t> bytes, const ParseOptions& options, Sce
   ctx.allow_external = options.allow_external;
   ctx.max_bytes = options.max_bytes;
   ctx.max_image_pixels = options.max_image_pixels;
+  ctx.max_total_image_pixels = options.max_total_image_pixels;
   ctx.doc = &doc;
   ctx.warnings = &warnings;
   tinygltf::TinyGLTF loader;
@@ -134,9 +147,14 @@ bool parse_gltf(std::span<const uint8_t> bytes, const ParseOptions& options, Sce
   std::string warn;
   const bool binary = bytes.size() >= 4 && std::memcmp(bytes.data(), "glTF", 4) == 0;
   const auto size = static_cast<unsigned int>(bytes.size());
-  return binary ? loader.LoadBinaryFromMemory(&doc.model, &err, &warn, bytes.data(), size, options.base_dir)
-                : loader.LoadASCIIFromString(&doc.model, &err, &warn, reinterpret_cast<const char*>(bytes.data()), size,
-                                             options.base_dir);
+  const bool ok = binary ? loader.LoadBinaryFromMemory(&doc.model, &err, &warn, bytes.data(), size, options.base_dir)
+                          : loader.LoadASCIIFromString(&doc.model, &err, &warn, reinterpret_cast<const char*>(bytes.data()),
+                                                       size, options.base_dir);
+  if (!ctx.fatal.empty()) {
+    err = ctx.fatal;
+    return false;
+  }
+  return ok;
 }
 
 }  // namespace hemibake::protocol

@@ -15,7 +15,11 @@ struct ParseOptions {
   bool allow_external = false;    ///< false: only embedded data (GLB or data URIs) is read
   uint64_t max_bytes = 0;         ///< per external file
   uint32_t max_image_pixels = 0;  ///< a larger image is not decoded (its texture counts as white)
+  uint64_t max_total_image_pixels = ~0ull;  ///< decoded pixels of all images together; past it, an error
 };
+
+/// How the error of a scene whose images hold more pixels than max_total_image_pixels begins.
+inline constexpr const char* kTooManyImagePixels = "the scene's images hold more than ";
 
 /// Parses `bytes` (GLB or glTF JSON, told apart by the GLB magic) into doc.model with tinygltf.
 /// Images keep their encoded bytes in doc.image_bytes and doc.image_mime and are decoded to 8-bit

@@ -11,6 +11,7 @@
 
 #include <cctype>
 #include <cstring>
+#include <set>
 
 namespace hemibake::protocol {
 namespace {
@@ -227,6 +228,12 @@ std::string check_accessors(Checker& c, const Counts& n) {
     if (!c.index(a, "bufferView", n.views, what, "bufferView") || !c.non_negative(a, "byteOffset", what) ||
         !c.non_negative(a, "count", what))
       return shorten(c.error);
+    // tinygltf takes any componentType from 5120 to 5130, and its Draco decoding sizes buffers by
+    // the component size, which is -1 for the ones glTF does not define: a 7 KB file with 5127 on
+    // a Draco primitive's accessor allocated 4 GB.
+    const json& type = a.contains("componentType") ? a["componentType"] : json();
+    if (!type.is_number_integer() || !std::set<int64_t>{5120, 5121, 5122, 5123, 5125, 5126}.count(type.get<int64_t>()))
+      return what + ".componentType must be 5120, 5121, 5122, 5123, 5125 or 5126 (got " + shorten(type.dump()) + ")";
     if (a.contains("sparse"))
       if (std::string e = check_sparse(c, a["sparse"], what, n); !e.empty()) return e;
   }

@@ -30,12 +30,19 @@ void usage(FILE* out) {
       "  --max-body BYTES        largest scene accepted (default 268435456)\n"
       "  --max-queue N           queued jobs before 429 (default 100)\n"
       "  --max-streams N         concurrent event streams (default 64)\n"
+      "  --idle-timeout S        close a connection idle for S seconds, or a request body paused that long (default 60)\n"
+      "  --header-timeout S      408 if a request line and headers take longer than S seconds (default 10)\n"
+      "  --min-rate BYTES        408 if a request body arrives slower than this many bytes per second on\n"
+      "                          average, counted after --header-timeout seconds (default 16384; 0: any)\n"
       "  --check-threads N       threads that load and check submitted scenes (default: half the cores)\n"
       "  --max-checks N          submitted scenes waiting for a check thread before 503 (default 4)\n"
       "  --job-seconds S         time budget per job (default 3600)\n"
       "  --max-elements N        element budget per job (default 2000000)\n"
       "  --max-shot-cache-mb N   memory per job for replayed shots (default 256; caps the job's shot_cache_mb)\n"
       "  --max-triangles N       largest scene in triangles (default 2000000)\n"
+      "  --max-job-mb N          memory a job may need (hemicubes, elements, images, shot cache, scene),\n"
+      "                          estimated at submit; more is refused with 422 (default 2048)\n"
+      "  --max-image-pixels N    decoded texture pixels per job, all images together (default 67108864)\n"
       "  --max-attempts N        restarts of a job interrupted by a crash (default 3)\n"
       "  --expire-hours H        delete finished jobs and results after H hours (default 168)\n",
       out);
@@ -55,9 +62,9 @@ int main(int argc, char** argv) {
       return 0;
     }
     static const char* const kOptions[] = {"--listen", "--data", "--workers", "--solver-threads", "--tokens", "--max-body",
-                                           "--max-queue", "--max-streams", "--check-threads", "--max-checks",
+                                           "--max-queue", "--max-streams", "--idle-timeout", "--header-timeout", "--min-rate", "--check-threads", "--max-checks",
                                            "--job-seconds", "--max-elements",
-                                           "--max-shot-cache-mb", "--max-triangles", "--max-attempts", "--expire-hours"};
+                                           "--max-shot-cache-mb", "--max-triangles", "--max-job-mb", "--max-image-pixels", "--max-attempts", "--expire-hours"};
     if (std::find(std::begin(kOptions), std::end(kOptions), opt) == std::end(kOptions)) {
       std::fprintf(stderr, "hemibake-server: unknown option '%s' (try --help)\n", opt.c_str());
       return 2;
@@ -105,12 +112,17 @@ int main(int argc, char** argv) {
     else if (opt == "--max-body") so.max_body_bytes = ho.max_body_bytes = static_cast<uint64_t>(need_count(1e15));
     else if (opt == "--max-queue") so.max_queue = static_cast<size_t>(need_count(1e9));
     else if (opt == "--max-streams") ho.max_streams = static_cast<size_t>(need_count(1e6));
+    else if (opt == "--idle-timeout") ho.idle_timeout = std::max(0.001, need_num());
+    else if (opt == "--header-timeout") ho.header_timeout = std::max(0.001, need_num());
+    else if (opt == "--min-rate") ho.min_rate = need_num();
     else if (opt == "--check-threads") so.check_threads = static_cast<unsigned>(need_count(1024));
     else if (opt == "--max-checks") so.max_checks = static_cast<size_t>(need_count(1e6));
     else if (opt == "--job-seconds") so.job_seconds = need_num();
     else if (opt == "--max-elements") so.max_elements = static_cast<uint64_t>(need_count(1e12));
     else if (opt == "--max-shot-cache-mb") so.max_shot_cache_mb = static_cast<uint32_t>(std::min(need_num(), 1048576.0));
     else if (opt == "--max-triangles") so.max_triangles = static_cast<uint64_t>(need_count(1e12));
+    else if (opt == "--max-job-mb") so.max_job_bytes = static_cast<uint64_t>(need_count(1e9)) << 20;
+    else if (opt == "--max-image-pixels") so.max_image_pixels = static_cast<uint64_t>(need_count(1e15));
     else if (opt == "--max-attempts") so.max_attempts = static_cast<int>(need_count(1e6));
     else if (opt == "--expire-hours") so.expire_seconds = need_num() * 3600.0;
     else {

@@ -92,6 +92,37 @@ constexpr auto kRegisterWait = std::chrono::seconds(5);
 constexpr unsigned kLookupThreads = 2;
 constexpr size_t kMaxLookups = 1024;
 
+// What a job's bake may hold in memory, by part, in bytes. The factors are measured (peak RSS of
+// `hemibake bake`, Release, Cornell box): the hemicubes take about 220 bytes per pixel of the top
+// face for each solver thread (resolution 1024: 247 MB; 2048: 926 MB; 1024 on two threads:
+// 487 MB), an element about 1 KB with the output written (400 000: 436 MB). Leaves are at least
+// aeps of the scene's area, so there are at most 1/aeps of them besides patches that are smaller.
+// hr's links and the reference tracer's paths are not counted.
+struct JobMemory {
+  uint64_t hemicubes = 0, elements = 0, element_count = 0, images = 0, shot_cache = 0, scene = 0;
+  uint64_t total() const { return hemicubes + elements + images + shot_cache + scene; }
+};
+
+JobMemory job_memory(const protocol::JobSpec& spec, const protocol::SceneDocument& document, uint64_t scene_bytes,
+                     unsigned threads) {
+  constexpr uint64_t kCubeBytesPerPixel = 240, kElementBytes = 1100;
+  constexpr uint64_t kFinerResolution = 400;  // shoot_piece's finer hemicube, for low resolutions
+  JobMemory m;
+  const uint64_t n = spec.params.resolution;
+  const uint64_t finer = std::min(2 * n, kFinerResolution);
+  m.hemicubes = kCubeBytesPerPixel * (n * n + (finer > n ? finer * finer : 0)) * std::max(1u, threads);
+  const double by_area = spec.params.aeps > 0 ? std::ceil(1.0 / spec.params.aeps) : 1e18;
+  m.element_count = std::min<uint64_t>(spec.params.max_elements,
+                                       static_cast<uint64_t>(std::min(by_area, 1e18)) + protocol::scene_of(document).patches.size());
+  m.elements = kElementBytes * m.element_count;
+  m.images = 4 * protocol::image_pixel_count(document);
+  m.shot_cache = static_cast<uint64_t>(spec.params.shot_cache_mb) << 20;
+  m.scene = 3 * scene_bytes;  // as stored, as loaded, as written
+  return m;
+}
+
+std::string megabytes(uint64_t bytes) { return std::to_string((bytes + (1u << 19)) >> 20) + " MB"; }
+
 Response preview_missed() {
   Response r = error(409, "the job finished (or is between long shots) before a preview was made; ask again or fetch the result");
   r.headers.emplace_back("Retry-After", "1");
@@ -173,8 +204,22 @@ bool same(const std::string& a, const std::string& b) {
   return diff == 0;
 }
 
-// The parts of a multipart/form-data body by field name: (content type, data). `repeated` is set to
-// the name of a field given twice.
+}  // namespace
+
+std::map<std::string, std::string> parse_query(const std::string& query) {
+  std::map<std::string, std::string> out;
+  size_t start = 0;
+  while (start < query.size()) {
+    size_t end = query.find('&', start);
+    if (end == std::string::npos) end = query.size();
+    const std::string pair = query.substr(start, end - start);
+    const size_t eq = pair.find('=');
+    if (!pair.empty()) out[percent_decode(pair.substr(0, eq))] = eq == std::string::npos ? "" : percent_decode(pair.substr(eq + 1));
+    start = end + 1;
+  }
+  return out;
+}
+
 std::map<std::string, std::pair<std::string, std::string>> parse_multipart(const std::string& body, const std::string& boundary,
                                                                            std::string& repeated) {
   std::map<std::string, std::pair<std::string, std::string>> parts;
@@ -211,28 +256,17 @@ std::map<std::string, std::pair<std::string, std::string>> parse_multipart(const
   return parts;
 }
 
-}  // namespace
-
-std::map<std::string, std::string> parse_query(const std::string& query) {
-  std::map<std::string, std::string> out;
-  size_t start = 0;
-  while (start < query.size()) {
-    size_t end = query.find('&', start);
-    if (end == std::string::npos) end = query.size();
-    const std::string pair = query.substr(start, end - start);
-    const size_t eq = pair.find('=');
-    if (!pair.empty()) out[percent_decode(pair.substr(0, eq))] = eq == std::string::npos ? "" : percent_decode(pair.substr(eq + 1));
-    start = end + 1;
-  }
-  return out;
-}
-
 Service::Service(const ServiceOptions& o) : options_(o) {}
 
 std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::string& err) {
+  auto store = Store::open(options.data_dir, err);
+  if (!store) return nullptr;
+  return start(options, std::move(store), err);
+}
+
+std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::unique_ptr<Store> store, std::string&) {
   std::unique_ptr<Service> s(new Service(options));
-  s->store_ = Store::open(options.data_dir, err);
-  if (!s->store_) return nullptr;
+  s->store_ = std::move(store);
   // An accepted job is never lost: what a crash left running runs again (up to max_attempts).
   s->store_->recover(options.max_attempts);
   s->store_->expire(options.expire_seconds);
@@ -252,6 +286,7 @@ Service::~Service() { stop(); }
 
 void Service::stop() {
   std::vector<Reply> waiting;
+  std::vector<std::function<void(EventBatch)>> streams;
   {
     std::lock_guard lock(mutex_);
     if (!running_) return;
@@ -264,8 +299,12 @@ void Service::stop() {
     for (auto& [id, waits] : unregistered_)
       for (auto& w : waits) waiting.push_back(std::move(w.reply));
     unregistered_.clear();
+    for (auto& [id, waits] : event_waits_)
+      for (auto& w : waits) streams.push_back(std::move(w.reply));
+    event_waits_.clear();
   }
   for (auto& reply : waiting) reply(stopping());
+  for (auto& reply : streams) reply(EventBatch{503, {}, false});
   wake_.notify_all();
   clock_wake_.notify_all();
   if (clock_.joinable()) clock_.join();
@@ -305,9 +344,25 @@ void Service::clock_loop() {
       });
       it = it->second.empty() ? unregistered_.erase(it) : std::next(it);
     }
-    if (!due.empty()) {
+    // Event streams that waited long enough: time for a heartbeat.
+    std::vector<std::function<void(EventBatch)>> heartbeats;
+    for (auto it = event_waits_.begin(); it != event_waits_.end();) {
+      auto& waits = it->second;
+      for (auto w = waits.begin(); w != waits.end();) {
+        if (w->until <= now) {
+          heartbeats.push_back(std::move(w->reply));
+          w = waits.erase(w);
+        } else {
+          next = std::min(next, w->until);
+          ++w;
+        }
+      }
+      it = waits.empty() ? event_waits_.erase(it) : std::next(it);
+    }
+    if (!due.empty() || !heartbeats.empty()) {
       lock.unlock();
       for (auto& [reply, response] : due) reply(std::move(response));
+      for (auto& reply : heartbeats) reply(EventBatch{});
       lock.lock();
       continue;
     }
@@ -353,28 +408,23 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
   } unregister{this, id};
   if (const auto rec = store_->get(id); rec && rec->state == JobState::kCancelled) {
     // Cancelled between the claim and the registration, when no token could be reached.
-    store_->add_event(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
+    emit(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
     return;
   }
-  store_->add_event(id, "state", json{{"state", "running"}}.dump(-1, ' ', false, kReplaceInvalid));
+  emit(id, "state", json{{"state", "running"}}.dump(-1, ' ', false, kReplaceInvalid));
   protocol::JobSpec spec;
   if (std::string e = protocol::parse_params_json(params, spec); !e.empty()) {
-    store_->fail(id, e);
-    store_->add_event(id, "state", json{{"state", "failed"}, {"error", e}}.dump(-1, ' ', false, kReplaceInvalid));
+    end_job(id, nullptr, e);
     return;
   }
   spec.params.threads = options_.solver_threads;
   spec.params.max_elements = std::min<uint64_t>(spec.params.max_elements, options_.max_elements);
   spec.params.shot_cache_mb = std::min(spec.params.shot_cache_mb, options_.max_shot_cache_mb);
-  protocol::LoadLimits limits;
-  limits.allow_external_files = false;
-  limits.max_file_bytes = options_.max_body_bytes;
-  limits.max_triangles = options_.max_triangles;
+  const protocol::LoadLimits limits = load_limits();
   const auto loaded = protocol::load_gltf_memory(
       std::span(reinterpret_cast<const uint8_t*>(scene.data()), scene.size()), "", limits);
   if (!loaded.document) {
-    store_->fail(id, loaded.error);
-    store_->add_event(id, "state", json{{"state", "failed"}, {"error", loaded.error}}.dump(-1, ' ', false, kReplaceInvalid));
+    end_job(id, nullptr, loaded.error);
     return;
   }
   bool over_budget = false;
@@ -394,7 +444,7 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
     timed.elapsed_seconds = elapsed;  // since the job started, loading included
     const std::string text = protocol::progress_json(timed);
     store_->set_progress(id, text);
-    store_->add_event(id, "progress", text);
+    emit(id, "progress", text);
   };
   hooks.previews_possible = [&](bool on) { set_previews(id, on); };
   hooks.preview_wanted = [&] { return take_preview_request(id); };
@@ -404,24 +454,20 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (st.cancelled) {
     if (over_budget) {
-      const std::string e = "the bake exceeded its time budget of " + std::to_string(options_.job_seconds) + " s";
-      store_->fail(id, e);
-      store_->add_event(id, "state", json{{"state", "failed"}, {"error", e}}.dump(-1, ' ', false, kReplaceInvalid));
+      end_job(id, nullptr, "the bake exceeded its time budget of " + std::to_string(options_.job_seconds) + " s");
     } else if (!running_) {
       store_->requeue(id);  // shutting down: the job runs again after the restart
     } else {
-      store_->add_event(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
+      emit(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
     }
     return;
   }
   if (!baked.error.empty()) {
-    store_->fail(id, baked.error);
-    store_->add_event(id, "state", json{{"state", "failed"}, {"error", baked.error}}.dump(-1, ' ', false, kReplaceInvalid));
+    end_job(id, nullptr, baked.error);
     return;
   }
   const std::string glb(baked.glb.begin(), baked.glb.end());
-  store_->succeed(id, glb, "\"" + sha256_hex(glb) + "\"");
-  store_->add_event(id, "state", json{{"state", "succeeded"}}.dump(-1, ' ', false, kReplaceInvalid));
+  if (!end_job(id, &glb, {})) return;
   std::lock_guard lock(metrics_mutex_);
   ++bakes_;
   bake_seconds_sum_ += seconds;
@@ -434,13 +480,80 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
   }
 }
 
+// The end of running job `id`: succeeded with `result` when it is given, else failed with `failure`.
+// The store's change is one atomic step from "running", so a DELETE that came first wins: the
+// stream is then told "cancelled" (the DELETE of a running job leaves that to the worker), and the
+// result is dropped. A result the store cannot write (a full disk) fails the job with the reason;
+// a failure is a small write, tried again for a few seconds, so that no job stays running with no
+// worker. Returns true if the job succeeded.
+bool Service::end_job(const std::string& id, const std::string* result, std::string failure) {
+  auto state_event = [](const char* state, const std::string& why) {
+    json j = {{"state", state}};
+    if (!why.empty()) j["error"] = why;
+    return j.dump(-1, ' ', false, kReplaceInvalid);
+  };
+  Change c;
+  if (result) {
+    c = store_->succeed(id, *result, "\"" + sha256_hex(*result) + "\"");
+    if (c.made) {
+      emit(id, "state", state_event("succeeded", {}));
+      return true;
+    }
+    if (!c.error.empty()) {
+      std::fprintf(stderr, "hemibake-server: the result of %s could not be stored: %s\n", id.c_str(), c.error.c_str());
+      failure = "the result could not be stored: " + c.error;
+    }
+  }
+  if (!result || !c.error.empty()) {
+    for (int attempt = 0;; ++attempt) {
+      c = store_->fail(id, failure);
+      if (c.made) {
+        emit(id, "state", state_event("failed", failure));
+        return false;
+      }
+      if (c.error.empty() || attempt == 3) break;
+      std::unique_lock lock(mutex_);
+      if (wake_.wait_for(lock, std::chrono::seconds(1 << attempt), [&] { return !running_.load(); })) break;
+    }
+  }
+  if (!c.error.empty()) {
+    // Not even the failure could be written: the store has the job running, and the next start
+    // re-queues it.
+    std::fprintf(stderr, "hemibake-server: job %s could not be marked failed (%s); it runs again after a restart\n",
+                 id.c_str(), c.error.c_str());
+  } else if (const auto rec = store_->get(id); rec && rec->state == JobState::kCancelled) {
+    emit(id, "state", state_event("cancelled", {}));
+  }
+  return false;
+}
+
+protocol::LoadLimits Service::load_limits() const {
+  protocol::LoadLimits limits;
+  limits.allow_external_files = false;
+  limits.max_file_bytes = options_.max_body_bytes;
+  limits.max_triangles = options_.max_triangles;
+  limits.max_image_pixels = static_cast<uint32_t>(std::min<uint64_t>(options_.max_image_pixels, 0xffffffffu));
+  limits.max_total_image_pixels = options_.max_image_pixels;
+  return limits;
+}
+
 std::optional<Response> Service::check_auth(const Request& request) const {
   if (options_.tokens.empty()) return std::nullopt;
   const std::string path = request.target.substr(0, request.target.find('?'));
   if (path == "/healthz" || path == "/readyz") return std::nullopt;
+  // "Bearer" in any case, then one or more spaces (RFC 9110, section 11.1; RFC 6750, section 2.1).
   const auto it = request.headers.find("authorization");
   std::string given;
-  if (it != request.headers.end() && it->second.rfind("Bearer ", 0) == 0) given = it->second.substr(7);
+  if (it != request.headers.end()) {
+    const std::string& value = it->second;
+    const size_t space = value.find(' ');
+    std::string scheme = value.substr(0, space);
+    std::transform(scheme.begin(), scheme.end(), scheme.begin(), ::tolower);
+    if (space != std::string::npos && scheme == "bearer") {
+      given = value.substr(std::min(value.size(), value.find_first_not_of(' ', space)));
+      given.erase(given.find_last_not_of(' ') + 1);
+    }
+  }
   bool ok = false;
   for (const auto& t : options_.tokens) ok = same(given, t) || ok;  // no early exit
   if (ok) return std::nullopt;
@@ -524,15 +637,37 @@ Response Service::submit(const Request& req, const std::string& query) {
   if (scene.size() > options_.max_body_bytes) return error(413, "the scene is larger than " + std::to_string(options_.max_body_bytes) + " bytes");
   if (std::string e = protocol::apply_params(values, spec); !e.empty()) return error(400, e);
   // The scene is checked before it is accepted: a bad file is refused now, not in the queue.
-  protocol::LoadLimits limits;
-  limits.allow_external_files = false;
-  limits.max_file_bytes = options_.max_body_bytes;
-  limits.max_triangles = options_.max_triangles;
-  const auto loaded = protocol::load_gltf_memory(std::span(reinterpret_cast<const uint8_t*>(scene.data()), scene.size()), "", limits);
+  const auto loaded = protocol::load_gltf_memory(std::span(reinterpret_cast<const uint8_t*>(scene.data()), scene.size()), "",
+                                                 load_limits());
   if (!loaded.document) return error(422, loaded.error);
   if (std::string e = protocol::bake_error(*loaded.document, spec); !e.empty()) return error(422, e);
+  // The memory the bake will ask for, with the server's caps applied as the worker applies them.
+  {
+    protocol::JobSpec capped = spec;
+    capped.params.max_elements = std::min<uint64_t>(capped.params.max_elements, options_.max_elements);
+    capped.params.shot_cache_mb = std::min(capped.params.shot_cache_mb, options_.max_shot_cache_mb);
+    const JobMemory m = job_memory(capped, *loaded.document, scene.size(), options_.solver_threads);
+    if (m.total() > options_.max_job_bytes)
+      return error(422, "the job would need about " + megabytes(m.total()) + " of memory (hemicubes at resolution " +
+                            std::to_string(capped.params.resolution) + ": " + megabytes(m.hemicubes) + "; up to " +
+                            std::to_string(m.element_count) + " elements: " + megabytes(m.elements) + "; images: " +
+                            megabytes(m.images) + "; shot cache: " + megabytes(m.shot_cache) + "; scene: " + megabytes(m.scene) +
+                            "), more than the server's limit of " + megabytes(options_.max_job_bytes) +
+                            " per job (hemibake-server --max-job-mb); lower resolution, max_elements, aeps or shot_cache_mb");
+  }
   const std::string params = protocol::params_json(spec);
   const std::string cache_key = sha256_hex(scene) + ":" + sha256_hex(params);
+  const auto key_it = req.headers.find("idempotency-key");
+  const std::string idem = key_it == req.headers.end() ? "" : key_it->second;
+  if (idem.size() > 200) return error(400, "the Idempotency-Key is longer than 200 characters");
+  // A key names one submission: the same key with another scene or other parameters is a client's
+  // mistake, not a retry (IETF draft-ietf-httpapi-idempotency-key-header, section 2.7).
+  auto reused = [&](const std::string& job) {
+    return error(422, "the Idempotency-Key was sent before with another scene or other parameters (job " + job +
+                          "); a new submission needs a new key");
+  };
+  const auto held = idem.empty() ? std::nullopt : store_->find_idempotent(idem);
+  if (held && held->second != cache_key) return reused(held->first);
   // The same scene and parameters as a finished job: its answer at once.
   if (auto cached = store_->find_cached(cache_key)) {
     auto rec = store_->get(*cached);
@@ -543,25 +678,26 @@ Response Service::submit(const Request& req, const std::string& query) {
       return r;
     }
   }
-  const auto key_it = req.headers.find("idempotency-key");
-  const std::string idem = key_it == req.headers.end() ? "" : key_it->second;
-  if (idem.size() > 200) return error(400, "the Idempotency-Key is longer than 200 characters");
   // A retry of an accepted submission gets its job even when the queue has filled since; any other
   // submission counts against the queue, with a key or without (a fresh key per request used to
   // skip the limit).
-  const bool retry = !idem.empty() && store_->find_idempotent(idem).has_value();
+  const bool retry = held.has_value();
   if (!retry && store_->count(JobState::kQueued) >= options_.max_queue) {
     Response r = error(429, "the queue is full (" + std::to_string(options_.max_queue) + " jobs); retry later");
     r.headers.emplace_back("Retry-After", "30");
     return r;
   }
-  bool existed = false;
-  const std::string id = store_->create(scene, content_type, params, cache_key, idem, existed);
-  if (id.empty()) return error(500, "the job could not be stored");
+  const Created created = store_->create(scene, content_type, params, cache_key, idem);
+  if (created.id.empty()) {
+    std::fprintf(stderr, "hemibake-server: a job could not be stored: %s\n", created.error.c_str());
+    return error(500, "the job could not be stored");
+  }
+  if (created.existed && created.cache_key != cache_key) return reused(created.id);  // taken meanwhile
+  const std::string& id = created.id;
   wake_.notify_one();
   auto rec = store_->get(id);
   if (!rec) return error(500, "the job could not be read back");
-  Response r = job_json(*rec, existed ? 200 : 202);
+  Response r = job_json(*rec, created.existed ? 200 : 202);
   r.headers.emplace_back("Location", "/v1/jobs/" + id);
   for (const auto& w : loaded.warnings) r.headers.emplace_back("Warning", "199 hemibake " + quoted_string(w));
   return r;
@@ -782,8 +918,23 @@ Response Service::handle(const Request& request) {
   return answered.get();
 }
 
-void Service::events_async(const std::string& id, uint64_t after, std::function<void(EventBatch)> reply) {
-  auto work = [this, id, after, reply] {
+void Service::events_async(const std::string& id, uint64_t after, std::chrono::milliseconds wait,
+                           std::function<void(EventBatch)> reply) {
+  const auto until = std::chrono::steady_clock::now() + wait;
+  auto work = [this, id, after, until, reply] { read_events(id, after, until, reply); };
+  if (!lookups_->post(std::move(work), [reply] { reply(EventBatch{503, {}, false}); })) reply(EventBatch{503, {}, false});
+}
+
+// Reads the events after `after`; with none, and the job still going, waits for the next (the
+// stream's end is an event too). No stream polls the store: each read follows an event.
+void Service::read_events(const std::string& id, uint64_t after, std::chrono::steady_clock::time_point until,
+                          std::function<void(EventBatch)> reply) {
+  for (;;) {
+    uint64_t written = 0;
+    {
+      std::lock_guard lock(mutex_);
+      written = events_written_;
+    }
     EventBatch b;
     try {
       b.events = store_->events_after(id, after, 100);
@@ -795,9 +946,36 @@ void Service::events_async(const std::string& id, uint64_t after, std::function<
       std::fprintf(stderr, "hemibake-server: reading the events of %s failed: %s\n", id.c_str(), e.what());
       b = EventBatch{503, {}, false};
     }
-    reply(std::move(b));
-  };
-  if (!lookups_->post(std::move(work), [reply] { reply(EventBatch{503, {}, false}); })) reply(EventBatch{503, {}, false});
+    if (b.status != 200 || !b.events.empty() || b.end || std::chrono::steady_clock::now() >= until) return reply(std::move(b));
+    std::unique_lock lock(mutex_);
+    if (!running_) {
+      lock.unlock();
+      return reply(EventBatch{503, {}, false});
+    }
+    // An event stored after the read above and before this lock would wake no one: read again.
+    if (events_written_ != written) continue;
+    event_waits_[id].push_back({until, after, std::move(reply)});
+    lock.unlock();
+    clock_wake_.notify_one();
+    return;
+  }
+}
+
+void Service::emit(const std::string& id, const std::string& type, const std::string& data) {
+  store_->add_event(id, type, data);
+  std::vector<EventWait> waits;
+  {
+    std::lock_guard lock(mutex_);
+    ++events_written_;
+    if (auto it = event_waits_.find(id); it != event_waits_.end()) {
+      waits = std::move(it->second);
+      event_waits_.erase(it);
+    }
+  }
+  for (auto& w : waits) {
+    auto work = [this, id, w] { read_events(id, w.after, w.until, w.reply); };
+    if (!lookups_->post(std::move(work), [reply = w.reply] { reply(EventBatch{503, {}, false}); })) w.reply(EventBatch{503, {}, false});
+  }
 }
 
 // The requests that read or write the store (not submissions, not previews), on the lookup pool.
@@ -842,14 +1020,27 @@ Response Service::route(const Request& req, const std::string& path, const std::
     if (sub.empty()) {
       if (req.method == "GET") return job_json(*rec, 200);
       if (req.method == "DELETE") {
-        if (finished(rec->state))
-          return error(409, std::string("the job ") + (rec->state == JobState::kCancelled ? "is already cancelled" : std::string("has already ") + to_string(rec->state)));
-        store_->cancel(id);
+        auto over = [](JobState s) {
+          return error(409, std::string("the job ") + (s == JobState::kCancelled ? "is already cancelled" : std::string("has already ") + to_string(s)));
+        };
+        if (finished(rec->state)) return over(rec->state);
+        // One step in the store decides between this and the worker's end of the job.
+        const Change c = store_->cancel(id);
+        if (!c.error.empty()) {
+          Response r = error(503, "the cancellation could not be stored; retry: " + c.error);
+          r.headers.emplace_back("Retry-After", "5");
+          return r;
+        }
+        if (!c.made) {
+          rec = store_->get(id);
+          return rec ? over(rec->state) : error(404, "no job " + id);
+        }
         {
           std::lock_guard lock(mutex_);
           if (auto it = active_.find(id); it != active_.end()) it->second.token->cancel();
         }
-        if (rec->state == JobState::kQueued) store_->add_event(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
+        // A running job's worker tells its stream, once the bake has stopped.
+        if (c.from == JobState::kQueued) emit(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
         return job_json(*store_->get(id), 200);
       }
       return not_allowed("GET, HEAD, DELETE");
@@ -877,7 +1068,15 @@ Response Service::route(const Request& req, const std::string& path, const std::
       r.headers.emplace_back("Content-Disposition", "attachment; filename=\"" + id + ".glb\"");
       return r;
     }
-    if (sub == "result" || sub == "preview" || sub == "events") return not_allowed("GET");  // events: GET is the session's
+    // GET of an event stream is the session's; what comes here is a HEAD (or a test's GET): the
+    // stream's status and type, without the stream.
+    if (sub == "events" && req.method == "GET") {
+      Response r;
+      r.content_type = "text/event-stream";
+      r.headers.emplace_back("Cache-Control", "no-cache");
+      return r;
+    }
+    if (sub == "result" || sub == "preview" || sub == "events") return not_allowed("GET");
     return error(404, "no such resource: " + path);
   }
   return error(404, "no such resource: " + path);

@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cstring>
 #include <filesystem>
+#include <mutex>
 #include <random>
 
 namespace hemibake::server {
@@ -27,7 +28,7 @@ class Stmt {
     return *this;
   }
   Stmt& blob(int i, const std::string& v) {
-    sqlite3_bind_blob64(s_, i, v.data(), v.size(), SQLITE_TRANSIENT);
+    sqlite3_bind_blob64(s_, i, v.data(), v.size(), SQLITE_STATIC);  // bound only while `v` lives
     return *this;
   }
   Stmt& real(int i, double v) {
@@ -43,7 +44,8 @@ class Stmt {
     return *this;
   }
   bool row() { return sqlite3_step(s_) == SQLITE_ROW; }
-  int run() { return sqlite3_step(s_); }
+  /// Runs a statement that returns no rows; true if it succeeded.
+  bool run() { return sqlite3_step(s_) == SQLITE_DONE; }
   std::string col_text(int i) {
     const auto* p = sqlite3_column_text(s_, i);
     return p ? std::string(reinterpret_cast<const char*>(p), static_cast<size_t>(sqlite3_column_bytes(s_, i))) : std::string();
@@ -54,7 +56,6 @@ class Stmt {
   }
   double col_real(int i) { return sqlite3_column_double(s_, i); }
   int64_t col_int(int i) { return sqlite3_column_int64(s_, i); }
-  bool ok() const { return s_ != nullptr; }
 
  private:
   sqlite3_stmt* s_ = nullptr;
@@ -71,8 +72,41 @@ std::string new_id() {
   return id;
 }
 
+// The job table holds only small columns; scenes and results have tables of their own. In one row,
+// a column after a large blob is reached by walking the blob's chain of overflow pages, so a status
+// read of a job with a 36 MB scene read 36 MB (layout 1, before user_version 2).
+constexpr int kLayout = 2;
+constexpr const char* kTables =
+    "CREATE TABLE IF NOT EXISTS jobs ("
+    "  id TEXT PRIMARY KEY, state TEXT NOT NULL, params TEXT NOT NULL, cache_key TEXT NOT NULL,"
+    "  idempotency_key TEXT UNIQUE, content_type TEXT NOT NULL, scene_bytes INTEGER NOT NULL,"
+    "  etag TEXT, result_bytes INTEGER NOT NULL DEFAULT 0, error TEXT, progress TEXT,"
+    "  attempts INTEGER NOT NULL DEFAULT 0, created REAL NOT NULL, started REAL NOT NULL DEFAULT 0,"
+    "  finished REAL NOT NULL DEFAULT 0, event_seq INTEGER NOT NULL DEFAULT 0);"
+    "CREATE INDEX IF NOT EXISTS jobs_state ON jobs(state, created);"
+    "CREATE INDEX IF NOT EXISTS jobs_cache ON jobs(cache_key, state);"
+    "CREATE TABLE IF NOT EXISTS scenes (job TEXT PRIMARY KEY, data BLOB NOT NULL);"
+    "CREATE TABLE IF NOT EXISTS results (job TEXT PRIMARY KEY, data BLOB NOT NULL);"
+    "CREATE TABLE IF NOT EXISTS events (job TEXT NOT NULL, seq INTEGER NOT NULL, type TEXT NOT NULL,"
+    "  data TEXT NOT NULL, PRIMARY KEY (job, seq));";
+
+// Layout 1 kept the scene and the result in the job's row: they move to their own tables.
+constexpr const char* kFromLayout1 =
+    "ALTER TABLE jobs RENAME TO jobs_layout1;"
+    "DROP INDEX IF EXISTS jobs_state;"
+    "DROP INDEX IF EXISTS jobs_cache;";
+constexpr const char* kCopyLayout1 =
+    "INSERT INTO jobs (id, state, params, cache_key, idempotency_key, content_type, scene_bytes, etag, result_bytes,"
+    "                  error, progress, attempts, created, started, finished, event_seq)"
+    "  SELECT id, state, params, cache_key, idempotency_key, content_type, length(scene), etag,"
+    "         coalesce(length(result), 0), error, progress, attempts, created, started, finished, event_seq"
+    "  FROM jobs_layout1;"
+    "INSERT INTO scenes (job, data) SELECT id, scene FROM jobs_layout1;"
+    "INSERT INTO results (job, data) SELECT id, result FROM jobs_layout1 WHERE result IS NOT NULL;"
+    "DROP TABLE jobs_layout1;";
+
 constexpr const char* kColumns =
-    "id, state, params, content_type, length(scene), progress, error, etag, length(result), attempts, "
+    "id, state, params, content_type, scene_bytes, progress, error, etag, result_bytes, attempts, "
     "created, started, finished, event_seq";
 
 JobRecord read_record(Stmt& s) {
@@ -93,6 +127,292 @@ JobRecord read_record(Stmt& s) {
   r.last_event = static_cast<uint64_t>(s.col_int(13));
   return r;
 }
+
+bool exec(sqlite3* db, const char* sql, std::string& error) {
+  char* msg = nullptr;
+  if (sqlite3_exec(db, sql, nullptr, nullptr, &msg) == SQLITE_OK) return true;
+  error = msg ? msg : sqlite3_errmsg(db);
+  sqlite3_free(msg);
+  return false;
+}
+
+// SQLite in WAL mode; one connection, calls serialised by a mutex.
+class SqliteStore final : public Store {
+ public:
+  SqliteStore(sqlite3* db, int lock_fd) : db_(db), lock_fd_(lock_fd) {}
+  ~SqliteStore() override {
+    sqlite3_close(db_);
+    ::close(lock_fd_);
+  }
+
+  Created create(const std::string& scene, const std::string& content_type, const std::string& params,
+                 const std::string& cache_key, const std::string& idempotency_key) override {
+    std::lock_guard lock(mutex_);
+    Created c;
+    if (!idempotency_key.empty()) {
+      if (auto held = idempotent_locked(idempotency_key)) {
+        c.existed = true;
+        c.id = held->first;
+        c.cache_key = held->second;
+        return c;
+      }
+    }
+    const std::string id = new_id();
+    Transaction t(*this);
+    Stmt s(db_,
+           "INSERT INTO jobs (id, state, params, cache_key, idempotency_key, content_type, scene_bytes, created)"
+           " VALUES (?, 'queued', ?, ?, ?, ?, ?, ?)");
+    s.text(1, id).text(2, params).text(3, cache_key);
+    if (idempotency_key.empty()) s.null(4);
+    else s.text(4, idempotency_key);
+    s.text(5, content_type).integer(6, static_cast<int64_t>(scene.size())).real(7, unix_now());
+    bool ok = t.ok() && s.run();
+    if (ok) {
+      Stmt d(db_, "INSERT INTO scenes (job, data) VALUES (?, ?)");
+      ok = d.text(1, id).blob(2, scene).run();
+    }
+    if (!ok || !t.commit()) {
+      c.error = t.error();
+      c.full = t.full();
+      return c;
+    }
+    c.id = id;
+    return c;
+  }
+
+  std::optional<std::pair<std::string, std::string>> find_idempotent(const std::string& idempotency_key) override {
+    std::lock_guard lock(mutex_);
+    return idempotent_locked(idempotency_key);
+  }
+
+  std::optional<std::string> find_cached(const std::string& cache_key) override {
+    std::lock_guard lock(mutex_);
+    Stmt s(db_, "SELECT id FROM jobs WHERE cache_key = ? AND state = 'succeeded' ORDER BY finished DESC LIMIT 1");
+    s.text(1, cache_key);
+    if (s.row()) return s.col_text(0);
+    return std::nullopt;
+  }
+
+  std::optional<JobRecord> get(const std::string& id) override {
+    std::lock_guard lock(mutex_);
+    Stmt s(db_, (std::string("SELECT ") + kColumns + " FROM jobs WHERE id = ?").c_str());
+    s.text(1, id);
+    if (!s.row()) return std::nullopt;
+    return read_record(s);
+  }
+
+  std::vector<JobRecord> list(std::optional<JobState> state, size_t limit, const std::string& after) override {
+    std::lock_guard lock(mutex_);
+    // Newest first; the cursor is the last id of the previous page (its creation time orders).
+    std::string sql = std::string("SELECT ") + kColumns + " FROM jobs WHERE (?1 IS NULL OR state = ?1)"
+                      " AND (?2 IS NULL OR created < (SELECT created FROM jobs WHERE id = ?2)"
+                      "      OR (created = (SELECT created FROM jobs WHERE id = ?2) AND id < ?2))"
+                      " ORDER BY created DESC, id DESC LIMIT ?3";
+    Stmt s(db_, sql.c_str());
+    if (state) s.text(1, to_string(*state));
+    else s.null(1);
+    if (after.empty()) s.null(2);
+    else s.text(2, after);
+    s.integer(3, static_cast<int64_t>(limit));
+    std::vector<JobRecord> out;
+    while (s.row()) out.push_back(read_record(s));
+    return out;
+  }
+
+  bool claim(std::string& id, std::string& scene, std::string& params) override {
+    std::lock_guard lock(mutex_);
+    Stmt s(db_,
+           "UPDATE jobs SET state = 'running', started = ?, attempts = attempts + 1"
+           " WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY created, id LIMIT 1)"
+           " RETURNING id, params");
+    s.real(1, unix_now());
+    if (!s.row()) return false;
+    id = s.col_text(0);
+    params = s.col_text(1);
+    s.row();  // completes the update
+    Stmt d(db_, "SELECT data FROM scenes WHERE job = ?");
+    d.text(1, id);
+    scene = d.row() ? d.col_blob(0) : std::string();
+    return true;
+  }
+
+  bool set_progress(const std::string& id, const std::string& progress_json) override {
+    std::lock_guard lock(mutex_);
+    Stmt s(db_, "UPDATE jobs SET progress = ? WHERE id = ?");
+    return s.text(1, progress_json).text(2, id).run();
+  }
+
+  uint64_t add_event(const std::string& id, const std::string& type, const std::string& data) override {
+    std::lock_guard lock(mutex_);
+    Transaction t(*this);
+    if (!t.ok()) return 0;
+    int64_t seq = 0;
+    {
+      Stmt u(db_, "UPDATE jobs SET event_seq = event_seq + 1 WHERE id = ? RETURNING event_seq");
+      u.text(1, id);
+      if (!u.row()) return 0;
+      seq = u.col_int(0);
+    }
+    Stmt s(db_, "INSERT INTO events (job, seq, type, data) VALUES (?, ?, ?, ?)");
+    if (!s.text(1, id).integer(2, seq).text(3, type).text(4, data).run() || !t.commit()) return 0;
+    return static_cast<uint64_t>(seq);
+  }
+
+  std::vector<Event> events_after(const std::string& id, uint64_t after, size_t limit) override {
+    std::lock_guard lock(mutex_);
+    Stmt s(db_, "SELECT seq, type, data FROM events WHERE job = ? AND seq > ? ORDER BY seq LIMIT ?");
+    s.text(1, id).integer(2, static_cast<int64_t>(after)).integer(3, static_cast<int64_t>(limit));
+    std::vector<Event> out;
+    while (s.row()) out.push_back({static_cast<uint64_t>(s.col_int(0)), s.col_text(1), s.col_text(2)});
+    return out;
+  }
+
+  Change succeed(const std::string& id, const std::string& result, const std::string& etag) override {
+    std::lock_guard lock(mutex_);
+    Transaction t(*this);
+    Change c = change_locked(t, id, "state = 'succeeded', etag = ?2, result_bytes = ?3, finished = ?4", "('running')",
+                             [&](Stmt& s) { s.text(2, etag).integer(3, static_cast<int64_t>(result.size())).real(4, unix_now()); });
+    if (!c.made) return c;
+    Stmt d(db_, "INSERT OR REPLACE INTO results (job, data) VALUES (?, ?)");
+    if (!d.text(1, id).blob(2, result).run() || !t.commit()) return Change{false, c.from, t.error()};
+    return c;
+  }
+
+  Change fail(const std::string& id, const std::string& error) override {
+    std::lock_guard lock(mutex_);
+    Transaction t(*this);
+    Change c = change_locked(t, id, "state = 'failed', error = ?2, finished = ?3", "('running')",
+                             [&](Stmt& s) { s.text(2, error).real(3, unix_now()); });
+    return c.made && !t.commit() ? Change{false, c.from, t.error()} : c;
+  }
+
+  Change cancel(const std::string& id) override {
+    std::lock_guard lock(mutex_);
+    Transaction t(*this);
+    Change c = change_locked(t, id, "state = 'cancelled', finished = ?2", "('queued', 'running')",
+                             [&](Stmt& s) { s.real(2, unix_now()); });
+    return c.made && !t.commit() ? Change{false, c.from, t.error()} : c;
+  }
+
+  Change requeue(const std::string& id) override {
+    std::lock_guard lock(mutex_);
+    Transaction t(*this);
+    Change c = change_locked(t, id, "state = 'queued'", "('running')", [](Stmt&) {});
+    return c.made && !t.commit() ? Change{false, c.from, t.error()} : c;
+  }
+
+  std::optional<std::string> result(const std::string& id) override {
+    std::lock_guard lock(mutex_);
+    Stmt s(db_, "SELECT r.data FROM results r JOIN jobs j ON j.id = r.job WHERE r.job = ? AND j.state = 'succeeded'");
+    s.text(1, id);
+    if (!s.row()) return std::nullopt;
+    return s.col_blob(0);
+  }
+
+  int recover(int max_attempts) override {
+    std::lock_guard lock(mutex_);
+    Stmt f(db_, "UPDATE jobs SET state = 'failed', finished = ?, error = 'the server stopped during each of its ' || attempts || ' attempts' WHERE state = 'running' AND attempts >= ?");
+    f.real(1, unix_now()).integer(2, max_attempts).run();
+    Stmt q(db_, "UPDATE jobs SET state = 'queued' WHERE state = 'running'");
+    q.run();
+    return sqlite3_changes(db_);
+  }
+
+  int expire(double age_seconds) override {
+    std::lock_guard lock(mutex_);
+    const double cutoff = unix_now() - age_seconds;
+    Transaction t(*this);
+    if (!t.ok()) return 0;
+    const char* old = "(SELECT id FROM jobs WHERE state IN ('succeeded', 'failed', 'cancelled') AND finished < ?)";
+    for (const char* table : {"events", "scenes", "results"}) {
+      Stmt e(db_, (std::string("DELETE FROM ") + table + " WHERE job IN " + old).c_str());
+      e.real(1, cutoff).run();
+    }
+    Stmt s(db_, "DELETE FROM jobs WHERE state IN ('succeeded', 'failed', 'cancelled') AND finished < ?");
+    s.real(1, cutoff).run();
+    const int n = sqlite3_changes(db_);
+    return t.commit() ? n : 0;
+  }
+
+  size_t count(JobState state) override {
+    std::lock_guard lock(mutex_);
+    Stmt s(db_, "SELECT count(*) FROM jobs WHERE state = ?");
+    s.text(1, to_string(state));
+    return s.row() ? static_cast<size_t>(s.col_int(0)) : 0;
+  }
+
+ private:
+  // A write transaction, rolled back unless committed. Callers hold mutex_.
+  class Transaction {
+   public:
+    explicit Transaction(SqliteStore& s) : db_(s.db_) { ok_ = sqlite3_exec(db_, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) == SQLITE_OK; note(); }
+    ~Transaction() {
+      // After some errors (a full disk among them) SQLite has rolled back already.
+      if (ok_ && !committed_ && !sqlite3_get_autocommit(db_)) sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+    }
+    bool ok() const { return ok_; }
+    bool commit() {
+      committed_ = ok_ && sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) == SQLITE_OK;
+      return committed_;
+    }
+    /// Why the last statement failed, for a message.
+    std::string error() {
+      note();
+      return error_.empty() ? "the job store could not write" : "the job store could not write: " + error_;
+    }
+    bool full() {
+      note();
+      return full_;
+    }
+
+   private:
+    void note() {
+      const int code = sqlite3_errcode(db_);
+      if (code != SQLITE_OK && code != SQLITE_DONE && code != SQLITE_ROW) {
+        error_ = sqlite3_errmsg(db_);
+        full_ = full_ || code == SQLITE_FULL;
+      }
+    }
+    sqlite3* db_;
+    bool ok_ = false, committed_ = false, full_ = false;
+    std::string error_;
+  };
+
+  // Sets `set` on job `id` if its state is one of `from` (an SQL list), in transaction `t`; ?1 is
+  // the id, `bind` binds the rest. The read of the state before and the update are one step.
+  template <typename Bind>
+  Change change_locked(Transaction& t, const std::string& id, const char* set, const char* from, Bind bind) {
+    Change c;
+    if (!t.ok()) {
+      c.error = t.error();
+      return c;
+    }
+    Stmt q(db_, "SELECT state FROM jobs WHERE id = ?");
+    q.text(1, id);
+    if (!q.row()) return c;
+    c.from = job_state_from(q.col_text(0)).value_or(JobState::kFailed);
+    Stmt s(db_, (std::string("UPDATE jobs SET ") + set + " WHERE id = ?1 AND state IN " + from).c_str());
+    s.text(1, id);
+    bind(s);
+    if (!s.run()) {
+      c.error = t.error();
+      return c;
+    }
+    c.made = sqlite3_changes(db_) > 0;
+    return c;
+  }
+
+  std::optional<std::pair<std::string, std::string>> idempotent_locked(const std::string& idempotency_key) {
+    Stmt s(db_, "SELECT id, cache_key FROM jobs WHERE idempotency_key = ?");
+    s.text(1, idempotency_key);
+    if (s.row()) return std::make_pair(s.col_text(0), s.col_text(1));
+    return std::nullopt;
+  }
+
+  sqlite3* db_;
+  int lock_fd_;  ///< flock'ed: one server per data directory
+  std::mutex mutex_;
+};
 
 }  // namespace
 
@@ -140,208 +460,36 @@ std::unique_ptr<Store> Store::open(const std::string& dir, std::string& error) {
   }
   const std::string path = (std::filesystem::path(dir) / "hemibake.db").string();
   sqlite3* db = nullptr;
-  if (sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX, nullptr) != SQLITE_OK) {
-    error = "cannot open " + path + ": " + (db ? sqlite3_errmsg(db) : "out of memory");
+  auto fail = [&](const std::string& what) {
+    error = what;
     sqlite3_close(db);
     ::close(lock_fd);
     return nullptr;
-  }
+  };
+  if (sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX, nullptr) != SQLITE_OK)
+    return fail("cannot open " + path + ": " + (db ? sqlite3_errmsg(db) : "out of memory"));
   // WAL: readers never wait for the writer; synchronous=FULL: a committed job survives power loss.
-  const char* schema =
-      "PRAGMA journal_mode=WAL;"
-      "PRAGMA synchronous=FULL;"
-      "PRAGMA busy_timeout=10000;"
-      "CREATE TABLE IF NOT EXISTS jobs ("
-      "  id TEXT PRIMARY KEY, state TEXT NOT NULL, params TEXT NOT NULL, cache_key TEXT NOT NULL,"
-      "  idempotency_key TEXT UNIQUE, scene BLOB NOT NULL, content_type TEXT NOT NULL,"
-      "  result BLOB, etag TEXT, error TEXT, progress TEXT, attempts INTEGER NOT NULL DEFAULT 0,"
-      "  created REAL NOT NULL, started REAL NOT NULL DEFAULT 0, finished REAL NOT NULL DEFAULT 0,"
-      "  event_seq INTEGER NOT NULL DEFAULT 0);"
-      "CREATE INDEX IF NOT EXISTS jobs_state ON jobs(state, created);"
-      "CREATE INDEX IF NOT EXISTS jobs_cache ON jobs(cache_key, state);"
-      "CREATE TABLE IF NOT EXISTS events (job TEXT NOT NULL, seq INTEGER NOT NULL, type TEXT NOT NULL,"
-      "  data TEXT NOT NULL, PRIMARY KEY (job, seq));";
-  char* msg = nullptr;
-  if (sqlite3_exec(db, schema, nullptr, nullptr, &msg) != SQLITE_OK) {
-    error = "cannot set up the job store " + path + ": " + (msg ? msg : "?");
-    sqlite3_free(msg);
-    sqlite3_close(db);
-    ::close(lock_fd);
-    return nullptr;
+  std::string why;
+  if (!exec(db, "PRAGMA journal_mode=WAL; PRAGMA synchronous=FULL; PRAGMA busy_timeout=10000;", why))
+    return fail("cannot set up the job store " + path + ": " + why);
+  int layout = 0;
+  bool layout1 = false;
+  {
+    Stmt v(db, "PRAGMA user_version");
+    if (v.row()) layout = static_cast<int>(v.col_int(0));
+    Stmt c(db, "SELECT 1 FROM pragma_table_info('jobs') WHERE name = 'scene'");
+    layout1 = c.row();
   }
-  return std::unique_ptr<Store>(new Store(db, lock_fd));
-}
-
-Store::~Store() {
-  sqlite3_close(db_);
-  ::close(lock_fd_);
-}
-
-std::string Store::create(const std::string& scene, const std::string& content_type, const std::string& params,
-                          const std::string& cache_key, const std::string& idempotency_key, bool& existed) {
-  std::lock_guard lock(mutex_);
-  existed = false;
-  if (!idempotency_key.empty()) {
-    if (auto id = idempotent_locked(idempotency_key)) {
-      existed = true;
-      return *id;
-    }
+  if (layout > kLayout) return fail("the job store " + path + " was written by a newer hemibake-server (layout " + std::to_string(layout) + ")");
+  // One transaction: a crash during the conversion leaves layout 1 as it was.
+  const std::string setup = std::string("BEGIN IMMEDIATE;") + (layout1 ? kFromLayout1 : "") + kTables +
+                            (layout1 ? kCopyLayout1 : "") + "PRAGMA user_version = " + std::to_string(kLayout) + "; COMMIT;";
+  if (!exec(db, setup.c_str(), why)) {
+    sqlite3_exec(db, "ROLLBACK", nullptr, nullptr, nullptr);
+    return fail("cannot set up the job store " + path + ": " + why);
   }
-  const std::string id = new_id();
-  Stmt s(db_,
-         "INSERT INTO jobs (id, state, params, cache_key, idempotency_key, scene, content_type, created)"
-         " VALUES (?, 'queued', ?, ?, ?, ?, ?, ?)");
-  s.text(1, id).text(2, params).text(3, cache_key);
-  if (idempotency_key.empty()) s.null(4);
-  else s.text(4, idempotency_key);
-  s.blob(5, scene).text(6, content_type).real(7, unix_now());
-  if (s.run() != SQLITE_DONE) return {};
-  return id;
-}
-
-std::optional<std::string> Store::idempotent_locked(const std::string& idempotency_key) {
-  Stmt s(db_, "SELECT id FROM jobs WHERE idempotency_key = ?");
-  s.text(1, idempotency_key);
-  if (s.row()) return s.col_text(0);
-  return std::nullopt;
-}
-
-std::optional<std::string> Store::find_idempotent(const std::string& idempotency_key) {
-  std::lock_guard lock(mutex_);
-  return idempotent_locked(idempotency_key);
-}
-
-std::optional<std::string> Store::find_cached(const std::string& cache_key) {
-  std::lock_guard lock(mutex_);
-  Stmt s(db_, "SELECT id FROM jobs WHERE cache_key = ? AND state = 'succeeded' ORDER BY finished DESC LIMIT 1");
-  s.text(1, cache_key);
-  if (s.row()) return s.col_text(0);
-  return std::nullopt;
-}
-
-std::optional<JobRecord> Store::get(const std::string& id) {
-  std::lock_guard lock(mutex_);
-  Stmt s(db_, (std::string("SELECT ") + kColumns + " FROM jobs WHERE id = ?").c_str());
-  s.text(1, id);
-  if (!s.row()) return std::nullopt;
-  return read_record(s);
-}
-
-std::vector<JobRecord> Store::list(std::optional<JobState> state, size_t limit, const std::string& after) {
-  std::lock_guard lock(mutex_);
-  // Newest first; the cursor is the last id of the previous page (its creation time orders).
-  std::string sql = std::string("SELECT ") + kColumns + " FROM jobs WHERE (?1 IS NULL OR state = ?1)"
-                    " AND (?2 IS NULL OR created < (SELECT created FROM jobs WHERE id = ?2)"
-                    "      OR (created = (SELECT created FROM jobs WHERE id = ?2) AND id < ?2))"
-                    " ORDER BY created DESC, id DESC LIMIT ?3";
-  Stmt s(db_, sql.c_str());
-  if (state) s.text(1, to_string(*state));
-  else s.null(1);
-  if (after.empty()) s.null(2);
-  else s.text(2, after);
-  s.integer(3, static_cast<int64_t>(limit));
-  std::vector<JobRecord> out;
-  while (s.row()) out.push_back(read_record(s));
-  return out;
-}
-
-bool Store::claim(std::string& id, std::string& scene, std::string& params) {
-  std::lock_guard lock(mutex_);
-  Stmt s(db_,
-         "UPDATE jobs SET state = 'running', started = ?, attempts = attempts + 1"
-         " WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY created, id LIMIT 1)"
-         " RETURNING id, scene, params");
-  s.real(1, unix_now());
-  if (!s.row()) return false;
-  id = s.col_text(0);
-  scene = s.col_blob(1);
-  params = s.col_text(2);
-  return true;
-}
-
-void Store::set_progress(const std::string& id, const std::string& progress_json) {
-  std::lock_guard lock(mutex_);
-  Stmt s(db_, "UPDATE jobs SET progress = ? WHERE id = ?");
-  s.text(1, progress_json).text(2, id).run();
-}
-
-uint64_t Store::add_event(const std::string& id, const std::string& type, const std::string& data) {
-  std::lock_guard lock(mutex_);
-  Stmt u(db_, "UPDATE jobs SET event_seq = event_seq + 1 WHERE id = ? RETURNING event_seq");
-  u.text(1, id);
-  if (!u.row()) return 0;
-  const int64_t seq = u.col_int(0);
-  Stmt s(db_, "INSERT INTO events (job, seq, type, data) VALUES (?, ?, ?, ?)");
-  s.text(1, id).integer(2, seq).text(3, type).text(4, data).run();
-  return static_cast<uint64_t>(seq);
-}
-
-std::vector<Event> Store::events_after(const std::string& id, uint64_t after, size_t limit) {
-  std::lock_guard lock(mutex_);
-  Stmt s(db_, "SELECT seq, type, data FROM events WHERE job = ? AND seq > ? ORDER BY seq LIMIT ?");
-  s.text(1, id).integer(2, static_cast<int64_t>(after)).integer(3, static_cast<int64_t>(limit));
-  std::vector<Event> out;
-  while (s.row()) out.push_back({static_cast<uint64_t>(s.col_int(0)), s.col_text(1), s.col_text(2)});
-  return out;
-}
-
-void Store::succeed(const std::string& id, const std::string& result, const std::string& etag) {
-  std::lock_guard lock(mutex_);
-  Stmt s(db_, "UPDATE jobs SET state = 'succeeded', result = ?, etag = ?, finished = ? WHERE id = ? AND state = 'running'");
-  s.blob(1, result).text(2, etag).real(3, unix_now()).text(4, id).run();
-}
-
-void Store::fail(const std::string& id, const std::string& error) {
-  std::lock_guard lock(mutex_);
-  Stmt s(db_, "UPDATE jobs SET state = 'failed', error = ?, finished = ? WHERE id = ? AND state = 'running'");
-  s.text(1, error).real(2, unix_now()).text(3, id).run();
-}
-
-bool Store::cancel(const std::string& id) {
-  std::lock_guard lock(mutex_);
-  Stmt s(db_, "UPDATE jobs SET state = 'cancelled', finished = ? WHERE id = ? AND state IN ('queued', 'running')");
-  s.real(1, unix_now()).text(2, id).run();
-  return sqlite3_changes(db_) > 0;
-}
-
-void Store::requeue(const std::string& id) {
-  std::lock_guard lock(mutex_);
-  Stmt s(db_, "UPDATE jobs SET state = 'queued' WHERE id = ? AND state = 'running'");
-  s.text(1, id).run();
-}
-
-std::optional<std::string> Store::result(const std::string& id) {
-  std::lock_guard lock(mutex_);
-  Stmt s(db_, "SELECT result FROM jobs WHERE id = ? AND state = 'succeeded'");
-  s.text(1, id);
-  if (!s.row()) return std::nullopt;
-  return s.col_blob(0);
-}
-
-int Store::recover(int max_attempts) {
-  std::lock_guard lock(mutex_);
-  Stmt f(db_, "UPDATE jobs SET state = 'failed', finished = ?, error = 'the server stopped during each of its ' || attempts || ' attempts' WHERE state = 'running' AND attempts >= ?");
-  f.real(1, unix_now()).integer(2, max_attempts).run();
-  Stmt q(db_, "UPDATE jobs SET state = 'queued' WHERE state = 'running'");
-  q.run();
-  return sqlite3_changes(db_);
-}
-
-int Store::expire(double age_seconds) {
-  std::lock_guard lock(mutex_);
-  const double cutoff = unix_now() - age_seconds;
-  Stmt e(db_, "DELETE FROM events WHERE job IN (SELECT id FROM jobs WHERE state IN ('succeeded', 'failed', 'cancelled') AND finished < ?)");
-  e.real(1, cutoff).run();
-  Stmt s(db_, "DELETE FROM jobs WHERE state IN ('succeeded', 'failed', 'cancelled') AND finished < ?");
-  s.real(1, cutoff).run();
-  return sqlite3_changes(db_);
-}
-
-size_t Store::count(JobState state) {
-  std::lock_guard lock(mutex_);
-  Stmt s(db_, "SELECT count(*) FROM jobs WHERE state = ?");
-  s.text(1, to_string(state));
-  return s.row() ? static_cast<size_t>(s.col_int(0)) : 0;
+  if (layout1) exec(db, "VACUUM", why);  // the old rows' space back; not needed to go on
+  return std::make_unique<SqliteStore>(db, lock_fd);
 }
 
 }  // namespace hemibake::server

@@ -8,14 +8,15 @@
 
 namespace hemibake::test {
 
-/// `gltf` (a .gltf with embedded buffers) with its light switched off, as a GLB whose BIN chunk is
-/// `bin_bytes` of zeros (rounded up to 4) that no accessor uses. The server reads and checks all of
-/// it (container, JSON, buffers), then refuses it for having no light (422), so nothing is stored.
-inline std::string dark_glb_with_padding(const std::string& gltf, uint32_t bin_bytes) {
+/// `gltf` (a .gltf with embedded buffers) as a GLB whose BIN chunk is `bin_bytes` of zeros (rounded
+/// up to 4) that no accessor uses: a large scene that bakes like the small one.
+inline std::string glb_with_padding(const std::string& gltf, uint32_t bin_bytes, bool dark = false) {
   nlohmann::json g = nlohmann::json::parse(gltf);
-  for (auto& m : g["materials"]) {
-    m.erase("emissiveFactor");
-    m.erase("extensions");
+  if (dark) {
+    for (auto& m : g["materials"]) {
+      m.erase("emissiveFactor");
+      m.erase("extensions");
+    }
   }
   // The BIN chunk is the buffer without a uri, and that buffer must come first.
   g["buffers"].insert(g["buffers"].begin(), nlohmann::json{{"byteLength", bin_bytes}});
@@ -35,6 +36,12 @@ inline std::string dark_glb_with_padding(const std::string& gltf, uint32_t bin_b
   glb.append("BIN\0", 4);
   glb.append(bin_bytes, '\0');
   return glb;
+}
+
+/// glb_with_padding with the light switched off. The server reads and checks all of it (container,
+/// JSON, buffers), then refuses it for having no light (422), so nothing is stored.
+inline std::string dark_glb_with_padding(const std::string& gltf, uint32_t bin_bytes) {
+  return glb_with_padding(gltf, bin_bytes, true);
 }
 
 }  // namespace hemibake::test

@@ -2,9 +2,14 @@
 #include "hemibake/server/service.h"
 
 #include "dark_glb.h"
+#include "faulty_store.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+#include <sqlite3.h>
+#define STB_IMAGE_WRITE_STATIC
+#define STB_IMAGE_WRITE_IMPLEMENTATION
+#include <stb_image_write.h>
 
 #include <atomic>
 #include <chrono>
@@ -12,9 +17,11 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <mutex>
 #include <sstream>
 #include <thread>
+#include <sys/resource.h>
 #include <unistd.h>
 #include <vector>
 
@@ -26,13 +33,22 @@ using nlohmann::json;
 struct Fixture {
   std::string dir;
   std::unique_ptr<Service> service;
-  explicit Fixture(ServiceOptions o = {}) {
+  test::FaultyStore* store = nullptr;  // with a `fault`: the service's store
+  explicit Fixture(ServiceOptions o = {}, test::FaultyStore::Fault fault = nullptr) {
     dir = (std::filesystem::temp_directory_path() / ("hemibake-handler-" + std::to_string(getpid()))).string();
     std::filesystem::remove_all(dir);
     o.data_dir = dir;
     o.workers = 1;
     std::string error;
-    service = Service::start(o, error);
+    if (fault) {
+      auto real = Store::open(dir, error);
+      EXPECT_TRUE(real) << error;
+      auto faulty = std::make_unique<test::FaultyStore>(std::move(real), std::move(fault));
+      store = faulty.get();
+      service = Service::start(o, std::move(faulty), error);
+    } else {
+      service = Service::start(o, error);
+    }
     EXPECT_TRUE(service) << error;
   }
   ~Fixture() {
@@ -381,6 +397,283 @@ TEST(Handler, InvalidUtf8InARequestGetsItsProperStatus) {
   const Response type = f.call("POST", "/v1/jobs", cornell(), {{"content-type", "text/\xc3\x28"}});
   EXPECT_EQ(type.status, 415);
   EXPECT_TRUE(json::parse(type.body, nullptr, false).is_object()) << type.body;
+}
+
+// Never fails a write: for tests that only count reads.
+std::string no_fault(const std::string&, const std::string&) { return {}; }
+
+// Streams of a job with nothing new wait for its next event without reading the store (they read
+// it five times a second each), and that event reaches all of them at once.
+TEST(Handler, WaitingEventStreamsReadTheStoreOnlyWhenAnEventComes) {
+  Fixture f({}, no_fault);
+  const std::string slow = start_slow_job(f);
+  const Response posted = f.call("POST", "/v1/jobs?convergence=0.3", cornell(), {{"content-type", "model/gltf+json"}});
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = json::parse(posted.body)["id"];
+  ASSERT_EQ(json::parse(posted.body)["state"], "queued");
+  std::mutex mutex;
+  std::condition_variable changed;
+  std::vector<EventBatch> batches;
+  for (int i = 0; i < 16; ++i)
+    f.service->events_async(id, 0, std::chrono::milliseconds(30'000), [&](EventBatch b) {
+      std::lock_guard lock(mutex);
+      batches.push_back(std::move(b));
+      changed.notify_all();
+    });
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // each has read once, and waits
+  const uint64_t before = f.store->reads.load();
+  std::this_thread::sleep_for(std::chrono::seconds(1));
+  EXPECT_EQ(f.store->reads.load(), before) << "waiting streams read the store";
+  {
+    std::lock_guard lock(mutex);
+    EXPECT_TRUE(batches.empty());
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  ASSERT_EQ(f.call("DELETE", "/v1/jobs/" + id).status, 200);
+  std::unique_lock lock(mutex);
+  ASSERT_TRUE(changed.wait_for(lock, std::chrono::seconds(10), [&] { return batches.size() == 16; }));
+  std::printf("16 waiting streams had the event %.1f ms after the DELETE was sent\n",
+              std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  for (const EventBatch& b : batches) {
+    EXPECT_EQ(b.status, 200);
+    ASSERT_EQ(b.events.size(), 1u);
+    EXPECT_EQ(json::parse(b.events[0].data)["state"], "cancelled");
+  }
+  lock.unlock();
+  f.call("DELETE", "/v1/jobs/" + slow);
+}
+
+// A job's event stream read to its end (or for `limit`), as a stream client reads it.
+std::vector<Event> read_stream(Service& service, const std::string& id, std::chrono::seconds limit, bool* ended) {
+  std::vector<Event> all;
+  *ended = false;
+  const auto until = std::chrono::steady_clock::now() + limit;
+  while (std::chrono::steady_clock::now() < until) {
+    std::promise<EventBatch> got;
+    service.events_async(id, all.empty() ? 0 : all.back().seq, std::chrono::milliseconds(1000),
+                         [&got](EventBatch b) { got.set_value(std::move(b)); });
+    EventBatch b = got.get_future().get();
+    all.insert(all.end(), b.events.begin(), b.events.end());
+    if (b.end || b.status == 404) {
+      *ended = b.end;
+      break;
+    }
+  }
+  return all;
+}
+
+// The state named by the last state event.
+std::string last_state(const std::vector<Event>& events) {
+  std::string state;
+  for (const Event& e : events)
+    if (e.type == "state") state = json::parse(e.data)["state"];
+  return state;
+}
+
+json wait_finished(Fixture& f, const std::string& id) {
+  json job;
+  for (int i = 0; i < 600; ++i) {
+    job = json::parse(f.call("GET", "/v1/jobs/" + id).body);
+    if (job["state"] != "queued" && job["state"] != "running") break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return job;
+}
+
+// A result the store cannot write (a full disk) fails the job with the reason: it does not stay
+// running for ever. Its stream ends, and its worker takes the next job, which succeeds once the
+// store can write again.
+TEST(Handler, ResultThatCannotBeStoredFailsTheJob) {
+  std::atomic<bool> full{true};
+  Fixture f({}, [&](const std::string& write, const std::string&) {
+    return full && write == "succeed" ? std::string("database or disk is full") : std::string();
+  });
+  const std::map<std::string, std::string> gltf = {{"content-type", "model/gltf+json"}};
+  const Response posted = f.call("POST", "/v1/jobs?convergence=0.2", cornell(), gltf);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = json::parse(posted.body)["id"];
+  bool ended = false;
+  const auto events = read_stream(*f.service, id, std::chrono::seconds(60), &ended);
+  EXPECT_TRUE(ended) << "the stream did not end";
+  EXPECT_EQ(last_state(events), "failed");
+  const json job = json::parse(f.call("GET", "/v1/jobs/" + id).body);
+  EXPECT_EQ(job["state"], "failed");
+  EXPECT_NE(job.value("error", "").find("database or disk is full"), std::string::npos) << job.dump();
+  EXPECT_NE(job.value("error", "").find("result could not be stored"), std::string::npos) << job.dump();
+  full = false;
+  const Response next = f.call("POST", "/v1/jobs?convergence=0.21", cornell(), gltf);
+  ASSERT_EQ(next.status, 202) << next.body;
+  EXPECT_EQ(wait_finished(f, json::parse(next.body)["id"])["state"], "succeeded");
+}
+
+// A DELETE that lands while the result is written: one of the two wins, and the job's state, its
+// stream and its result all say the same (the state said cancelled while the stream said succeeded).
+TEST(Handler, CancelDuringTheResultWriteEndsTheJobOneWay) {
+  Fixture* fixture = nullptr;
+  std::atomic<int> deleted{0};
+  Fixture f({}, [&](const std::string& write, const std::string& id) {
+    if (write == "succeed" && deleted == 0) deleted = fixture->call("DELETE", "/v1/jobs/" + id).status;
+    return std::string();
+  });
+  fixture = &f;
+  const Response posted = f.call("POST", "/v1/jobs?convergence=0.2", cornell(), {{"content-type", "model/gltf+json"}});
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = json::parse(posted.body)["id"];
+  bool ended = false;
+  const auto events = read_stream(*f.service, id, std::chrono::seconds(60), &ended);
+  EXPECT_TRUE(ended);
+  const json job = json::parse(f.call("GET", "/v1/jobs/" + id).body);
+  const int result = f.call("GET", "/v1/jobs/" + id + "/result").status;
+  EXPECT_EQ(last_state(events), job["state"]) << "the stream and the job disagree";
+  if (job["state"] == "cancelled") {
+    EXPECT_EQ(deleted.load(), 200);
+    EXPECT_EQ(result, 409);
+  } else {
+    EXPECT_EQ(job["state"], "succeeded");
+    EXPECT_EQ(deleted.load(), 409);
+    EXPECT_EQ(result, 200);
+  }
+}
+
+// A data directory of the older layout (the scene and the result in the job's row) is converted at
+// start: the jobs, their scenes, results and events are all still there.
+TEST(Handler, StoreOfTheOlderLayoutIsConverted) {
+  const std::string dir = (std::filesystem::temp_directory_path() / ("hemibake-layout1-" + std::to_string(getpid()))).string();
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  {
+    sqlite3* db = nullptr;
+    ASSERT_EQ(sqlite3_open((dir + "/hemibake.db").c_str(), &db), SQLITE_OK);
+    const char* layout1 =
+        "PRAGMA journal_mode=WAL;"
+        "CREATE TABLE jobs (id TEXT PRIMARY KEY, state TEXT NOT NULL, params TEXT NOT NULL, cache_key TEXT NOT NULL,"
+        "  idempotency_key TEXT UNIQUE, scene BLOB NOT NULL, content_type TEXT NOT NULL,"
+        "  result BLOB, etag TEXT, error TEXT, progress TEXT, attempts INTEGER NOT NULL DEFAULT 0,"
+        "  created REAL NOT NULL, started REAL NOT NULL DEFAULT 0, finished REAL NOT NULL DEFAULT 0,"
+        "  event_seq INTEGER NOT NULL DEFAULT 0);"
+        "CREATE INDEX jobs_state ON jobs(state, created);"
+        "CREATE INDEX jobs_cache ON jobs(cache_key, state);"
+        "CREATE TABLE events (job TEXT NOT NULL, seq INTEGER NOT NULL, type TEXT NOT NULL,"
+        "  data TEXT NOT NULL, PRIMARY KEY (job, seq));"
+        "INSERT INTO jobs (id, state, params, cache_key, idempotency_key, scene, content_type, result, etag, created,"
+        "  finished, event_seq) VALUES ('done', 'succeeded', '{}', 'k1', 'key', x'0102030405', 'model/gltf-binary',"
+        "  x'0a0b0c', '\"e\"', 1, 2, 1);"
+        "INSERT INTO jobs (id, state, params, cache_key, scene, content_type, created)"
+        "  VALUES ('waiting', 'queued', '{\"resolution\":64}', 'k2', x'0607', 'model/gltf+json', 3);"
+        "INSERT INTO events VALUES ('done', 1, 'state', '{\"state\":\"succeeded\"}');";
+    ASSERT_EQ(sqlite3_exec(db, layout1, nullptr, nullptr, nullptr), SQLITE_OK) << sqlite3_errmsg(db);
+    sqlite3_close(db);
+  }
+  std::string error;
+  auto store = Store::open(dir, error);
+  ASSERT_TRUE(store) << error;
+  const auto done = store->get("done");
+  ASSERT_TRUE(done);
+  EXPECT_EQ(done->state, JobState::kSucceeded);
+  EXPECT_EQ(done->scene_bytes, 5u);
+  EXPECT_EQ(done->result_bytes, 3u);
+  EXPECT_EQ(done->etag, "\"e\"");
+  EXPECT_EQ(done->last_event, 1u);
+  EXPECT_EQ(store->result("done"), std::string("\x0a\x0b\x0c"));
+  EXPECT_EQ(store->events_after("done", 0, 10).size(), 1u);
+  EXPECT_EQ(store->find_idempotent("key")->first, "done");
+  EXPECT_EQ(store->find_cached("k1"), std::string("done"));
+  std::string id, scene, params;
+  ASSERT_TRUE(store->claim(id, scene, params));
+  EXPECT_EQ(id, "waiting");
+  EXPECT_EQ(scene, std::string("\x06\x07"));
+  EXPECT_EQ(params, "{\"resolution\":64}");
+  store.reset();
+  ASSERT_TRUE(Store::open(dir, error)) << error;  // converted once; the new layout opens as it is
+  std::filesystem::remove_all(dir);
+}
+
+// An Idempotency-Key names one submission: the same key with another scene or other parameters is
+// refused with 422 (as the IETF Idempotency-Key draft asks), not answered with the first job.
+TEST(Handler, IdempotencyKeyReusedForAnotherSubmissionIsRefused) {
+  Fixture f;
+  const std::map<std::string, std::string> h = {{"content-type", "model/gltf+json"}, {"idempotency-key", "k-1"}};
+  const Response first = f.call("POST", "/v1/jobs?convergence=0.3", cornell(), h);
+  ASSERT_EQ(first.status, 202) << first.body;
+  const Response again = f.call("POST", "/v1/jobs?convergence=0.3", cornell(), h);
+  EXPECT_EQ(again.status, 200) << again.body;
+  EXPECT_EQ(json::parse(again.body)["id"], json::parse(first.body)["id"]);
+  const Response params = f.call("POST", "/v1/jobs?convergence=0.25", cornell(), h);
+  EXPECT_EQ(params.status, 422) << params.body;
+  EXPECT_NE(json::parse(params.body)["error"].get<std::string>().find("Idempotency-Key"), std::string::npos) << params.body;
+  json other = json::parse(cornell());
+  other["materials"][0]["name"] = "another";
+  const Response scene = f.call("POST", "/v1/jobs?convergence=0.3", other.dump(), h);
+  EXPECT_EQ(scene.status, 422) << scene.body;
+}
+
+// A PNG of w x h grey pixels as a data URI.
+std::string png_uri(int w, int h) {
+  std::vector<unsigned char> pixels(static_cast<size_t>(w) * h * 3, 128);
+  std::string png;
+  stbi_write_png_to_func([](void* out, void* data, int size) { static_cast<std::string*>(out)->append(static_cast<char*>(data), size); },
+                         &png, w, h, 3, pixels.data(), w * 3);
+  static const char* abc = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string b64;
+  for (size_t i = 0; i < png.size(); i += 3) {
+    uint32_t v = static_cast<unsigned char>(png[i]) << 16;
+    if (i + 1 < png.size()) v |= static_cast<unsigned char>(png[i + 1]) << 8;
+    if (i + 2 < png.size()) v |= static_cast<unsigned char>(png[i + 2]);
+    b64 += abc[(v >> 18) & 63];
+    b64 += abc[(v >> 12) & 63];
+    b64 += i + 1 < png.size() ? abc[(v >> 6) & 63] : '=';
+    b64 += i + 2 < png.size() ? abc[v & 63] : '=';
+  }
+  return "data:image/png;base64," + b64;
+}
+
+// Memory a job asks for is budgeted at submit, naming the limit: a 4096² hemicube (3.7 GB) is
+// refused by default, a small job under a small budget is not; the decoded pixels of all images
+// together are limited (the limit was per image).
+TEST(Handler, JobsThatNeedMoreMemoryThanTheBudgetAreRefusedAtSubmit) {
+  const std::map<std::string, std::string> gltf = {{"content-type", "model/gltf+json"}};
+  {
+    Fixture f;
+    const Response huge = f.call("POST", "/v1/jobs?resolution=4096", cornell(), gltf);
+    EXPECT_EQ(huge.status, 422) << huge.body;
+    EXPECT_NE(huge.body.find("limit of 2048 MB per job (hemibake-server --max-job-mb)"), std::string::npos) << huge.body;
+    EXPECT_NE(huge.body.find("hemicubes at resolution 4096"), std::string::npos) << huge.body;
+  }
+  ServiceOptions o;
+  o.max_job_bytes = 64u << 20;
+  o.max_image_pixels = 100;
+  Fixture f(o);
+  const Response big = f.call("POST", "/v1/jobs?resolution=1024&shot_cache_mb=0", cornell(), gltf);
+  EXPECT_EQ(big.status, 422) << big.body;
+  EXPECT_NE(big.body.find("limit of 64 MB"), std::string::npos) << big.body;
+  const Response cache = f.call("POST", "/v1/jobs?shot_cache_mb=200", cornell(), gltf);
+  EXPECT_EQ(cache.status, 422) << cache.body;
+  EXPECT_EQ(f.call("POST", "/v1/jobs?resolution=100&shot_cache_mb=0&convergence=0.3", cornell(), gltf).status, 202);
+  json scene = json::parse(cornell());
+  scene["images"] = json::array({{{"uri", png_uri(8, 8)}}});
+  EXPECT_EQ(f.call("POST", "/v1/jobs?shot_cache_mb=0&convergence=0.31", scene.dump(), gltf).status, 202);
+  scene["images"].push_back({{"uri", png_uri(8, 8)}});
+  const Response images = f.call("POST", "/v1/jobs?shot_cache_mb=0&convergence=0.32", scene.dump(), gltf);
+  EXPECT_EQ(images.status, 422) << images.body;
+  EXPECT_NE(images.body.find("more than 100 pixels in all"), std::string::npos) << images.body;
+}
+
+// Found by gltf_fuzz: a baked GLB (7 KB) whose Draco primitive has an accessor of componentType
+// 5127, which glTF does not define. tinygltf sized the decoded buffer by a component size of -1
+// and allocated 4 GB for the submission. It is refused from the JSON, with the accessor named.
+TEST(Handler, UndefinedComponentTypeIsRefusedBeforeDracoDecoding) {
+  Fixture f;
+  std::ifstream in(HEMIBAKE_SOURCE_DIR "/tests/fuzz/corpus/gltf/draco-bad-component-type.glb", std::ios::binary);
+  const std::string glb((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_EQ(glb.size(), 6796u);
+  rusage before{};
+  getrusage(RUSAGE_SELF, &before);
+  const Response r = f.call("POST", "/v1/jobs", glb, {{"content-type", "model/gltf-binary"}});
+  rusage after{};
+  getrusage(RUSAGE_SELF, &after);
+  EXPECT_EQ(r.status, 422) << r.body;
+  EXPECT_NE(r.body.find("accessor 4.componentType must be"), std::string::npos) << r.body;
+  EXPECT_LT(after.ru_maxrss - before.ru_maxrss, 512 * 1024) << "peak memory grew by " << (after.ru_maxrss - before.ru_maxrss) << " KB";
 }
 
 TEST(Handler, QueryStringsDecode) {

@@ -22,6 +22,8 @@
 #include <set>
 #include <sstream>
 #include <string>
+#include <fcntl.h>
+#include <poll.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <thread>
@@ -47,21 +49,31 @@ std::string read_file(const std::string& path) {
 // A hemibake-server process on a free loopback port.
 class ServerProcess {
  public:
-  // `max_files` > 0 sets the server's limit of open file descriptors.
+  // `max_files` > 0 sets the server's limit of open file descriptors. `prefix` runs the server
+  // through another program (which ends by executing it); `errors` receives its stderr.
   ServerProcess(const std::string& data_dir, std::vector<std::string> extra = {}, std::vector<std::string> env = {},
-                rlim_t max_files = 0) {
+                rlim_t max_files = 0, std::vector<std::string> prefix = {}, const std::string& errors = {}) {
     int fds[2];
     if (pipe(fds) != 0) std::abort();
     pid_ = fork();
     if (pid_ == 0) {
       dup2(fds[1], STDOUT_FILENO);
       close(fds[0]);
+      if (!errors.empty()) {
+        const int fd = ::open(errors.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        dup2(fd, STDERR_FILENO);
+      }
       if (max_files > 0) {
         const rlimit limit{max_files, max_files};
         setrlimit(RLIMIT_NOFILE, &limit);
       }
       for (const auto& e : env) putenv(const_cast<char*>(e.c_str()));
-      std::vector<std::string> args = {HEMIBAKE_SERVER, "--listen", "127.0.0.1:0", "--data", data_dir};
+      // HEMIBAKE_TEST_SERVER runs the tests against another build of the server (an older one, to see a
+      // regression test fail).
+      const char* binary = std::getenv("HEMIBAKE_TEST_SERVER") ? std::getenv("HEMIBAKE_TEST_SERVER") : HEMIBAKE_SERVER;
+      std::vector<std::string> args = prefix;
+      for (const std::string& a : {std::string(binary), std::string("--listen"), std::string("127.0.0.1:0"), std::string("--data"), data_dir})
+        args.push_back(a);
       args.insert(args.end(), extra.begin(), extra.end());
       std::vector<char*> argv;
       for (auto& a : args) argv.push_back(a.data());
@@ -120,6 +132,7 @@ Reply request(unsigned short port, http::verb method, const std::string& target,
   beast::flat_buffer buffer;
   http::response_parser<http::string_body> parser;
   parser.body_limit(1ull << 30);
+  parser.skip(method == http::verb::head);  // the GET's Content-Length, and no body
   http::read(stream, buffer, parser);
   Reply r;
   r.status = static_cast<int>(parser.get().result_int());
@@ -508,17 +521,41 @@ TEST(Client, BakesOnTheServerAndReportsErrors) {
   EXPECT_NE(std::system(unreachable.c_str()), 0);
 }
 
-// Everything the server sends on one connection for `raw` requests, until it closes.
-std::string exchange(unsigned short port, const std::string& raw) {
+// What arrives on `socket` until the peer closes it or `limit` has passed (then `timed_out` is set).
+// Beast's stream timeouts do not apply to blocking reads, so this waits with poll().
+std::string read_until_closed(tcp::socket& socket, std::chrono::seconds limit, bool* timed_out) {
+  const auto until = std::chrono::steady_clock::now() + limit;
+  std::string all;
+  char buf[4096];
+  if (timed_out) *timed_out = false;
+  for (;;) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(until - std::chrono::steady_clock::now()).count();
+    pollfd p{socket.native_handle(), POLLIN, 0};
+    if (left <= 0 || poll(&p, 1, static_cast<int>(left)) == 0) {
+      if (timed_out) *timed_out = true;
+      return all;
+    }
+    const ssize_t n = ::recv(socket.native_handle(), buf, sizeof buf, 0);
+    if (n <= 0) return all;
+    all.append(buf, static_cast<size_t>(n));
+  }
+}
+
+// Everything the server sends on one connection for `raw` requests, until it closes (or `limit`
+// has passed: then `timed_out` is set, if given).
+std::string exchange(unsigned short port, const std::string& raw, std::chrono::seconds limit = 30s, bool* timed_out = nullptr) {
   net::io_context io;
   tcp::socket socket(io);
   socket.connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
   net::write(socket, net::buffer(raw));
-  std::string all;
-  char buf[4096];
-  beast::error_code ec;
-  while (!ec) all.append(buf, socket.read_some(net::buffer(buf), ec));
-  return all;
+  return read_until_closed(socket, limit, timed_out);
+}
+
+// How many responses `all` holds (status lines; bodies here are JSON, without "HTTP/1.1 ").
+size_t responses(const std::string& all) {
+  size_t n = 0;
+  for (size_t at = all.find("HTTP/1.1 "); at != std::string::npos; at = all.find("HTTP/1.1 ", at + 1)) ++n;
+  return n;
 }
 
 // A HEAD response has the GET's headers and no body, so a request pipelined after it is answered
@@ -811,6 +848,282 @@ TEST(Server, HealthzAnswersWhilePreviewsWaitAndALargeSceneIsChecked) {
   EXPECT_GE(previews.load(), 4);
   EXPECT_EQ(preview_failures.load(), 0) << "the first: " << first_failure;
   request(port, http::verb::delete_, "/v1/jobs/" + id);
+}
+
+// Bytes a process has read through read calls (files and pipes), from /proc/PID/io.
+uint64_t bytes_read(pid_t pid) {
+  std::istringstream io(read_file("/proc/" + std::to_string(pid) + "/io"));
+  for (std::string key; io >> key;) {
+    uint64_t value = 0;
+    io >> value;
+    if (key == "rchar:") return value;
+  }
+  return 0;
+}
+
+// A running job with long shots (1024² hemicubes, none replayed), so that the next one stays queued.
+std::string start_slow_job(unsigned short port) {
+  const Reply posted = request(port, http::verb::post, "/v1/jobs?resolution=1024&reuse=false&convergence=0.00001", cornell(), kGltf);
+  EXPECT_EQ(posted.status, 202) << posted.body;
+  const std::string id = posted.js()["id"];
+  for (int i = 0; i < 200 && request(port, http::verb::get, "/v1/jobs/" + id).js()["state"] != "running"; ++i)
+    std::this_thread::sleep_for(20ms);
+  return id;
+}
+
+// Status reads, lists and event streams touch only a job's small columns: with 16 streams watching
+// a job whose scene is 48 MB, and status and list requests for it, the server reads next to
+// nothing from its store (it read the whole scene for each, 5 times a second per stream).
+TEST(Server, StatusListsAndStreamsDoNotReadScenes) {
+  ServerProcess server(temp_dir("small-reads"), {"--workers", "1"});
+  ASSERT_NE(server.port(), 0);
+  const unsigned short port = server.port();
+  const std::string slow = start_slow_job(port);
+  const Reply big = request(port, http::verb::post, "/v1/jobs", hemibake::test::glb_with_padding(cornell(), 48u << 20),
+                            {{"Content-Type", "model/gltf-binary"}});
+  ASSERT_EQ(big.status, 202) << big.body;
+  const std::string id = big.js()["id"];
+  ASSERT_EQ(big.js()["state"], "queued");
+  net::io_context io;
+  std::vector<tcp::socket> streams;
+  for (int i = 0; i < 16; ++i) {
+    streams.emplace_back(io);
+    streams.back().connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
+    net::write(streams.back(), net::buffer("GET /v1/jobs/" + id + "/events HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n"));
+  }
+  std::this_thread::sleep_for(500ms);
+  const uint64_t before = bytes_read(server.pid());
+  for (int i = 0; i < 10; ++i) EXPECT_EQ(request(port, http::verb::get, "/v1/jobs/" + id).js()["scene_bytes"].get<uint64_t>() >> 20, 48u);
+  for (int i = 0; i < 3; ++i) EXPECT_EQ(request(port, http::verb::get, "/v1/jobs").status, 200);
+  std::this_thread::sleep_for(2s);
+  const uint64_t read = bytes_read(server.pid()) - before;
+  std::printf("read %.1f MB in 2 s with 16 streams, 10 status and 3 list requests\n", read / 1e6);
+  EXPECT_LT(read, 4u << 20);
+  streams.clear();
+  request(port, http::verb::delete_, "/v1/jobs/" + id);
+  request(port, http::verb::delete_, "/v1/jobs/" + slow);
+}
+
+// A Transfer-Encoding whose last coding is not chunked, or that names chunked twice, leaves the
+// body's length unknown to one reader and known to another (RFC 9112, section 6.3): refused with
+// 400 and the connection closed, so that a request hidden in the body never runs (a DELETE did).
+// A coding before chunked that the server cannot decode is 501.
+TEST(Server, TransferEncodingsThatHideARequestAreRefused) {
+  ServerProcess server(temp_dir("smuggle"), {"--workers", "1"});
+  ASSERT_NE(server.port(), 0);
+  const std::string slow = start_slow_job(server.port());
+  ASSERT_EQ(request(server.port(), http::verb::get, "/v1/jobs/" + slow).js()["state"], "running");
+  const std::string hidden = "DELETE /v1/jobs/" + slow + " HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"Transfer-Encoding: gzip\r\n", "400"},
+      {"Transfer-Encoding: chunked, chunked\r\n", "400"},
+      {"Transfer-Encoding: chunked\r\nTransfer-Encoding: chunked\r\n", "400"},
+      {"Transfer-Encoding: chunked, identity\r\n", "400"},
+      {"Transfer-Encoding: CHUNKED , gzip\r\n", "400"},
+      {"Transfer-Encoding: gzip, chunked\r\n", "501"},
+  };
+  for (const auto& [te, status] : cases) {
+    bool timed_out = false;
+    const std::string all = exchange(server.port(),
+                                     "POST /v1/jobs HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: model/gltf+json\r\n" + te +
+                                         "\r\n" + hidden,
+                                     10s, &timed_out);
+    EXPECT_EQ(all.rfind("HTTP/1.1 " + status, 0), 0u) << te << all;
+    EXPECT_EQ(responses(all), 1u) << te << all;
+    EXPECT_FALSE(timed_out) << te << ": the connection stayed open";
+    EXPECT_NE(all.find("Connection: close"), std::string::npos) << te << all;
+  }
+  EXPECT_EQ(request(server.port(), http::verb::get, "/v1/jobs/" + slow).js()["state"], "running");
+  // Chunked alone is a body like any other.
+  const std::string chunked = exchange(server.port(),
+                                       "POST /v1/jobs?convergence=0.3 HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: model/gltf+json\r\n"
+                                       "Transfer-Encoding: chunked\r\nConnection: close\r\n\r\n" +
+                                           [] {
+                                             std::ostringstream hex;
+                                             hex << std::hex << cornell().size();
+                                             return hex.str();
+                                           }() + "\r\n" + cornell() + "\r\n0\r\n\r\n",
+                                       10s);
+  EXPECT_EQ(chunked.rfind("HTTP/1.1 202", 0), 0u) << chunked;
+  request(server.port(), http::verb::delete_, "/v1/jobs/" + slow);
+}
+
+// The token is checked from the headers: a request without one gets 401 at once and the
+// connection is closed, before any of its body is read (four unauthenticated 256 MB uploads held
+// 1 GB of memory).
+TEST(Server, TokenIsCheckedBeforeTheBodyIsRead) {
+  ServerProcess server(temp_dir("auth-first"), {"--workers", "1"}, {"HEMIBAKE_TOKENS=s3cret"});
+  ASSERT_NE(server.port(), 0);
+  bool timed_out = false;
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::string all = exchange(server.port(),
+                                   "POST /v1/jobs HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: model/gltf-binary\r\n"
+                                   "Content-Length: 200000000\r\n\r\nglTF",
+                                   10s, &timed_out);
+  EXPECT_FALSE(timed_out) << "no answer before the body";
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 5s);
+  EXPECT_EQ(all.rfind("HTTP/1.1 401", 0), 0u) << all;
+  EXPECT_NE(all.find("WWW-Authenticate: Bearer"), std::string::npos) << all;
+  // With the token, the same headers wait for the body.
+  const std::string allowed = exchange(server.port(),
+                                       "POST /v1/jobs HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: model/gltf-binary\r\n"
+                                       "Authorization: Bearer s3cret\r\nContent-Length: 200000000\r\n\r\nglTF",
+                                       2s, &timed_out);
+  EXPECT_TRUE(timed_out) << allowed;
+  EXPECT_EQ(allowed, "");
+}
+
+// Sends `body` after `head` at `rate` bytes per second (what is due every 50 ms, so that a late
+// wake-up on a busy machine does not slow it), stopping early if an answer comes; then reads the
+// answer.
+std::string upload_slowly(unsigned short port, const std::string& head, const std::string& body, double rate) {
+  net::io_context io;
+  tcp::socket socket(io);
+  socket.connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), port));
+  net::write(socket, net::buffer(head));
+  const auto t0 = std::chrono::steady_clock::now();
+  beast::error_code ec;
+  for (size_t sent = 0; sent < body.size() && !ec;) {
+    std::this_thread::sleep_for(50ms);
+    pollfd p{socket.native_handle(), POLLIN, 0};
+    if (poll(&p, 1, 0) > 0) break;  // answered already
+    const double due = rate * std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const size_t target = std::min(body.size(), static_cast<size_t>(due));
+    if (target <= sent) continue;
+    net::write(socket, net::buffer(body.data() + sent, target - sent), ec);
+    sent = target;
+  }
+  return read_until_closed(socket, 60s, nullptr);
+}
+
+// Timeouts: an idle connection is closed, headers that do not arrive in time and a body that
+// arrives too slowly are answered 408; a slow but steady upload that takes longer than 30 s (once
+// the limit for a whole request) is accepted.
+TEST(Server, SlowButSteadyUploadsSucceedAndTooSlowOnesGet408) {
+  ServerProcess strict(temp_dir("timeouts"), {"--workers", "1", "--idle-timeout", "1", "--header-timeout", "1",
+                                              "--min-rate", "20000"});
+  ASSERT_NE(strict.port(), 0);
+  bool timed_out = false;
+  auto t0 = std::chrono::steady_clock::now();
+  EXPECT_EQ(exchange(strict.port(), "", 10s, &timed_out), "");  // idle: closed without a word
+  EXPECT_FALSE(timed_out);
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 3s);
+  t0 = std::chrono::steady_clock::now();
+  const std::string header = exchange(strict.port(), "GET /healthz HTTP/1.1\r\nHo", 10s, &timed_out);
+  EXPECT_EQ(header.rfind("HTTP/1.1 408", 0), 0u) << header;
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 3s);
+  const std::string scene = hemibake::test::glb_with_padding(cornell(), 600'000);
+  const std::string head = "POST /v1/jobs HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\nContent-Type: model/gltf-binary\r\nContent-Length: " +
+                           std::to_string(scene.size()) + "\r\n\r\n";
+  t0 = std::chrono::steady_clock::now();
+  const std::string slow = upload_slowly(strict.port(), head, scene, 10'000);
+  EXPECT_EQ(slow.rfind("HTTP/1.1 408", 0), 0u) << slow;
+  EXPECT_NE(slow.find("20000 bytes per second"), std::string::npos) << slow;
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 10s);
+
+  // The defaults (at least 16 KB/s on average): 600 KB at 19 KB/s, for more than 30 s.
+  ServerProcess server(temp_dir("steady"), {"--workers", "1"});
+  t0 = std::chrono::steady_clock::now();
+  const std::string steady = upload_slowly(server.port(), head, scene, 19'000);
+  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("%zu bytes uploaded in %.1f s\n", scene.size(), took);
+  EXPECT_GT(took, 30.0);
+  EXPECT_EQ(steady.rfind("HTTP/1.1 202", 0), 0u) << steady;
+}
+
+// Smaller things from a probe: Expect: 100-continue is answered before the body is sent; HEAD on
+// an event stream has the GET's status and type; the Bearer scheme is matched in any case
+// (RFC 9110, section 11.1); a Last-Event-ID that is not a whole number replays from the start.
+TEST(Server, ContinueHeadOnEventsBearerCaseAndBadLastEventId) {
+  ServerProcess server(temp_dir("small"), {"--workers", "1"}, {"HEMIBAKE_TOKENS=s3cret"});
+  ASSERT_NE(server.port(), 0);
+  const std::map<std::string, std::string> auth = {{"Authorization", "bearer s3cret"}};
+  EXPECT_EQ(request(server.port(), http::verb::get, "/v1/jobs", "", auth).status, 200);
+  EXPECT_EQ(request(server.port(), http::verb::get, "/v1/jobs", "", {{"Authorization", "BEARER   s3cret"}}).status, 200);
+  EXPECT_EQ(request(server.port(), http::verb::get, "/v1/jobs", "", {{"Authorization", "Basic s3cret"}}).status, 401);
+
+  bool timed_out = false;
+  const std::string cont = exchange(server.port(),
+                                    "POST /v1/jobs HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: model/gltf+json\r\n"
+                                    "Authorization: Bearer s3cret\r\nExpect: 100-continue\r\nContent-Length: 5618\r\n\r\n",
+                                    3s, &timed_out);
+  EXPECT_EQ(cont, "HTTP/1.1 100 Continue\r\n\r\n");
+  // Refused from the headers: no 100, the final answer at once.
+  const std::string refused = exchange(server.port(),
+                                       "POST /v1/jobs HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: model/gltf+json\r\n"
+                                       "Expect: 100-continue\r\nContent-Length: 5618\r\n\r\n",
+                                       3s, &timed_out);
+  EXPECT_EQ(refused.rfind("HTTP/1.1 401", 0), 0u) << refused;
+
+  const Reply posted = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.3", cornell(),
+                               {{"Content-Type", "model/gltf+json"}, {"Authorization", "Bearer s3cret"}});
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = posted.js()["id"];
+  const Reply head = request(server.port(), http::verb::head, "/v1/jobs/" + id + "/events", "", auth);
+  EXPECT_EQ(head.status, 200);
+  EXPECT_EQ(head.headers.count("content-type") ? head.headers.at("content-type") : "", "text/event-stream");
+  EXPECT_EQ(request(server.port(), http::verb::head, "/v1/jobs/nope/events", "", auth).status, 404);
+
+  for (int i = 0; i < 200 && request(server.port(), http::verb::get, "/v1/jobs/" + id, "", auth).js()["state"] != "succeeded"; ++i)
+    std::this_thread::sleep_for(50ms);
+  auto first_id = [&](const std::string& last) {
+    const std::string all = exchange(server.port(), "GET /v1/jobs/" + id + "/events HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+                                     "Authorization: Bearer s3cret\r\nLast-Event-ID: " + last + "\r\n\r\n", 10s);
+    const size_t at = all.find("\nid: ");
+    return at == std::string::npos ? std::string("none") : all.substr(at + 5, all.find('\n', at + 5) - at - 5);
+  };
+  EXPECT_EQ(first_id("-5"), "1");
+  EXPECT_EQ(first_id("abc"), "1");
+  EXPECT_EQ(first_id("99999999999999999999999"), "1");
+  EXPECT_EQ(first_id("1"), "2");
+}
+
+// A real full disk: the data directory on an 8 MB tmpfs of the server's own (a user and mount
+// namespace, so no privilege is needed), filled up while a job bakes. The result cannot be
+// written: once space is back, the job is failed with the reason (not left running), its stream
+// has ended, and the next job succeeds.
+TEST(Server, FullDiskDuringABakeFailsTheJobAndTheServerRecovers) {
+  if (std::system("unshare -rm sh -c 'mount -t tmpfs -o size=1m tmpfs /tmp' 2>/dev/null") != 0)
+    GTEST_SKIP() << "no user and mount namespaces here (unshare -rm)";
+  const std::string dir = temp_dir("full-disk");
+  std::filesystem::create_directories(dir);
+  const std::string errors = dir + "-stderr.log";
+  ServerProcess server(dir, {"--workers", "1"}, {}, 0,
+                       {"/usr/bin/unshare", "-rm", "sh", "-c", "mount -t tmpfs -o size=8m tmpfs \"$4\" && exec \"$0\" \"$@\""}, errors);
+  ASSERT_NE(server.port(), 0) << read_file(errors);
+  const unsigned short port = server.port();
+  // The server's view of its data directory (its mount namespace).
+  const std::string inside = "/proc/" + std::to_string(server.pid()) + "/root" + dir;
+  ASSERT_TRUE(std::filesystem::exists(inside + "/hemibake.db"));
+  const std::string id = request(port, http::verb::post, "/v1/jobs?resolution=512&reuse=false&max_shots=10", cornell(), kGltf).js()["id"];
+  for (int i = 0; i < 200 && request(port, http::verb::get, "/v1/jobs/" + id).js()["state"] != "running"; ++i)
+    std::this_thread::sleep_for(20ms);
+  {
+    std::ofstream ballast(inside + "/ballast", std::ios::binary);
+    const std::string mb(1 << 20, 'x');
+    for (int i = 0; i < 16 && ballast.write(mb.data(), static_cast<std::streamsize>(mb.size())); ++i) {}
+  }
+  // Full: a submission is refused cleanly, with nothing queued.
+  const Reply refused = request(port, http::verb::post, "/v1/jobs?convergence=0.3", cornell(), kGltf);
+  EXPECT_EQ(refused.status, 500) << refused.body;
+  EXPECT_TRUE(refused.js().contains("error")) << refused.body;
+  // Space comes back once the worker has found that the result cannot be written.
+  bool seen = false;
+  for (int i = 0; i < 600 && !(seen = read_file(errors).find("the result of " + id + " could not be stored") != std::string::npos); ++i)
+    std::this_thread::sleep_for(100ms);
+  EXPECT_TRUE(seen) << read_file(errors);
+  std::filesystem::remove(inside + "/ballast");
+  const json job = wait_finished(port, id, 30s);
+  EXPECT_EQ(job["state"], "failed") << job.dump() << "\n" << read_file(errors);
+  EXPECT_NE(job.value("error", "").find("the result could not be stored"), std::string::npos) << job.dump();
+  EXPECT_NE(job.value("error", "").find("full"), std::string::npos) << job.dump();
+  const auto evs = events(port, id);  // returns only once the stream has ended
+  ASSERT_FALSE(evs.empty());
+  EXPECT_EQ(json::parse(std::get<2>(evs.back())).value("state", ""), "failed");
+  const Reply next = request(port, http::verb::post, "/v1/jobs?convergence=0.2", cornell(), kGltf);
+  ASSERT_EQ(next.status, 202) << next.body;
+  EXPECT_EQ(wait_finished(port, next.js()["id"])["state"], "succeeded");
+  std::filesystem::remove(errors);
 }
 
 }  // namespace

@@ -17,7 +17,9 @@ namespace hemibake::protocol {
 struct LoadLimits {
   uint64_t max_file_bytes = 512ull << 20;  ///< the .glb/.gltf file itself
   uint64_t max_triangles = 2'000'000;      ///< triangles in the scene, instances counted
-  uint32_t max_image_pixels = 8192 * 8192; ///< per texture image
+  uint32_t max_image_pixels = 8192 * 8192; ///< per texture image (a larger one counts as white, with a warning)
+  uint64_t max_total_image_pixels = 4ull * 8192 * 8192;  ///< all images together, decoded (4 bytes each);
+                                                         ///< more is an error
   bool allow_external_files = true;        ///< .gltf buffers and images beside the file; false
                                            ///< accepts only embedded (GLB or data-URI) data
 };
@@ -43,6 +45,9 @@ const solver::Scene& scene_of(const SceneDocument& document);
 
 /// Number of triangles in the input scene (instances counted).
 uint64_t triangle_count(const SceneDocument& document);
+
+/// Pixels of the decoded texture images (each holds 4 bytes in memory).
+uint64_t image_pixel_count(const SceneDocument& document);
 
 /// Empty when the scene can be baked; otherwise why not, for the user (no surface emits light, so
 /// the bake would be black). A loaded scene may still be read without light (tests, inspection).

@@ -16,7 +16,10 @@ struct HttpOptions {
   std::string host = "127.0.0.1";
   unsigned short port = 8080;     ///< 0 picks a free port
   size_t max_streams = 64;        ///< concurrent event streams
-  double read_timeout = 30.0;     ///< seconds for a request to arrive
+  double idle_timeout = 60.0;     ///< seconds a connection may wait for its next request, or a body pause
+  double header_timeout = 10.0;   ///< seconds for a request line and headers from their first byte (then 408);
+                                  ///< also a body's grace before min_rate counts
+  double min_rate = 16384.0;      ///< bytes per second a request body must average (below: 408); 0 = any
   double heartbeat = 15.0;        ///< seconds between event-stream heartbeats
   uint64_t max_body_bytes = 256ull << 20;  ///< larger request bodies get 413
 };

@@ -3,6 +3,7 @@
 // is tested without a network (through handle(), which waits for it).
 #pragma once
 
+#include "hemibake/protocol/gltf.h"
 #include "hemibake/server/store.h"
 
 #include <atomic>
@@ -37,6 +38,9 @@ struct ServiceOptions {
   uint64_t max_elements = 2'000'000;  ///< per-job element budget (caps the parameter)
   uint32_t max_shot_cache_mb = 256;   ///< per-job memory for replayed shots (caps the parameter)
   uint64_t max_triangles = 2'000'000;
+  uint64_t max_job_bytes = 2048ull << 20;  ///< memory a job's bake may need (hemicubes, elements, images,
+                                           ///< shot cache, scene); more is refused at submit (422)
+  uint64_t max_image_pixels = 8192ull * 8192;  ///< decoded texture pixels per job, all images together
   unsigned check_threads = 0;       ///< threads that load and check submitted scenes; 0 = half the cores (at least 1)
   size_t max_checks = 4;            ///< submitted scenes waiting for a check thread before 503 (each
                                     ///< holds its body, up to max_body_bytes, in memory)
@@ -73,6 +77,9 @@ class Service {
  public:
   /// Opens the store in options.data_dir, re-queues jobs a crash left running, starts the workers.
   static std::unique_ptr<Service> start(const ServiceOptions& options, std::string& error);
+  /// The same on a store already open (options.data_dir is not used): another implementation, or
+  /// one that fails on purpose in tests.
+  static std::unique_ptr<Service> start(const ServiceOptions& options, std::unique_ptr<Store> store, std::string& error);
   ~Service();
 
   /// Answers one request (everything but event streams) through `reply`, without ever blocking
@@ -84,8 +91,11 @@ class Service {
   /// handle_async, waited for: for tests and tools without an event loop.
   Response handle(const Request& request);
   /// For event streams: the events of job `id` after sequence number `after`, read on the lookup
-  /// pool and given to `reply` (which, like a Reply, must not block).
-  void events_async(const std::string& id, uint64_t after, std::function<void(EventBatch)> reply);
+  /// pool and given to `reply` (which, like a Reply, must not block). If there are none yet and the
+  /// job has not finished, the request waits (as an entry, not a thread) until the job's next event
+  /// or until `wait` has passed, then an empty batch says that it is time for a heartbeat.
+  void events_async(const std::string& id, uint64_t after, std::chrono::milliseconds wait,
+                    std::function<void(EventBatch)> reply);
 
   /// For event streams: the job id if `request` is GET /v1/jobs/{id}/events, else empty.
   static std::string events_job(const Request& request);
@@ -104,6 +114,15 @@ class Service {
   void worker_loop();
   void clock_loop();
   void bake(const std::string& id, const std::string& scene, const std::string& params);
+  /// How submitted scenes are loaded and checked (the same at submit and in the worker).
+  protocol::LoadLimits load_limits() const;
+  /// Ends running job `id`: succeeded with `result`, or failed with `failure` if there is none.
+  bool end_job(const std::string& id, const std::string* result, std::string failure);
+  /// Stores an event of job `id` and wakes the streams that wait for one.
+  void emit(const std::string& id, const std::string& type, const std::string& data);
+  /// events_async's work on a lookup thread: reads, and waits if there is nothing to read.
+  void read_events(const std::string& id, uint64_t after, std::chrono::steady_clock::time_point until,
+                   std::function<void(EventBatch)> reply);
   std::optional<Response> answer_at_once(const Request& request, const std::string& path) const;
   Response route(const Request& request, const std::string& path, const std::string& query);
   Response submit(const Request& request, const std::string& query);
@@ -137,6 +156,16 @@ class Service {
     std::vector<PreviewWait> waits;
   };
   std::map<std::string, Active> active_;
+  // Event streams with nothing to send, waiting for their job's next event, or for `until` (then
+  // the clock answers them with an empty batch, for a heartbeat).
+  struct EventWait {
+    std::chrono::steady_clock::time_point until;
+    uint64_t after = 0;
+    std::function<void(EventBatch)> reply;
+  };
+  std::map<std::string, std::vector<EventWait>> event_waits_;
+  uint64_t events_written_ = 0;  // events stored so far (under mutex_): a wait set up after a read
+                                 // checks that none came between the two
   // Previews of jobs claimed by a worker that has not registered them yet.
   std::map<std::string, std::vector<PreviewWait>> unregistered_;
   std::condition_variable clock_wake_;  // a new deadline, or the stop
@@ -156,5 +185,10 @@ class Service {
 
 /// Splits "a=1&b=x%20y" into decoded pairs.
 std::map<std::string, std::string> parse_query(const std::string& query);
+
+/// The parts of a multipart/form-data body by field name: (content type in lower case, data).
+/// `repeated` is set to the name of a field given twice (the last one is kept).
+std::map<std::string, std::pair<std::string, std::string>> parse_multipart(const std::string& body, const std::string& boundary,
+                                                                           std::string& repeated);
 
 }  // namespace hemibake::server

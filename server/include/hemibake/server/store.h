@@ -1,15 +1,16 @@
-// The embedded job store: SQLite in WAL mode in a data directory. Jobs, their scenes, parameters,
-// progress events and results survive a restart.
+// The job store: jobs, their scenes, parameters, progress events and results, kept so that they
+// survive a restart. `Store` is the interface the service uses; Store::open gives the embedded
+// implementation (SQLite in WAL mode in a data directory).
+//
+// Reads that answer status, list and event requests touch only small columns: a job's scene and
+// result are read only by claim() and result(), when a worker or a client asks for them.
 #pragma once
 
 #include <cstdint>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
-
-struct sqlite3;
 
 namespace hemibake::server {
 
@@ -40,51 +41,66 @@ struct Event {
   std::string data;  ///< JSON
 };
 
-/// Thread-safe: one connection, calls serialised by a mutex.
+/// What create() did.
+struct Created {
+  std::string id;          ///< the new job, or the one that holds the idempotency key; empty on error
+  bool existed = false;    ///< the idempotency key was taken: `id` is that job
+  std::string cache_key;   ///< when `existed`: that job's cache key (scene and parameters)
+  std::string error;       ///< the store could not write the job (disk full, ...)
+  bool full = false;       ///< ... because the disk or the store's size limit is full
+};
+
+/// What a state change did. Each change is one atomic step in the store that applies only from the
+/// states it names, so of two that race (a cancel and the result's write) exactly one is made.
+struct Change {
+  bool made = false;                  ///< the job was in a state this change applies to, and now is changed
+  JobState from = JobState::kQueued;  ///< when made: the state it was in before
+  std::string error;                  ///< the store could not write the change (made is false)
+};
+
+/// Thread-safe.
 class Store {
  public:
-  /// Opens (creating) `dir`/hemibake.db and holds an exclusive lock on `dir`/hemibake.lock while it
-  /// lives. Returns null and sets `error` on failure, also when another process holds the lock.
+  /// The embedded store: opens (creating) `dir`/hemibake.db and holds an exclusive lock on
+  /// `dir`/hemibake.lock while it lives. A database of an older layout is converted. Returns null and
+  /// sets `error` on failure, also when another process holds the lock.
   static std::unique_ptr<Store> open(const std::string& dir, std::string& error);
-  ~Store();
+  virtual ~Store() = default;
 
-  /// A new queued job. `idempotency_key` may be empty. Returns the new id, or the id of the job
-  /// that already has this idempotency key (then `existed` is set).
-  std::string create(const std::string& scene, const std::string& content_type, const std::string& params,
-                     const std::string& cache_key, const std::string& idempotency_key, bool& existed);
-  /// The job that holds this idempotency key, if any.
-  std::optional<std::string> find_idempotent(const std::string& idempotency_key);
+  /// A new queued job. `idempotency_key` may be empty; if another job holds it, that job is named
+  /// instead (`existed`) and nothing is written.
+  virtual Created create(const std::string& scene, const std::string& content_type, const std::string& params,
+                         const std::string& cache_key, const std::string& idempotency_key) = 0;
+  /// The job that holds this idempotency key, if any, and its cache key.
+  virtual std::optional<std::pair<std::string, std::string>> find_idempotent(const std::string& idempotency_key) = 0;
   /// The newest succeeded job with this cache key, if any.
-  std::optional<std::string> find_cached(const std::string& cache_key);
-  std::optional<JobRecord> get(const std::string& id);
+  virtual std::optional<std::string> find_cached(const std::string& cache_key) = 0;
+  virtual std::optional<JobRecord> get(const std::string& id) = 0;
   /// Jobs, newest first; `state` filters when set. `after` is a paging cursor (a job id) or empty.
-  std::vector<JobRecord> list(std::optional<JobState> state, size_t limit, const std::string& after);
+  virtual std::vector<JobRecord> list(std::optional<JobState> state, size_t limit, const std::string& after) = 0;
   /// Takes the oldest queued job and marks it running; returns its id, scene and params.
-  bool claim(std::string& id, std::string& scene, std::string& params);
-  void set_progress(const std::string& id, const std::string& progress_json);
-  uint64_t add_event(const std::string& id, const std::string& type, const std::string& data);
-  std::vector<Event> events_after(const std::string& id, uint64_t after, size_t limit);
-  void succeed(const std::string& id, const std::string& result, const std::string& etag);
-  void fail(const std::string& id, const std::string& error);
-  /// Marks a queued or running job cancelled; false if it had finished already or is unknown.
-  bool cancel(const std::string& id);
-  /// Puts it back in the queue (a worker stopped before finishing it).
-  void requeue(const std::string& id);
-  std::optional<std::string> result(const std::string& id);
+  virtual bool claim(std::string& id, std::string& scene, std::string& params) = 0;
+  /// False if it could not be written.
+  virtual bool set_progress(const std::string& id, const std::string& progress_json) = 0;
+  /// The new event's sequence number; 0 if the job is unknown or the event could not be written.
+  virtual uint64_t add_event(const std::string& id, const std::string& type, const std::string& data) = 0;
+  virtual std::vector<Event> events_after(const std::string& id, uint64_t after, size_t limit) = 0;
+  /// running -> succeeded, storing the result.
+  virtual Change succeed(const std::string& id, const std::string& result, const std::string& etag) = 0;
+  /// running -> failed.
+  virtual Change fail(const std::string& id, const std::string& error) = 0;
+  /// queued or running -> cancelled.
+  virtual Change cancel(const std::string& id) = 0;
+  /// running -> queued (a worker stopped before finishing it).
+  virtual Change requeue(const std::string& id) = 0;
+  /// The result of a succeeded job.
+  virtual std::optional<std::string> result(const std::string& id) = 0;
   /// At start: jobs left running by a crash are queued again, or failed after `max_attempts`.
   /// Returns how many were re-queued.
-  int recover(int max_attempts);
+  virtual int recover(int max_attempts) = 0;
   /// Deletes finished jobs older than `age_seconds`; returns how many.
-  int expire(double age_seconds);
-  size_t count(JobState state);
-
- private:
-  Store(sqlite3* db, int lock_fd) : db_(db), lock_fd_(lock_fd) {}
-  /// find_idempotent's query, for callers that hold mutex_.
-  std::optional<std::string> idempotent_locked(const std::string& idempotency_key);
-  sqlite3* db_;
-  int lock_fd_;  ///< flock'ed: one server per data directory
-  std::mutex mutex_;
+  virtual int expire(double age_seconds) = 0;
+  virtual size_t count(JobState state) = 0;
 };
 
 double unix_now();
