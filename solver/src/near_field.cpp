@@ -129,40 +129,28 @@ bool Solver::Impl::absorber_close(const Piece& piece) const {
   const glm::dvec3& c = piece.centre;
   const double r = piece.diameter;
   const double eps = kRoundingLength * prep.diagonal;
-  std::vector<uint32_t> nodes{0};
-  while (!nodes.empty()) {
-    const BoxNode& node = tree[nodes.back()];
-    nodes.pop_back();
-    const glm::dvec3 gap = glm::max(node.lo - c, glm::max(c - node.hi, glm::dvec3(0.0)));
-    if (glm::dot(gap, gap) > r * r) continue;
-    if (node.child != kNone) {
-      nodes.push_back(node.child);
-      nodes.push_back(node.child + 1);
-      continue;
+  auto near = [&](const glm::dvec3& lo, const glm::dvec3& hi) {
+    const glm::dvec3 gap = glm::max(lo - c, glm::max(c - hi, glm::dvec3(0.0)));
+    return glm::dot(gap, gap) <= r * r;
+  };
+  return find_patch(near, [&](uint32_t q) {
+    if (prep.back_hidden[q] || p_shooting[q] == shooting_stamp) return false;
+    if (glm::dot(prep.normal[q], c - patches[q].corners[0]) >= -eps) return false;  // not its back
+    if (!near(p_lo[q], p_hi[q])) return false;
+    // The form factor from the centre to the patch cut to the piece's front side: the share of
+    // the centre's light it takes (a back seen edge-on takes little).
+    std::array<glm::dvec3, 8> cut{};
+    uint32_t m = 0;
+    const uint32_t cc = patches[q].corner_count;
+    for (uint32_t k = 0; k < cc; ++k) {
+      const glm::dvec3& a = patches[q].corners[k];
+      const glm::dvec3& b = patches[q].corners[(k + 1) % cc];
+      const double da = glm::dot(piece.normal, a - c), db = glm::dot(piece.normal, b - c);
+      if (da > eps) cut[m++] = a;
+      if ((da > eps) != (db > eps)) cut[m++] = a + (b - a) * ((da - eps) / (da - db));
     }
-    for (uint32_t i = node.begin; i < node.end; ++i) {
-      const uint32_t q = tree_patch[i];
-      if (prep.back_hidden[q] || p_shooting[q] == shooting_stamp) continue;
-      if (glm::dot(prep.normal[q], c - patches[q].corners[0]) >= -eps) continue;  // not its back
-      const glm::dvec3 d = glm::max(p_lo[q] - c, glm::max(c - p_hi[q], glm::dvec3(0.0)));
-      const double d2 = glm::dot(d, d);
-      if (d2 > r * r) continue;
-      // The form factor from the centre to the patch cut to the piece's front side: the share of
-      // the centre's light it takes (a back seen edge-on takes little).
-      std::array<glm::dvec3, 8> cut{};
-      uint32_t m = 0;
-      const uint32_t cc = patches[q].corner_count;
-      for (uint32_t k = 0; k < cc; ++k) {
-        const glm::dvec3& a = patches[q].corners[k];
-        const glm::dvec3& b = patches[q].corners[(k + 1) % cc];
-        const double da = glm::dot(piece.normal, a - c), db = glm::dot(piece.normal, b - c);
-        if (da > eps) cut[m++] = a;
-        if ((da > eps) != (db > eps)) cut[m++] = a + (b - a) * ((da - eps) / (da - db));
-      }
-      if (m >= 3 && point_polygon_form_factor(c, piece.normal, std::span(cut.data(), m)) >= kAbsorberShare) return true;
-    }
-  }
-  return false;
+    return m >= 3 && point_polygon_form_factor(c, piece.normal, std::span(cut.data(), m)) >= kAbsorberShare;
+  });
 }
 
 // Whether point x of patch p lies under another surface resting on p: a patch in p's plane facing
@@ -172,31 +160,20 @@ bool Solver::Impl::absorber_close(const Piece& piece) const {
 bool Solver::Impl::covered(uint32_t p, const glm::dvec3& x) const {
   const glm::dvec3& n = prep.normal[p];
   const double eps = kCloseFacingLength * prep.diagonal;
-  std::vector<uint32_t> nodes{0};
-  while (!nodes.empty()) {
-    const BoxNode& node = tree[nodes.back()];
-    nodes.pop_back();
-    if (glm::any(glm::lessThan(x, node.lo - eps)) || glm::any(glm::greaterThan(x, node.hi + eps))) continue;
-    if (node.child != kNone) {
-      nodes.push_back(node.child);
-      nodes.push_back(node.child + 1);
-      continue;
+  auto near = [&](const glm::dvec3& lo, const glm::dvec3& hi) {
+    return !glm::any(glm::lessThan(x, lo - eps)) && !glm::any(glm::greaterThan(x, hi + eps));
+  };
+  return find_patch(near, [&](uint32_t q) {
+    if (glm::dot(prep.normal[q], n) > -1.0 + 1e-9 || prep.twin[q] == p) return false;
+    const Patch& pq = patches[q];
+    if (std::abs(glm::dot(prep.normal[q], x - pq.corners[0])) > eps) return false;
+    for (uint32_t k = 0; k < pq.corner_count; ++k) {
+      const glm::dvec3& a = pq.corners[k];
+      const glm::dvec3& b = pq.corners[(k + 1) % pq.corner_count];
+      if (glm::dot(glm::cross(b - a, x - a), prep.normal[q]) <= eps * glm::length(b - a)) return false;
     }
-    for (uint32_t i = node.begin; i < node.end; ++i) {
-      const uint32_t q = tree_patch[i];
-      if (glm::dot(prep.normal[q], n) > -1.0 + 1e-9 || prep.twin[q] == p) continue;
-      const Patch& pq = patches[q];
-      if (std::abs(glm::dot(prep.normal[q], x - pq.corners[0])) > eps) continue;
-      bool inside = true;
-      for (uint32_t k = 0; k < pq.corner_count && inside; ++k) {
-        const glm::dvec3& a = pq.corners[k];
-        const glm::dvec3& b = pq.corners[(k + 1) % pq.corner_count];
-        inside = glm::dot(glm::cross(b - a, x - a), prep.normal[q]) > eps * glm::length(b - a);
-      }
-      if (inside) return true;
-    }
-  }
-  return false;
+    return true;
+  });
 }
 
 }  // namespace hemibake::solver

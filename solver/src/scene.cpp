@@ -282,8 +282,11 @@ void find_groups(const Scene& scene, const EdgePatches& edge_patches, PreparedSc
   const size_t n = scene.patches.size();
   UnionFind occl(n), smooth(n);
   std::vector<Touch> neighbours;
-  auto coplanar = [&](uint32_t a, uint32_t b) {
-    if (glm::dot(out.normal[a], out.normal[b]) < 1.0 - 1e-9) return false;
+  // Whether b lies in a's plane: facing the same way (coplanar), or either way (same_plane: a
+  // double-sided surface's twins lie in one plane).
+  auto in_plane = [&](uint32_t a, uint32_t b, bool either_way) {
+    const double d = glm::dot(out.normal[a], out.normal[b]);
+    if ((either_way ? std::abs(d) : d) < 1.0 - 1e-9) return false;
     const Patch& pa = scene.patches[a];
     const Patch& pb = scene.patches[b];
     for (uint32_t c = 0; c < pb.corner_count; ++c)
@@ -291,16 +294,8 @@ void find_groups(const Scene& scene, const EdgePatches& edge_patches, PreparedSc
         return false;
     return true;
   };
-  // The plane of a, either way round (a double-sided surface's twins lie in one).
-  auto same_plane = [&](uint32_t a, uint32_t b) {
-    if (std::abs(glm::dot(out.normal[a], out.normal[b])) < 1.0 - 1e-9) return false;
-    const Patch& pa = scene.patches[a];
-    const Patch& pb = scene.patches[b];
-    for (uint32_t c = 0; c < pb.corner_count; ++c)
-      if (std::abs(glm::dot(out.normal[a], pb.corners[c] - pa.corners[0])) > 1e-9 * out.diagonal)
-        return false;
-    return true;
-  };
+  auto coplanar = [&](uint32_t a, uint32_t b) { return in_plane(a, b, false); };
+  auto same_plane = [&](uint32_t a, uint32_t b) { return in_plane(a, b, true); };
   // A junction: a surface of another plane stands on the edge between two patches (a wall on the
   // line between two rooms' floors, a shelf on a seam of the wall behind it). Light differs on its
   // two sides, so the patches are neither one smooth surface (their vertices would average across

@@ -220,6 +220,10 @@ struct Solver::Impl {
   void split(uint32_t e);
   template <typename Fn>
   void for_leaves(uint32_t e, Fn&& fn) const;
+  // Calls found(q) for the patches of the patch tree's leaves whose boxes pass near(lo, hi), until
+  // found returns true; returns whether it did.
+  template <typename Near, typename Found>
+  bool find_patch(Near&& near, Found&& found) const;
   void replace_split(std::vector<uint32_t>& list) const;
   void grow_scratch();
   void update_unshot_total();
@@ -390,6 +394,24 @@ struct Solver::Impl {
   Stats stats;
   bool done = false;
 };
+
+template <typename Near, typename Found>
+bool Solver::Impl::find_patch(Near&& near, Found&& found) const {
+  std::vector<uint32_t> nodes{0};
+  while (!nodes.empty()) {
+    const BoxNode& node = tree[nodes.back()];
+    nodes.pop_back();
+    if (!near(node.lo, node.hi)) continue;
+    if (node.child != kNone) {
+      nodes.push_back(node.child);
+      nodes.push_back(node.child + 1);
+      continue;
+    }
+    for (uint32_t i = node.begin; i < node.end; ++i)
+      if (found(tree_patch[i])) return true;
+  }
+  return false;
+}
 
 template <typename Fn>
 void Solver::Impl::for_leaves(uint32_t e, Fn&& fn) const {
