@@ -212,10 +212,7 @@ void Solver::Impl::project_light_view(LightView& v, std::span<const uint32_t> el
   v.place();
   v.begin.resize(e_patch.size());
   v.end.resize(e_patch.size());
-  const double eps = kRoundingLength * prep.diagonal;
-  const size_t n = elements.size();
-  const size_t chunks = pool.chunk_count(n);
-  pool.parallel_for(n, [&](size_t begin, size_t end, size_t c) {
+  pool.parallel_for(elements.size(), [&](size_t begin, size_t end, size_t c) {
     auto& out = chunk_frags[c];
     out.clear();
     Corners poly{};
@@ -225,33 +222,14 @@ void Solver::Impl::project_light_view(LightView& v, std::span<const uint32_t> el
       v.begin[el] = v.end[el] = static_cast<uint32_t>(out.size());
       const double facing = v.parallel ? -glm::dot(prep.normal[p], v.d) * prep.diagonal
                                        : glm::dot(prep.normal[p], v.eye - patches[p].corners[0]);
-      if (std::abs(facing) <= eps || (facing < 0.0 && prep.back_hidden[p])) continue;
+      if (culled(p, facing)) continue;
       corners_of(el, poly);
-      const uint32_t cc = corner_count(el);
-      if (facing < 0.0) std::reverse(poly.begin(), poly.begin() + cc);  // its back, as seen
       if (v.parallel)
-        for (uint32_t k = 0; k < cc; ++k) poly[k] = v.mapped(poly[k]);
-      const glm::dvec3 normal = facing > 0.0 ? prep.normal[p] : -prep.normal[p];
-      const glm::dvec3* plane = v.parallel ? nullptr : &normal;
-      if (facing > 0.0) {
-        v.cube->project(std::span(poly.data(), cc), el, params.method, scratch[c], out, plane);
-        v.end[el] = static_cast<uint32_t>(out.size());
-        continue;
-      }
-      const size_t first = out.size();
-      v.cube->project(std::span(poly.data(), cc), el | detail::kBackFace, params.method, scratch[c], out, plane);
-      for (size_t k = first; k < out.size(); ++k) out[k].inv_depth *= detail::kBackDepthScale;
+        for (uint32_t k = 0; k < corner_count(el); ++k) poly[k] = v.mapped(poly[k]);
+      if (project_side(*v.cube, el, poly, facing, !v.parallel, scratch[c], out)) v.end[el] = static_cast<uint32_t>(out.size());
     }
   });
-  v.frags.clear();
-  for (size_t c = 0; c < chunks; ++c) {
-    const uint32_t base = static_cast<uint32_t>(v.frags.size());
-    v.frags.insert(v.frags.end(), chunk_frags[c].begin(), chunk_frags[c].end());
-    for (size_t i = n * c / chunks; i < n * (c + 1) / chunks; ++i) {
-      v.begin[elements[i]] += base;
-      v.end[elements[i]] += base;
-    }
-  }
+  join_chunks(elements, v.begin, v.end, v.frags);
   detail::resolve(v.frags, v.cube->pixel_count(), params.method, e_group, prep.adjacency, pool, order, pixel_start);
   stats.peak_fragments = std::max<uint64_t>(stats.peak_fragments, v.frags.size());
 }

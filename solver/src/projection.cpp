@@ -30,17 +30,61 @@ void Solver::Impl::sum_form_factors(std::span<const uint32_t> elements) {
   });
 }
 
-// Each chunk of elements projects into a fragment list of its own; the lists are joined in chunk
-// order, so fragments (and ties in depth) come in the same order with any number of threads.
+// The paper culls the parent patch's back faces (section 2.2), which is exact where every back face
+// lies behind a front face of the same solid. A one-sided wall seen from behind has none: culled, it
+// would let light through (a room of inward-facing walls lit from outside came out lit inside). So
+// such backs (PreparedScene::back_hidden) are projected as occluders that take no light: flagged,
+// and outside the element's fragment range. The backs of solids and of double-sided surfaces stay
+// culled: projected too, they would over-occlude at every silhouette pixel (front and back cover the
+// same part of it, and E_k takes them as independent). A patch seen edge-on is left out.
+bool Solver::Impl::culled(uint32_t p, double facing) const {
+  return std::abs(facing) <= kRoundingLength * prep.diagonal || (facing < 0.0 && prep.back_hidden[p]);
+}
+
+// Projects element el (its corners in poly, as the cube sees them) into `cube`: its front, or
+// (facing < 0) its back as an occluder that takes no light, reversed to run counter-clockwise as
+// seen and a little farther than a front face at the same depth. `plane`: clip to the element's
+// side of its plane (a perspective view). Returns whether the fragments are the element's own.
+bool Solver::Impl::project_side(detail::Hemicube& into, uint32_t el, Corners& poly, double facing, bool plane,
+                                detail::ProjectScratch& s, std::vector<Fragment>& out) const {
+  const uint32_t p = e_patch[el];
+  const uint32_t cc = patches[p].corner_count;
+  if (facing > 0.0) {
+    into.project(std::span(poly.data(), cc), el, params.method, s, out, plane ? &prep.normal[p] : nullptr);
+    return true;
+  }
+  std::reverse(poly.begin(), poly.begin() + cc);
+  const glm::dvec3 back = -prep.normal[p];
+  const size_t first = out.size();
+  into.project(std::span(poly.data(), cc), el | detail::kBackFace, params.method, s, out, plane ? &back : nullptr);
+  for (size_t k = first; k < out.size(); ++k) out[k].inv_depth *= detail::kBackDepthScale;
+  return false;
+}
+
+// Joins the chunks' fragment lists (chunk_frags) into `all` in chunk order, so fragments (and ties
+// in depth) come in the same order with any number of threads, and moves each element's range.
+void Solver::Impl::join_chunks(std::span<const uint32_t> elements, std::vector<uint32_t>& begin,
+                               std::vector<uint32_t>& end, std::vector<Fragment>& all) {
+  const size_t n = elements.size();
+  const size_t chunks = pool.chunk_count(n);
+  all.clear();
+  for (size_t c = 0; c < chunks; ++c) {
+    const uint32_t base = static_cast<uint32_t>(all.size());
+    all.insert(all.end(), chunk_frags[c].begin(), chunk_frags[c].end());
+    for (size_t i = n * c / chunks; i < n * (c + 1) / chunks; ++i) {
+      begin[elements[i]] += base;
+      end[elements[i]] += base;
+    }
+  }
+}
+
+// Each chunk of elements projects into a fragment list of its own (join_chunks).
 void Solver::Impl::project(std::span<const uint32_t> elements) {
   const auto t0 = Clock::now();
   ++stats.projections;
   stats.elements_projected += elements.size();
   const glm::dvec3 eye = cube->eye();
-  const double eps = kRoundingLength * prep.diagonal;
-  const size_t n = elements.size();
-  const size_t chunks = pool.chunk_count(n);
-  pool.parallel_for(n, [&](size_t b, size_t e, size_t c) {
+  pool.parallel_for(elements.size(), [&](size_t b, size_t e, size_t c) {
     auto& out = chunk_frags[c];
     out.clear();
     Corners poly{};
@@ -49,38 +93,12 @@ void Solver::Impl::project(std::span<const uint32_t> elements) {
       const uint32_t p = e_patch[el];
       f_begin[el] = f_end[el] = static_cast<uint32_t>(out.size());
       const double facing = glm::dot(prep.normal[p], eye - patches[p].corners[0]);
-      if (p_shooting[p] == shooting_stamp || std::abs(facing) <= eps) continue;
-      // The paper culls the parent patch's back faces (section 2.2), which is exact where every
-      // back face lies behind a front face of the same solid. A one-sided wall seen from behind has
-      // none: culled, it would let light through (a room of inward-facing walls lit from outside
-      // came out lit inside). So such backs (PreparedScene::back_hidden) are projected as occluders
-      // that take no light: flagged, and outside the element's fragment range. The backs of solids
-      // stay culled: projected too, they would over-occlude at every silhouette pixel (front and
-      // back cover the same part of it, and E_k takes them as independent).
-      if (facing < 0.0 && prep.back_hidden[p]) continue;
+      if (p_shooting[p] == shooting_stamp || culled(p, facing)) continue;
       corners_of(el, poly);
-      const uint32_t cc = patches[p].corner_count;
-      if (facing > 0.0) {
-        cube->project(std::span(poly.data(), cc), el, params.method, scratch[c], out, &prep.normal[p]);
-        f_end[el] = static_cast<uint32_t>(out.size());
-        continue;
-      }
-      std::reverse(poly.begin(), poly.begin() + cc);  // its back, counter-clockwise as seen
-      const glm::dvec3 back = -prep.normal[p];
-      const size_t first = out.size();
-      cube->project(std::span(poly.data(), cc), el | detail::kBackFace, params.method, scratch[c], out, &back);
-      for (size_t k = first; k < out.size(); ++k) out[k].inv_depth *= detail::kBackDepthScale;
+      if (project_side(*cube, el, poly, facing, true, scratch[c], out)) f_end[el] = static_cast<uint32_t>(out.size());
     }
   });
-  frags.clear();
-  for (size_t c = 0; c < chunks; ++c) {
-    const uint32_t base = static_cast<uint32_t>(frags.size());
-    frags.insert(frags.end(), chunk_frags[c].begin(), chunk_frags[c].end());
-    for (size_t i = n * c / chunks; i < n * (c + 1) / chunks; ++i) {
-      f_begin[elements[i]] += base;
-      f_end[elements[i]] += base;
-    }
-  }
+  join_chunks(elements, f_begin, f_end, frags);
   for (uint32_t el : elements) HEMIBAKE_DCHECK(f_begin[el] <= f_end[el] && f_end[el] <= frags.size());
   detail::resolve(frags, cube->pixel_count(), params.method, e_group, prep.adjacency, pool, order, pixel_start);
   stats.peak_fragments = std::max<uint64_t>(stats.peak_fragments, frags.size());

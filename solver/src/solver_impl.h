@@ -284,6 +284,11 @@ struct Solver::Impl {
   // projection.cpp: onto the placed hemicube. Projects `elements`, but for the patches of the
   // shooting piece (p_shooting == shooting_stamp).
   void project(std::span<const uint32_t> elements);
+  bool culled(uint32_t p, double facing) const;
+  bool project_side(detail::Hemicube& into, uint32_t el, Corners& poly, double facing, bool plane,
+                    detail::ProjectScratch& s, std::vector<Fragment>& out) const;
+  void join_chunks(std::span<const uint32_t> elements, std::vector<uint32_t>& begin, std::vector<uint32_t>& end,
+                   std::vector<Fragment>& all);
   void project_children(const std::vector<uint32_t>& parents);
   void sum_form_factors(std::span<const uint32_t> elements);
 
