@@ -47,6 +47,8 @@ uint32_t Solver::Impl::add_element(uint32_t patch, uint32_t parent,
   e_mark.push_back(0);
   e_exact.push_back(0.0);
   e_exact_stamp.push_back(0);
+  e_light.push_back(parent != kNone ? e_light[parent] : glm::dvec3(0.0));
+  e_mean.push_back(b);
   return id;
 }
 

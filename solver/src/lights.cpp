@@ -226,7 +226,7 @@ void Solver::Impl::project_light_view(LightView& v, std::span<const uint32_t> el
       corners_of(el, poly);
       if (v.parallel)
         for (uint32_t k = 0; k < corner_count(el); ++k) poly[k] = v.mapped(poly[k]);
-      if (project_side(*v.cube, el, poly, facing, !v.parallel, scratch[c], out)) v.end[el] = static_cast<uint32_t>(out.size());
+      if (project_side(*v.cube, el, el, poly, facing, !v.parallel, scratch[c], out)) v.end[el] = static_cast<uint32_t>(out.size());
     }
   });
   join_chunks(elements, v.begin, v.end, v.frags);
@@ -349,7 +349,10 @@ void Solver::Impl::shoot_light(const Light& light) {
   }
   light_factors(&light, views, accepted);
   for (uint32_t e : accepted)
-    if (f_recv[e] > 0.0) light_receive(e, dB * f_recv[e]);
+    if (f_recv[e] > 0.0) {
+      light_receive(e, dB * f_recv[e]);
+      e_light[e] += patches[e_patch[e]].reflectance * dB * f_recv[e];
+    }
 }
 
 // Per element of `elements` (indexed by element): the sky's irradiance per unit radiance, visible

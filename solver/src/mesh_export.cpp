@@ -80,10 +80,15 @@ Mesh Solver::mesh(bool ambient) const {
       hanging(a, b);
     }
     el.boundary_end = static_cast<uint32_t>(m.boundary.size());
+    const glm::dvec3& rho = s.patches[el.patch].reflectance;
     for (uint32_t i = el.boundary_begin; i < el.boundary_end; ++i) {
       const uint32_t v = m.boundary[i];
       if (v >= s.vpos.size()) continue;  // another surface's point: interpolated below
-      acc[v] += el.radiosity * el.area;
+      // Gathered: the vertex's own light (gather.cpp), the lights' direct light as the element's.
+      const glm::dvec3 b = s.gather_done && s.v_gathered[v]
+                               ? s.patches[el.patch].emission + s.e_light[e] + rho * (s.v_irr[v] + amb)
+                               : el.radiosity;
+      acc[v] += b * el.area;
       weight[v] += el.area;
     }
     m.elements.push_back(el);

@@ -36,7 +36,9 @@ void Solver::Impl::sum_form_factors(std::span<const uint32_t> elements) {
 // such backs (PreparedScene::back_hidden) are projected as occluders that take no light: flagged,
 // and outside the element's fragment range. The backs of solids and of double-sided surfaces stay
 // culled: projected too, they would over-occlude at every silhouette pixel (front and back cover the
-// same part of it, and E_k takes them as independent). A patch seen edge-on is left out.
+// same part of it, and E_k takes them as independent). A patch seen edge-on is left out. The final
+// gather (gather.cpp) projects the backs of the solids whose bounding box holds its point: a point
+// on the floor under a box standing on it sees nothing but the box's backs.
 bool Solver::Impl::culled(uint32_t p, double facing) const {
   return std::abs(facing) <= kRoundingLength * prep.diagonal || (facing < 0.0 && prep.back_hidden[p]);
 }
@@ -44,19 +46,20 @@ bool Solver::Impl::culled(uint32_t p, double facing) const {
 // Projects element el (its corners in poly, as the cube sees them) into `cube`: its front, or
 // (facing < 0) its back as an occluder that takes no light, reversed to run counter-clockwise as
 // seen and a little farther than a front face at the same depth. `plane`: clip to the element's
-// side of its plane (a perspective view). Returns whether the fragments are the element's own.
-bool Solver::Impl::project_side(detail::Hemicube& into, uint32_t el, Corners& poly, double facing, bool plane,
-                                detail::ProjectScratch& s, std::vector<Fragment>& out) const {
+// side of its plane (a perspective view). The fragments carry `id` (el, or the caller's own index).
+// Returns whether the fragments are the element's own.
+bool Solver::Impl::project_side(detail::Hemicube& into, uint32_t el, uint32_t id, Corners& poly, double facing,
+                                bool plane, detail::ProjectScratch& s, std::vector<Fragment>& out) const {
   const uint32_t p = e_patch[el];
   const uint32_t cc = patches[p].corner_count;
   if (facing > 0.0) {
-    into.project(std::span(poly.data(), cc), el, params.method, s, out, plane ? &prep.normal[p] : nullptr);
+    into.project(std::span(poly.data(), cc), id, params.method, s, out, plane ? &prep.normal[p] : nullptr);
     return true;
   }
   std::reverse(poly.begin(), poly.begin() + cc);
   const glm::dvec3 back = -prep.normal[p];
   const size_t first = out.size();
-  into.project(std::span(poly.data(), cc), el | detail::kBackFace, params.method, s, out, plane ? &back : nullptr);
+  into.project(std::span(poly.data(), cc), id | detail::kBackFace, params.method, s, out, plane ? &back : nullptr);
   for (size_t k = first; k < out.size(); ++k) out[k].inv_depth *= detail::kBackDepthScale;
   return false;
 }
@@ -95,7 +98,7 @@ void Solver::Impl::project(std::span<const uint32_t> elements) {
       const double facing = glm::dot(prep.normal[p], eye - patches[p].corners[0]);
       if (p_shooting[p] == shooting_stamp || culled(p, facing)) continue;
       corners_of(el, poly);
-      if (project_side(*cube, el, poly, facing, true, scratch[c], out)) f_end[el] = static_cast<uint32_t>(out.size());
+      if (project_side(*cube, el, el, poly, facing, true, scratch[c], out)) f_end[el] = static_cast<uint32_t>(out.size());
     }
   });
   join_chunks(elements, f_begin, f_end, frags);

@@ -420,8 +420,19 @@ void hide_solid_backs(const Scene& scene, const EdgePatches& edge_patches, Prepa
     volume[r] += glm::dot(c - 0.5 * (box_lo[r] + box_hi[r]), out.normal[i]) * out.area[i] / 3.0;
   }
   const double tiny = 1e-9 * out.diagonal * out.diagonal * out.diagonal;
-  for (uint32_t i = 0; i < n; ++i)
-    if (volume[part.find(i)] > tiny) out.back_hidden[i] = 1;
+  std::vector<uint32_t> solid_of(n, kNone);
+  out.solid.assign(n, kNone);
+  for (uint32_t i = 0; i < n; ++i) {
+    const uint32_t r = part.find(i);
+    if (volume[r] <= tiny) continue;
+    out.back_hidden[i] = 1;
+    if (solid_of[r] == kNone) {
+      solid_of[r] = static_cast<uint32_t>(out.solid_lo.size());
+      out.solid_lo.push_back(box_lo[r]);
+      out.solid_hi.push_back(box_hi[r]);
+    }
+    out.solid[i] = solid_of[r];
+  }
 }
 
 // Solver vertices: one per (point, smoothing group), so radiosity is averaged within a surface.

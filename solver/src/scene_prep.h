@@ -26,6 +26,10 @@ struct PreparedScene {
   /// patches enclosing a positive signed volume). Open sheets and inward-facing shells (a room's
   /// walls seen from outside) need their backs projected as occluders.
   std::vector<uint8_t> back_hidden;
+  /// Per patch: the outward-facing solid whose front faces hide its back (index into solid_lo and
+  /// solid_hi, the solid's bounding box), or kNone.
+  std::vector<uint32_t> solid;
+  std::vector<glm::dvec3> solid_lo, solid_hi;
   std::vector<uint32_t> twin;                 ///< per patch: its other side (the same points facing
                                               ///< the other way: a double-sided surface), or kNone
   double total_area = 0.0;

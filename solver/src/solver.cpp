@@ -26,7 +26,8 @@
 // pieces (1); shoot_piece.cpp shoots one piece in stages, with shaft.cpp (what may hide the
 // receivers) and projection.cpp (2), refine.cpp (3) and shot_cache.cpp (records for replays);
 // near_field.cpp decides which receivers are too close to a piece for its hemicube. lights.cpp
-// shoots the punctual lights and the sky, once each, before the first patch.
+// shoots the punctual lights and the sky, once each, before the first patch; gather.cpp gathers
+// at the mesh's vertices after the last.
 // element_tree.cpp, patch_bvh.cpp and clusters.cpp hold what they walk; mesh_export.cpp the result.
 #include "solver_impl.h"
 
@@ -103,12 +104,15 @@ bool Solver::Impl::step() {
   if (done) return false;
   // Lights and the sky shoot first, each once (lights.cpp).
   if (stats.shots < params.max_shots && shoot_next_light()) return true;
+  // Once the shots are done, the final gather (gather.cpp), in batches.
   if (stats.unshot_fraction < params.convergence || emitted_power <= 0.0) {
+    if (gather_step()) return true;
     stats.converged = true;
     done = true;
     return false;
   }
   if (stats.shots >= params.max_shots) {
+    if (gather_step()) return true;
     stats.shot_limit = true;
     done = true;
     return false;

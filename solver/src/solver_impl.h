@@ -285,7 +285,7 @@ struct Solver::Impl {
   // shooting piece (p_shooting == shooting_stamp).
   void project(std::span<const uint32_t> elements);
   bool culled(uint32_t p, double facing) const;
-  bool project_side(detail::Hemicube& into, uint32_t el, Corners& poly, double facing, bool plane,
+  bool project_side(detail::Hemicube& into, uint32_t el, uint32_t id, Corners& poly, double facing, bool plane,
                     detail::ProjectScratch& s, std::vector<Fragment>& out) const;
   void join_chunks(std::span<const uint32_t> elements, std::vector<uint32_t>& begin, std::vector<uint32_t>& end,
                    std::vector<Fragment>& all);
@@ -309,6 +309,15 @@ struct Solver::Impl {
   double min_sharp_split_area() const {
     return params.method == Method::kAntiAliased ? min_split_area() / kSharpAreaFactor : min_split_area();
   }
+
+  // gather.cpp: the final gather at the mesh's vertices, once the shots are done.
+  struct GatherPoint;
+  struct GatherWorker;
+  bool gather_step();
+  void start_gather();
+  void gather_round();
+  void gather_points(std::vector<GatherPoint>& points);
+  glm::dvec3 gather_at(const GatherPoint& point, GatherWorker& w) const;
 
   // shot_cache.cpp: records and replays.
   bool replay(uint32_t unit);
@@ -396,8 +405,46 @@ struct Solver::Impl {
   std::unique_ptr<detail::Hemicube> light_cube;  // at params.resolution, for lights' views
   std::unique_ptr<detail::Hemicube> sky_cube;    // coarser, for the sky's many directions
 
+  // The final gather (gather.cpp), in rounds: each gathers at the corners of the elements in
+  // gather_queue, then at the points their splits would make, then splits those where the light is
+  // not linear; their children make the next round. Per element: the radiosity punctual lights
+  // gave it directly (e_light, which a hemicube cannot see) and the mean radiosity of its leaves
+  // (e_mean). Per vertex: its normal, the way into its surface where it lies on the outline
+  // (v_inward), and the irradiance gathered there (v_irr, in radiosity units: sum of F B), valid
+  // where v_gathered.
+  std::vector<glm::dvec3> e_light, e_mean;
+  std::vector<glm::dvec3> v_normal, v_inward, v_irr;
+  std::vector<uint8_t> v_gathered;
+  std::vector<uint32_t> gather_queue;
+  std::vector<GatherPoint> gather_pending;  // points of this round's phase still to gather
+  size_t gather_next = 0;                   // ... from here on
+  int gather_phase = 0;                     // 0: corners, 1: the splits' points
+  bool gather_started = false, gather_done = false;
+  std::vector<std::unique_ptr<GatherWorker>> gather_workers;  // per chunk of the pool
+
   Stats stats;
   bool done = false;
+};
+
+// A point the final gather gathers at, and what it is for.
+struct Solver::Impl::GatherPoint {
+  enum class Kind : uint8_t { kVertex, kMidpoint, kCentre };
+  Kind kind;
+  uint32_t id;             // the vertex; the element whose edge (k) or centre it is
+  uint32_t edge;           // kMidpoint: which edge of the element
+  glm::dvec3 x, n, inward;
+  glm::dvec3 irr{0.0};     // the result
+};
+
+// One thread's hemicube and scratch for the final gather.
+struct Solver::Impl::GatherWorker {
+  explicit GatherWorker(uint32_t resolution) : cube(resolution), inline_pool(1) {}
+  detail::Hemicube cube;
+  detail::ThreadPool inline_pool;
+  detail::ProjectScratch scratch;
+  std::vector<Fragment> frags;
+  std::vector<uint32_t> list, stack, group_of, order, pixel_start;
+  std::vector<uint8_t> inside;  // per solid: its box holds the point
 };
 
 template <typename Near, typename Found>

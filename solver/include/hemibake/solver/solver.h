@@ -88,6 +88,10 @@ struct Params {
                                 ///< clusters up to this wide; 0 = every patch shoots alone
   bool reuse_visibility = true; ///< children take visibility from their parent's pixels; false
                                 ///< re-projects the whole scene after every split (for comparison)
+  bool gather = true;           ///< after the shots, every vertex of the mesh gathers the radiosity of
+                                ///< what it sees through a hemicube of the solve's method, and
+                                ///< elements split where the light gathered across them is not linear
+                                ///< (see README); false: vertices average their elements
   uint32_t shot_cache_mb = 256; ///< memory for the form factors of earlier shots, replayed when the
                                 ///< same shooter shoots again with no more power and an unchanged
                                 ///< mesh (see README); 0 = every shot projects anew
@@ -138,6 +142,9 @@ struct Stats {
   uint64_t splits_form_factor = 0;  ///< ... of which for their form factor (FEPS)
   uint64_t splits_visibility = 0;   ///< ... for partial visibility
   uint64_t splits_gradient = 0;     ///< ... for a radiosity jump at a corner
+  uint64_t gathers = 0;          ///< hemicubes placed at points of the mesh by the final gather
+  uint64_t splits_gather = 0;    ///< elements split by the final gather (not counted in `splits`' kinds)
+  double seconds_gathering = 0.0;  ///< in the final gather
   uint64_t reused_children = 0;  ///< children whose form factor came from their parent's pixels
   uint64_t elements = 0;         ///< leaf elements now
   uint64_t patches = 0;          ///< input patches
@@ -166,8 +173,9 @@ struct Mesh {
     uint32_t boundary_end = 0;         ///< finer neighbours on its edges, counter-clockwise
   };
   std::vector<glm::dvec3> positions;   ///< per vertex
-  std::vector<glm::dvec3> radiosity;   ///< per vertex: area-weighted mean of the elements around
-                                       ///< it on the same surface and material
+  std::vector<glm::dvec3> radiosity;   ///< per vertex: gathered at the vertex (Params::gather, once
+                                       ///< the solve has ended), else the area-weighted mean of the
+                                       ///< elements around it on the same surface and material
   std::vector<Element> elements;       ///< ordered by patch
   std::vector<uint32_t> boundary;      ///< element boundary loops (see Element)
 };

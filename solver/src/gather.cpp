@@ -1,0 +1,300 @@
+// The final gather: once the shots are done, every vertex of the mesh gathers the radiosity of what
+// it sees, and elements split where the light gathered across them is not linear.
+//
+// Shooting leaves each element one radiosity, its mean over the element, and the mesh showed the
+// mean of the elements around each vertex. A face lit only indirectly takes many weak shots, none
+// of which splits it, so it stayed one flat element (a block's face turned from the light, darkening
+// by a factor of three toward the floor), and a vertex on a surface's outline showed the mean of
+// elements that all lie to one side of it. Here a hemicube of the solve's method is placed at each
+// vertex; what it sees, with the radiosities the shots gave it, makes the vertex's irradiance
+// H = sum F B (in radiosity units), and the vertex shows E + rho H. Where the sky shows through, it
+// brings pi times its radiance. Punctual lights are no surfaces a hemicube can see: their direct
+// light keeps the elements' mean (their own shots refine for it).
+//
+// Then each element large enough to split gathers at the points its split would make (its edges'
+// midpoints, a quad's centre). Where one differs from the value the corners interpolate by more
+// than the radiosity tolerance, it splits, and its children are checked in turn.
+//
+// A gather projects a cut through the element trees, not every leaf: a node that looks narrower
+// than kGatherAngle from the point stands for its leaves with their mean radiosity (a node's polygon
+// is the union of its children's, so what it hides is the same). The backs of a solid are occluders
+// when the point lies in the solid's box: a point on the floor under a box standing on it sees
+// nothing else (elsewhere they stay culled, as in the shots). A vertex on a surface's outline
+// gathers a little inside it: at a wall's foot the floor fills half the view, but from the outline
+// itself it lies edge-on. Points are gathered in parallel, each with one thread's hemicube.
+#include "solver_impl.h"
+
+#include <glm/geometric.hpp>
+#include <glm/vector_relational.hpp>
+
+#include <algorithm>
+#include <cmath>
+
+namespace hemibake::solver {
+namespace {
+
+// A node narrower than this (radians, as seen from the gathering point) is projected whole.
+constexpr double kGatherAngle = 0.8;
+// The gather's hemicube has this share of the solve's resolution (at least kMinResolution): it
+// sums light that the shots have already resolved, and its cost is mostly per pixel.
+constexpr uint32_t kGatherResolutionDivisor = 4;
+// A vertex whose elements' centroid lies farther from it than this share of its smallest
+// element's radius is on the surface's outline; it gathers kOutlineStep of the scene's diagonal
+// inside.
+constexpr double kOutlineShare = 0.25;
+constexpr double kOutlineStep = 1e-4;
+// Points gathered per step(), so that cancellation and progress come between batches.
+constexpr size_t kGatherBatch = 512;
+constexpr double kPi = 3.14159265358979323846;
+
+glm::dvec3 up_hint(const glm::dvec3& n) {
+  return std::abs(n.z) < 0.9 ? glm::dvec3(0.0, 0.0, 1.0) : glm::dvec3(1.0, 0.0, 0.0);
+}
+
+}  // namespace
+
+// One batch of the final gather. Returns false when there is nothing (more) to do.
+bool Solver::Impl::gather_step() {
+  if (!params.gather || gather_done) return false;
+  const auto t0 = Clock::now();
+  if (!gather_started) start_gather();
+  if (gather_next < gather_pending.size()) {
+    const size_t end = std::min(gather_pending.size(), gather_next + kGatherBatch);
+    std::vector<GatherPoint> batch(gather_pending.begin() + static_cast<std::ptrdiff_t>(gather_next),
+                                   gather_pending.begin() + static_cast<std::ptrdiff_t>(end));
+    gather_points(batch);
+    std::copy(batch.begin(), batch.end(), gather_pending.begin() + static_cast<std::ptrdiff_t>(gather_next));
+    gather_next = end;
+  } else {
+    gather_round();
+  }
+  stats.seconds_gathering += seconds_since(t0);
+  stats.seconds += seconds_since(t0);
+  return true;
+}
+
+// The elements' mean radiosities, the vertices' normals (area-weighted over the patches around
+// them) and outlines, and every leaf to check.
+void Solver::Impl::start_gather() {
+  gather_started = true;
+  // Children come after their parents: a backward sweep meets every node after its children.
+  for (size_t i = e_patch.size(); i-- > 0;) {
+    if (e_child[i] == kNone) {
+      e_mean[i] = e_b[i];
+      continue;
+    }
+    glm::dvec3 sum(0.0);
+    double a = 0.0;
+    for (uint32_t k = 0; k < 4; ++k) {
+      sum += e_mean[e_child[i] + k] * e_area[e_child[i] + k];
+      a += e_area[e_child[i] + k];
+    }
+    e_mean[i] = a > 0.0 ? sum / a : e_b[i];
+  }
+  v_normal.assign(vpos.size(), glm::dvec3(0.0));
+  v_inward.assign(vpos.size(), glm::dvec3(0.0));
+  std::vector<double> v_area(vpos.size(), 0.0), v_size(vpos.size(), 0.0);
+  for (uint32_t e : leaves)
+    for (uint32_t k = 0; k < corner_count(e); ++k) {
+      const uint32_t v = e_corner[e][k];
+      v_normal[v] += prep.normal[e_patch[e]] * e_area[e];
+      v_inward[v] += e_centre[e] * e_area[e];
+      v_area[v] += e_area[e];
+      v_size[v] = v_size[v] > 0.0 ? std::min(v_size[v], e_radius[e]) : e_radius[e];
+    }
+  for (size_t v = 0; v < vpos.size(); ++v) {
+    const double len = glm::length(v_normal[v]);
+    if (len > 0.0) v_normal[v] /= len;
+    const glm::dvec3 in = v_area[v] > 0.0 ? v_inward[v] / v_area[v] - vpos[v] : glm::dvec3(0.0);
+    v_inward[v] = glm::length(in) > kOutlineShare * v_size[v] ? glm::normalize(in) : glm::dvec3(0.0);
+  }
+  v_irr.assign(vpos.size(), glm::dvec3(0.0));
+  v_gathered.assign(vpos.size(), 0);
+  gather_queue = leaves;
+  gather_phase = 0;
+  gather_pending.clear();
+  gather_next = 0;
+  // Phase 0 of the first round: every vertex of the mesh.
+  for (uint32_t v = 0; v < vpos.size(); ++v)
+    if (v_area[v] > 0.0) gather_pending.push_back({GatherPoint::Kind::kVertex, v, 0, vpos[v], v_normal[v], v_inward[v]});
+}
+
+// Ends the phase whose points are all gathered, and starts the next: the splits' points of this
+// round's elements, or (after them) the splits, whose children make the next round.
+void Solver::Impl::gather_round() {
+  if (gather_phase == 0) {
+    for (const GatherPoint& g : gather_pending) {
+      v_irr[g.id] = g.irr;
+      v_gathered[g.id] = 1;
+    }
+    // The points each element's split would make, where it may split at all.
+    gather_pending.clear();
+    std::unordered_map<uint64_t, uint32_t> edge_seen;  // a midpoint is gathered once
+    for (uint32_t e : gather_queue) {
+      if (e_area[e] < min_split_area()) continue;
+      const uint32_t nc = corner_count(e);
+      const glm::dvec3& n = prep.normal[e_patch[e]];
+      for (uint32_t k = 0; k < nc; ++k) {
+        const uint32_t a = e_corner[e][k], b = e_corner[e][(k + 1) % nc];
+        if (auto it = midpoints.find(edge_key(a, b)); it != midpoints.end() && v_gathered[it->second]) continue;
+        if (!edge_seen.emplace(edge_key(a, b), e).second) continue;
+        const glm::dvec3 mid = 0.5 * (vpos[a] + vpos[b]);
+        gather_pending.push_back({GatherPoint::Kind::kMidpoint, e, k, mid, n, glm::normalize(e_centre[e] - mid)});
+      }
+      if (nc == 4) gather_pending.push_back({GatherPoint::Kind::kCentre, e, 0, e_centre[e], n, glm::dvec3(0.0)});
+    }
+    gather_phase = 1;
+    gather_next = 0;
+    return;
+  }
+  // Phase 1 done: what was gathered, by edge and by centre.
+  std::unordered_map<uint64_t, glm::dvec3> at_edge;
+  std::unordered_map<uint32_t, glm::dvec3> at_centre;
+  for (const GatherPoint& g : gather_pending) {
+    if (g.kind == GatherPoint::Kind::kCentre) {
+      at_centre.emplace(g.id, g.irr);
+    } else {
+      const uint32_t nc = corner_count(g.id);
+      at_edge.emplace(edge_key(e_corner[g.id][g.edge], e_corner[g.id][(g.edge + 1) % nc]), g.irr);
+    }
+  }
+  std::vector<uint32_t> next;
+  for (uint32_t e : gather_queue) {
+    if (e_area[e] < min_split_area() || leaves.size() + 3 * (1 + next.size() / 4) > params.max_elements) continue;
+    const uint32_t nc = corner_count(e);
+    const std::array<uint32_t, 4> c = e_corner[e];
+    const glm::dvec3& rho = patches[e_patch[e]].reflectance;
+    // The light at the new points, as gathered and as the corners interpolate it.
+    std::array<glm::dvec3, 5> got{}, lerp{};
+    for (uint32_t k = 0; k < nc; ++k) {
+      const uint64_t key = edge_key(c[k], c[(k + 1) % nc]);
+      lerp[k] = 0.5 * (v_irr[c[k]] + v_irr[c[(k + 1) % nc]]);
+      if (auto it = midpoints.find(key); it != midpoints.end() && v_gathered[it->second]) {
+        got[k] = v_irr[it->second];
+      } else {
+        got[k] = at_edge.at(key);
+      }
+    }
+    const uint32_t points = nc == 4 ? 5 : 3;
+    if (nc == 4) {
+      got[4] = at_centre.at(e);
+      lerp[4] = 0.25 * (v_irr[c[0]] + v_irr[c[1]] + v_irr[c[2]] + v_irr[c[3]]);
+    }
+    double worst = 0.0;
+    for (uint32_t k = 0; k < points; ++k) worst = std::max(worst, mean(rho * glm::abs(got[k] - lerp[k])));
+    if (worst <= b_tolerance) continue;
+    split(e);
+    ++stats.splits_gather;
+    // The split made the midpoints and the centre: they keep what was gathered there.
+    v_normal.resize(vpos.size(), glm::dvec3(0.0));
+    v_inward.resize(vpos.size(), glm::dvec3(0.0));
+    v_irr.resize(vpos.size(), glm::dvec3(0.0));
+    v_gathered.resize(vpos.size(), 0);
+    for (uint32_t k = 0; k < nc; ++k) {
+      const uint32_t m = midpoints.at(edge_key(c[k], c[(k + 1) % nc]));
+      if (v_gathered[m]) continue;
+      v_normal[m] = prep.normal[e_patch[e]];
+      v_irr[m] = got[k];
+      v_gathered[m] = 1;
+    }
+    if (nc == 4) {
+      const uint32_t ctr = e_corner[e_child[e]][2];  // child 0 is {c0, m01, centre, m30}
+      v_normal[ctr] = prep.normal[e_patch[e]];
+      v_irr[ctr] = got[4];
+      v_gathered[ctr] = 1;
+    }
+    for (uint32_t k = 0; k < 4; ++k) {
+      e_mean[e_child[e] + k] = e_b[e];
+      next.push_back(e_child[e] + k);
+    }
+  }
+  replace_split(leaves);
+  grow_scratch();
+  update_unshot_total();
+  // The children's corners are all gathered: the next round starts with its splits' points.
+  gather_queue.swap(next);
+  gather_pending.clear();
+  gather_next = 0;
+  gather_phase = 0;
+  if (gather_queue.empty()) {
+    gather_done = true;
+    gather_workers.clear();
+  }
+}
+
+// Gathers at every point, in parallel: each chunk of the pool with a hemicube of its own.
+void Solver::Impl::gather_points(std::vector<GatherPoint>& points) {
+  const size_t chunks = pool.chunk_count(points.size());
+  const uint32_t res = std::max(kMinResolution, (params.resolution / kGatherResolutionDivisor + 1) & ~1u);
+  while (gather_workers.size() < chunks) gather_workers.push_back(std::make_unique<GatherWorker>(res));
+  pool.parallel_for(points.size(), [&](size_t begin, size_t end, size_t c) {
+    for (size_t i = begin; i < end; ++i) points[i].irr = gather_at(points[i], *gather_workers[c]);
+  });
+  stats.gathers += points.size();
+}
+
+// The irradiance at a point, in radiosity units (sum over what it sees of F B): from a hemicube at
+// the point over a cut through the element trees, plus the sky where nothing is seen.
+glm::dvec3 Solver::Impl::gather_at(const GatherPoint& point, GatherWorker& w) const {
+  const glm::dvec3& n = point.n;
+  if (glm::dot(n, n) == 0.0) return glm::dvec3(0.0);
+  const glm::dvec3 x = point.x + kOutlineStep * prep.diagonal * point.inward;
+  // The cut, over the patches with a corner in front of the point's plane.
+  const double ahead = kRoundingLength * prep.diagonal;
+  w.list.clear();
+  find_patch(
+      [&](const glm::dvec3& lo, const glm::dvec3& hi) {
+        const glm::dvec3 far(n.x > 0.0 ? hi.x : lo.x, n.y > 0.0 ? hi.y : lo.y, n.z > 0.0 ? hi.z : lo.z);
+        return glm::dot(n, far - x) > ahead;
+      },
+      [&](uint32_t q) {
+        bool front = false;
+        for (uint32_t k = 0; k < patches[q].corner_count && !front; ++k)
+          front = glm::dot(n, patches[q].corners[k] - x) > ahead;
+        if (!front) return false;
+        w.stack.push_back(p_root[q]);
+        while (!w.stack.empty()) {
+          const uint32_t k = w.stack.back();
+          w.stack.pop_back();
+          if (e_child[k] == kNone || 2.0 * e_radius[k] < kGatherAngle * (glm::distance(x, e_centre[k]) - e_radius[k])) {
+            w.list.push_back(k);
+          } else {
+            for (uint32_t j = 0; j < 4; ++j) w.stack.push_back(e_child[k] + j);
+          }
+        }
+        return false;
+      });
+  if (w.list.empty()) return kPi * sky;
+  w.inside.resize(prep.solid_lo.size());
+  for (size_t k = 0; k < prep.solid_lo.size(); ++k)
+    w.inside[k] = glm::all(glm::greaterThanEqual(x, prep.solid_lo[k] - ahead)) &&
+                  glm::all(glm::lessThanEqual(x, prep.solid_hi[k] + ahead));
+  w.cube.place(x, n, up_hint(n));
+  // Fragments carry the node's place in the list.
+  w.frags.clear();
+  w.group_of.resize(w.list.size());
+  Corners poly{};
+  for (uint32_t i = 0; i < w.list.size(); ++i) {
+    const uint32_t el = w.list[i];
+    const uint32_t p = e_patch[el];
+    w.group_of[i] = e_group[el];
+    const double facing = glm::dot(prep.normal[p], x - patches[p].corners[0]);
+    const bool solid_seen_inside = prep.solid[p] != kNone && w.inside[prep.solid[p]];
+    if (std::abs(facing) <= ahead || (facing < 0.0 && prep.back_hidden[p] && !solid_seen_inside)) continue;
+    corners_of(el, poly);
+    project_side(w.cube, el, i, poly, facing, true, w.scratch, w.frags);
+  }
+  detail::resolve(w.frags, w.cube.pixel_count(), params.method, w.group_of, prep.adjacency, w.inline_pool, w.order,
+                  w.pixel_start);
+  const auto& dff = w.cube.delta_form_factors();
+  glm::dvec3 h(0.0);
+  double covered = 0.0;  // whatever is seen, backs too, hides the sky
+  for (const Fragment& f : w.frags) {
+    const double a = static_cast<double>(f.area) * dff[f.pixel] * f.trans;
+    covered += a;
+    if ((f.element & detail::kBackFace) == 0) h += a * e_mean[w.list[f.element]];
+  }
+  return h + kPi * sky * std::max(0.0, 1.0 - covered);
+}
+
+}  // namespace hemibake::solver
