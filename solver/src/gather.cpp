@@ -43,6 +43,10 @@ constexpr uint32_t kGatherResolutionDivisor = 4;
 // inside.
 constexpr double kOutlineShare = 0.25;
 constexpr double kOutlineStep = 1e-4;
+// The gather projects at most this many times the nodes the shots projected (stats'
+// elements_projected): on the Cornell box that is every vertex, on thousands of small patches the
+// vertices of the largest elements.
+constexpr double kGatherBudget = 1.0;
 // Points gathered per step(), so that cancellation and progress come between batches.
 constexpr size_t kGatherBatch = 512;
 constexpr double kPi = 3.14159265358979323846;
@@ -58,7 +62,12 @@ bool Solver::Impl::gather_step() {
   if (!params.gather || gather_done) return false;
   const auto t0 = Clock::now();
   if (!gather_started) start_gather();
-  if (gather_next < gather_pending.size()) {
+  if (gather_spent >= gather_budget) {
+    // Out of budget: what is not gathered keeps its elements' mean.
+    gather_done = true;
+    gather_pending.clear();
+    gather_workers.clear();
+  } else if (gather_next < gather_pending.size()) {
     const size_t end = std::min(gather_pending.size(), gather_next + kGatherBatch);
     std::vector<GatherPoint> batch(gather_pending.begin() + static_cast<std::ptrdiff_t>(gather_next),
                                    gather_pending.begin() + static_cast<std::ptrdiff_t>(end));
@@ -114,9 +123,16 @@ void Solver::Impl::start_gather() {
   gather_phase = 0;
   gather_pending.clear();
   gather_next = 0;
-  // Phase 0 of the first round: every vertex of the mesh.
+  // Phase 0 of the first round: every vertex of the mesh, those of the largest elements first.
+  std::vector<double> largest(vpos.size(), 0.0);
+  for (uint32_t e : leaves)
+    for (uint32_t k = 0; k < corner_count(e); ++k) largest[e_corner[e][k]] = std::max(largest[e_corner[e][k]], e_area[e]);
+  std::vector<uint32_t> order;
   for (uint32_t v = 0; v < vpos.size(); ++v)
-    if (v_area[v] > 0.0) gather_pending.push_back({GatherPoint::Kind::kVertex, v, 0, vpos[v], v_normal[v], v_inward[v]});
+    if (v_area[v] > 0.0) order.push_back(v);
+  std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return largest[a] > largest[b]; });
+  for (uint32_t v : order) gather_pending.push_back({GatherPoint::Kind::kVertex, v, 0, vpos[v], v_normal[v], v_inward[v]});
+  gather_budget = static_cast<uint64_t>(kGatherBudget * static_cast<double>(stats.elements_projected));
 }
 
 // Ends the phase whose points are all gathered, and starts the next: the splits' points of this
@@ -127,6 +143,12 @@ void Solver::Impl::gather_round() {
       v_irr[g.id] = g.irr;
       v_gathered[g.id] = 1;
     }
+    // Only elements whose corners are all gathered may split.
+    std::erase_if(gather_queue, [&](uint32_t e) {
+      for (uint32_t k = 0; k < corner_count(e); ++k)
+        if (!v_gathered[e_corner[e][k]]) return true;
+      return false;
+    });
     // The points each element's split would make, where it may split at all.
     gather_pending.clear();
     std::unordered_map<uint64_t, uint32_t> edge_seen;  // a midpoint is gathered once
@@ -182,7 +204,7 @@ void Solver::Impl::gather_round() {
     }
     double worst = 0.0;
     for (uint32_t k = 0; k < points; ++k) worst = std::max(worst, mean(rho * glm::abs(got[k] - lerp[k])));
-    if (worst <= b_tolerance) continue;
+    if (worst <= gather_tolerance) continue;
     split(e);
     ++stats.splits_gather;
     // The split made the midpoints and the centre: they keep what was gathered there.
@@ -228,14 +250,15 @@ void Solver::Impl::gather_points(std::vector<GatherPoint>& points) {
   const uint32_t res = std::max(kMinResolution, (params.resolution / kGatherResolutionDivisor + 1) & ~1u);
   while (gather_workers.size() < chunks) gather_workers.push_back(std::make_unique<GatherWorker>(res));
   pool.parallel_for(points.size(), [&](size_t begin, size_t end, size_t c) {
-    for (size_t i = begin; i < end; ++i) points[i].irr = gather_at(points[i], *gather_workers[c]);
+    for (size_t i = begin; i < end; ++i) points[i].irr = gather_at(points[i], *gather_workers[c], points[i].cost);
   });
   stats.gathers += points.size();
+  for (const GatherPoint& g : points) gather_spent += g.cost;
 }
 
 // The irradiance at a point, in radiosity units (sum over what it sees of F B): from a hemicube at
 // the point over a cut through the element trees, plus the sky where nothing is seen.
-glm::dvec3 Solver::Impl::gather_at(const GatherPoint& point, GatherWorker& w) const {
+glm::dvec3 Solver::Impl::gather_at(const GatherPoint& point, GatherWorker& w, uint32_t& cost) const {
   const glm::dvec3& n = point.n;
   if (glm::dot(n, n) == 0.0) return glm::dvec3(0.0);
   const glm::dvec3 x = point.x + kOutlineStep * prep.diagonal * point.inward;
@@ -264,6 +287,7 @@ glm::dvec3 Solver::Impl::gather_at(const GatherPoint& point, GatherWorker& w) co
         }
         return false;
       });
+  cost = static_cast<uint32_t>(w.list.size());
   if (w.list.empty()) return kPi * sky;
   w.inside.resize(prep.solid_lo.size());
   for (size_t k = 0; k < prep.solid_lo.size(); ++k)

@@ -36,6 +36,7 @@
 #include <algorithm>
 #include <limits>
 #include <thread>
+#include <cstdlib>
 
 namespace hemibake::solver {
 
@@ -59,6 +60,7 @@ Solver::Impl::Impl(const Scene& scene, const Params& p)
     emitted_mean += mean(patches[i].emission) * prep.area[i];
   }
   b_tolerance = params.beps * emitted_mean / prep.total_area;
+  gather_tolerance = b_tolerance;
   p_root.resize(patches.size());
   p_unshot.resize(patches.size());
   for (uint32_t i = 0; i < patches.size(); ++i) {

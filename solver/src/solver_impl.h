@@ -317,7 +317,7 @@ struct Solver::Impl {
   void start_gather();
   void gather_round();
   void gather_points(std::vector<GatherPoint>& points);
-  glm::dvec3 gather_at(const GatherPoint& point, GatherWorker& w) const;
+  glm::dvec3 gather_at(const GatherPoint& point, GatherWorker& w, uint32_t& cost) const;
 
   // shot_cache.cpp: records and replays.
   bool replay(uint32_t unit);
@@ -333,6 +333,7 @@ struct Solver::Impl {
   detail::PreparedScene prep;
   double aeps_area = 0.0;       // smallest element area allowed
   double b_tolerance = 0.0;     // radiosity tolerance for criteria (b) and (c)
+  double gather_tolerance = 0.0;  // ... for the final gather's splits
   double shooter_limit = 0.0;   // widest shooting sub-area
   double emitted_power = 0.0;   // sum over patches of channel_sum(E) * A
   double power_shot = 0.0;      // by all hemicubes so far
@@ -420,6 +421,7 @@ struct Solver::Impl {
   size_t gather_next = 0;                   // ... from here on
   int gather_phase = 0;                     // 0: corners, 1: the splits' points
   bool gather_started = false, gather_done = false;
+  uint64_t gather_budget = 0, gather_spent = 0;  // nodes the gather may project, and has
   std::vector<std::unique_ptr<GatherWorker>> gather_workers;  // per chunk of the pool
 
   Stats stats;
@@ -434,6 +436,7 @@ struct Solver::Impl::GatherPoint {
   uint32_t edge;           // kMidpoint: which edge of the element
   glm::dvec3 x, n, inward;
   glm::dvec3 irr{0.0};     // the result
+  uint32_t cost = 0;       // nodes projected for it
 };
 
 // One thread's hemicube and scratch for the final gather.
