@@ -1,0 +1,220 @@
+// The final gather (Params::gather): what the mesh shows at and between its vertices, against
+// closed forms computed here (Lambert's point-to-polygon form factor, a uniform sky).
+#include "hemibake/solver/hemicube.h"
+#include "hemibake/solver/scenes.h"
+#include "hemibake/solver/solver.h"
+
+#include <gtest/gtest.h>
+#include <glm/geometric.hpp>
+#include <glm/vec2.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <optional>
+#include <random>
+#include <vector>
+
+namespace hemibake::solver {
+namespace {
+
+double mean3(const glm::dvec3& v) { return (v.x + v.y + v.z) / 3.0; }
+
+// What a viewer shows at (x, 0, z) on a floor facing +y: the element holding the point, its loop
+// drawn as one triangle or as a fan from its centre (the mean of its loop), values interpolated
+// barycentrically. Empty when no element of `patches` holds the point.
+std::optional<glm::dvec3> shown_on_floor(const Mesh& mesh, uint32_t first_patch, uint32_t end_patch, double x, double z) {
+  auto cross2 = [](const glm::dvec2& a, const glm::dvec2& b) { return a.x * b.y - a.y * b.x; };
+  const glm::dvec2 p(x, z);
+  for (const Mesh::Element& el : mesh.elements) {
+    if (el.patch < first_patch || el.patch >= end_patch) continue;
+    std::vector<glm::dvec2> loop;
+    std::vector<glm::dvec3> value;
+    for (uint32_t i = el.boundary_begin; i < el.boundary_end; ++i) {
+      const glm::dvec3& q = mesh.positions[mesh.boundary[i]];
+      loop.emplace_back(q.x, q.z);
+      value.push_back(mesh.radiosity[mesh.boundary[i]]);
+    }
+    glm::dvec2 c(0.0);
+    glm::dvec3 vc(0.0);
+    for (size_t k = 0; k < loop.size(); ++k) {
+      c += loop[k];
+      vc += value[k];
+    }
+    c /= static_cast<double>(loop.size());
+    vc /= static_cast<double>(loop.size());
+    // Triangles (a, b, d) with values; a loop of three is itself the triangle.
+    auto inside = [&](const glm::dvec2& a, const glm::dvec2& b, const glm::dvec2& d, const glm::dvec3& va,
+                      const glm::dvec3& vb, const glm::dvec3& vd) -> std::optional<glm::dvec3> {
+      const double area = cross2(b - a, d - a);
+      if (std::abs(area) < 1e-15) return std::nullopt;
+      const double wa = cross2(b - p, d - p) / area, wb = cross2(d - p, a - p) / area, wd = cross2(a - p, b - p) / area;
+      if (wa < -1e-12 || wb < -1e-12 || wd < -1e-12) return std::nullopt;
+      return wa * va + wb * vb + wd * vd;
+    };
+    if (loop.size() == 3) {
+      if (auto v = inside(loop[0], loop[1], loop[2], value[0], value[1], value[2])) return v;
+      continue;
+    }
+    for (size_t k = 0; k < loop.size(); ++k) {
+      const size_t j = (k + 1) % loop.size();
+      if (auto v = inside(c, loop[k], loop[j], vc, value[k], value[j])) return v;
+    }
+  }
+  return std::nullopt;
+}
+
+// A floor 4 x 4 m (one patch) under a 1 x 1 m emitter 1 m up, facing down, nothing else: every
+// point of the floor shows rho E F(point -> emitter). The gather puts that value at every vertex,
+// on the floor's outline too, and the mesh interpolates it between them; as shown at random points
+// the floor is within a few percent of the closed form.
+TEST(Gather, FloorUnderALampShowsThePointFormFactor) {
+  Scene scene;
+  const glm::dvec3 rho(0.6), e(5.0);
+  add_quad(scene, {-2, 0, -2}, {-2, 0, 2}, {2, 0, 2}, {2, 0, -2}, rho, glm::dvec3(0.0), 0);
+  add_quad(scene, {-0.5, 1, -0.5}, {0.5, 1, -0.5}, {0.5, 1, 0.5}, {-0.5, 1, 0.5}, glm::dvec3(0.0), e, 1);
+  ASSERT_EQ(validate(scene), "");
+  const std::vector<glm::dvec3> lamp{{-0.5, 1, -0.5}, {0.5, 1, -0.5}, {0.5, 1, 0.5}, {-0.5, 1, 0.5}};
+  auto exact = [&](double x, double z) { return rho.x * e.x * point_polygon_form_factor({x, 0, z}, {0, 1, 0}, lamp); };
+  for (const bool gather : {true, false}) {
+    Params params;
+    params.gather = gather;
+    Solver solver(scene, params);
+    ASSERT_TRUE(solver.run().converged);
+    const Mesh mesh = solver.mesh();
+    double worst_vertex = 0.0;
+    for (const Mesh::Element& el : mesh.elements) {
+      if (el.patch != 0) continue;
+      for (uint32_t i = el.boundary_begin; i < el.boundary_end; ++i) {
+        const glm::dvec3& q = mesh.positions[mesh.boundary[i]];
+        const double want = exact(q.x, q.z);
+        worst_vertex = std::max(worst_vertex, std::abs(mesh.radiosity[mesh.boundary[i]].x - want) / want);
+      }
+    }
+    std::mt19937_64 rng(7);
+    std::uniform_real_distribution<double> u(-2.0, 2.0);
+    std::vector<double> errors;
+    for (int i = 0; i < 400; ++i) {
+      const double x = u(rng), z = u(rng);
+      const auto shown = shown_on_floor(mesh, 0, 1, x, z);
+      ASSERT_TRUE(shown.has_value()) << x << " " << z;
+      const double want = exact(x, z);
+      errors.push_back(std::abs(shown->x - want) / want);
+    }
+    std::sort(errors.begin(), errors.end());
+    const double median = errors[errors.size() / 2], p90 = errors[errors.size() * 9 / 10];
+    std::printf("gather %d: worst vertex %.4f, shown median %.4f p90 %.4f, %zu elements\n", gather, worst_vertex, median,
+                p90, mesh.elements.size());
+    if (gather) {
+      EXPECT_LT(worst_vertex, 0.03);
+      EXPECT_LT(median, 0.01);
+      EXPECT_LT(p90, 0.03);
+    } else {
+      // Averaging the elements around a vertex misses the falloff on the outline: the gather is
+      // what makes the vertices right.
+      EXPECT_GT(worst_vertex, 0.05);
+    }
+  }
+}
+
+// A wall standing on an emitting floor (E uniform, 2 x 2 m) and nothing else: a point of the wall
+// at height y shows rho E F(point -> floor), half of rho E at its foot. The wall is one patch; what
+// it shows must follow the falloff up the wall.
+TEST(Gather, WallOnAGlowingFloorFollowsTheFalloff) {
+  Scene scene;
+  const glm::dvec3 rho(0.5), e(1.0);
+  add_quad(scene, {-1, 0, -1}, {-1, 0, 1}, {1, 0, 1}, {1, 0, -1}, glm::dvec3(0.0), e, 0);
+  // The wall: along the floor's edge z = -1, facing +z, 2 m wide and 2 m high.
+  add_quad(scene, {-1, 0, -1}, {1, 0, -1}, {1, 2, -1}, {-1, 2, -1}, rho, glm::dvec3(0.0), 1);
+  ASSERT_EQ(validate(scene), "");
+  const std::vector<glm::dvec3> floor{{-1, 0, -1}, {-1, 0, 1}, {1, 0, 1}, {1, 0, -1}};
+  Solver solver(scene, Params{});
+  ASSERT_TRUE(solver.run().converged);
+  const Mesh mesh = solver.mesh();
+  double worst = 0.0;
+  size_t checked = 0;
+  for (const Mesh::Element& el : mesh.elements) {
+    if (el.patch != 1) continue;
+    for (uint32_t i = el.boundary_begin; i < el.boundary_end; ++i) {
+      const glm::dvec3 q = mesh.positions[mesh.boundary[i]];
+      // At the wall's two lower corners the light has no one value (it depends on the way one
+      // comes to them): they are left out.
+      if (q.y == 0.0 && std::abs(q.x) == 1.0) continue;
+      // On the foot itself the floor lies edge-on; just above it, it fills half the view.
+      const glm::dvec3 at(q.x, std::max(q.y, 1e-7), q.z);
+      const double want = rho.x * e.x * point_polygon_form_factor(at, {0, 0, 1}, floor);
+      const double err = std::abs(mesh.radiosity[mesh.boundary[i]].x - want) / want;
+      worst = std::max(worst, err);
+      ++checked;
+    }
+  }
+  std::printf("wall: %zu vertex values, worst %.4f\n", checked, worst);
+  EXPECT_GT(checked, 8u);
+  EXPECT_LT(worst, 0.03);
+}
+
+// A box (one-sided faces, outward, no bottom) standing on a floor of 8 x 8 patches, under a lamp:
+// the floor's vertices inside the box's footprint see only the box's backs and stay dark.
+TEST(Gather, FloorUnderABoxStaysDark) {
+  Scene scene;
+  const glm::dvec3 rho(0.6), e(5.0);
+  for (int i = 0; i < 8; ++i)
+    for (int j = 0; j < 8; ++j) {
+      const double x0 = -2 + 0.5 * i, z0 = -2 + 0.5 * j;
+      add_quad(scene, {x0, 0, z0}, {x0, 0, z0 + 0.5}, {x0 + 0.5, 0, z0 + 0.5}, {x0 + 0.5, 0, z0}, rho, glm::dvec3(0.0), 0);
+    }
+  const uint32_t floor_end = static_cast<uint32_t>(scene.patches.size());
+  // The box [-0.6, 0.6] x [0, 0.5] x [-0.6, 0.6]: its footprint holds the floor's vertices at
+  // x, z in {-0.5, 0, 0.5}.
+  const double a = 0.6, h = 0.5;
+  add_quad(scene, {-a, h, -a}, {-a, h, a}, {a, h, a}, {a, h, -a}, rho, glm::dvec3(0.0), 0);   // top
+  add_quad(scene, {-a, 0, a}, {a, 0, a}, {a, h, a}, {-a, h, a}, rho, glm::dvec3(0.0), 0);     // +z
+  add_quad(scene, {a, 0, -a}, {-a, 0, -a}, {-a, h, -a}, {a, h, -a}, rho, glm::dvec3(0.0), 0); // -z
+  add_quad(scene, {a, 0, a}, {a, 0, -a}, {a, h, -a}, {a, h, a}, rho, glm::dvec3(0.0), 0);     // +x
+  add_quad(scene, {-a, 0, -a}, {-a, 0, a}, {-a, h, a}, {-a, h, -a}, rho, glm::dvec3(0.0), 0); // -x
+  add_quad(scene, {-0.5, 2, -0.5}, {0.5, 2, -0.5}, {0.5, 2, 0.5}, {-0.5, 2, 0.5}, glm::dvec3(0.0), e, 1);
+  ASSERT_EQ(validate(scene), "");
+  Solver solver(scene, Params{});
+  ASSERT_TRUE(solver.run().converged);
+  const Mesh mesh = solver.mesh();
+  double inside = 0.0, outside = 0.0;
+  size_t n_inside = 0;
+  for (const Mesh::Element& el : mesh.elements) {
+    if (el.patch >= floor_end) continue;
+    for (uint32_t i = el.boundary_begin; i < el.boundary_end; ++i) {
+      const glm::dvec3& q = mesh.positions[mesh.boundary[i]];
+      const double b = mean3(mesh.radiosity[mesh.boundary[i]]);
+      if (std::abs(q.x) < a - 0.05 && std::abs(q.z) < a - 0.05) {
+        inside = std::max(inside, b);
+        ++n_inside;
+      } else if (std::abs(q.x) > a + 0.3 || std::abs(q.z) > a + 0.3) {
+        outside = std::max(outside, b);
+      }
+    }
+  }
+  std::printf("under the box: %zu vertex values, brightest %.5f; outside, brightest %.5f\n", n_inside, inside, outside);
+  EXPECT_GT(n_inside, 8u);
+  EXPECT_GT(outside, 0.0);
+  EXPECT_LT(inside, 0.01 * outside);
+}
+
+// An open floor under a uniform sky of radiance L: E = pi L everywhere, so every vertex shows
+// rho pi L.
+TEST(Gather, OpenFloorUnderTheSky) {
+  Scene scene;
+  const glm::dvec3 rho(0.4, 0.5, 0.6);
+  for (int i = 0; i < 3; ++i)
+    add_quad(scene, {i, 0, 0}, {i, 0, 1}, {i + 1.0, 0, 1}, {i + 1.0, 0, 0}, rho, glm::dvec3(0.0), 0);
+  scene.sky = glm::dvec3(0.2, 0.3, 0.1);
+  ASSERT_EQ(validate(scene), "");
+  Solver solver(scene, Params{});
+  ASSERT_TRUE(solver.run().converged);
+  EXPECT_GT(solver.stats().gathers, 0u);
+  const Mesh mesh = solver.mesh();
+  const glm::dvec3 want = rho * std::numbers::pi * scene.sky;
+  for (uint32_t v : mesh.boundary)
+    for (int c = 0; c < 3; ++c) ASSERT_NEAR(mesh.radiosity[v][c], want[c], 0.01 * want[c]) << "vertex " << v;
+}
+
+}  // namespace
+}  // namespace hemibake::solver
