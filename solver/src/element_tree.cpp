@@ -48,7 +48,11 @@ uint32_t Solver::Impl::add_element(uint32_t patch, uint32_t parent,
   e_exact.push_back(0.0);
   e_exact_stamp.push_back(0);
   e_light.push_back(parent != kNone ? e_light[parent] : glm::dvec3(0.0));
+  e_gap.push_back(parent != kNone ? e_gap[parent] : glm::dvec3(0.0));
+  e_cov.push_back(-1);
   e_mean.push_back(b);
+  e_low.push_back(mean(b));
+  e_high.push_back(mean(b));
   return id;
 }
 

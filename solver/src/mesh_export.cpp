@@ -84,9 +84,10 @@ Mesh Solver::mesh(bool ambient) const {
     for (uint32_t i = el.boundary_begin; i < el.boundary_end; ++i) {
       const uint32_t v = m.boundary[i];
       if (v >= s.vpos.size()) continue;  // another surface's point: interpolated below
-      // Gathered: the vertex's own light (gather.cpp), the lights' direct light as the element's.
-      const glm::dvec3 b = s.gather_done && s.v_gathered[v]
-                               ? s.patches[el.patch].emission + s.e_light[e] + rho * (s.v_irr[v] + amb)
+      // Gathered: the vertex's own light (gather.cpp); the lights' direct light and light from
+      // covered pieces (e_gap) as the element's.
+      const glm::dvec3 b = s.gather_done && v < s.v_gathered.size() && s.v_gathered[v]
+                               ? s.patches[el.patch].emission + s.e_light[e] + s.e_gap[e] + rho * (s.v_irr[v] + amb)
                                : el.radiosity;
       acc[v] += b * el.area;
       weight[v] += el.area;

@@ -157,16 +157,20 @@ bool Solver::Impl::absorber_close(const Piece& piece) const {
 // the other way (not p's own other side) whose polygon holds x, as a block's bottom holds the floor
 // under it. Light there is the mesh's error (a floor element reaching under the block got some),
 // and a hemicube there would see the block's inside.
-bool Solver::Impl::covered(uint32_t p, const glm::dvec3& x) const {
+// With a `gap`, the other surface may also lie up to that far in front of x (a lamp hung just under
+// a ceiling covers the ceiling above it: light there only gets out through the gap).
+bool Solver::Impl::covered(uint32_t p, const glm::dvec3& x, double gap) const {
   const glm::dvec3& n = prep.normal[p];
   const double eps = kCloseFacingLength * prep.diagonal;
+  const double reach = std::max(eps, gap);
   auto near = [&](const glm::dvec3& lo, const glm::dvec3& hi) {
-    return !glm::any(glm::lessThan(x, lo - eps)) && !glm::any(glm::greaterThan(x, hi + eps));
+    return !glm::any(glm::lessThan(x, lo - reach)) && !glm::any(glm::greaterThan(x, hi + reach));
   };
   return find_patch(near, [&](uint32_t q) {
     if (glm::dot(prep.normal[q], n) > -1.0 + 1e-9 || prep.twin[q] == p) return false;
     const Patch& pq = patches[q];
-    if (std::abs(glm::dot(prep.normal[q], x - pq.corners[0])) > eps) return false;
+    const double d = glm::dot(prep.normal[q], x - pq.corners[0]);
+    if (d < -eps || d > reach) return false;
     for (uint32_t k = 0; k < pq.corner_count; ++k) {
       const glm::dvec3& a = pq.corners[k];
       const glm::dvec3& b = pq.corners[(k + 1) % pq.corner_count];
@@ -174,6 +178,32 @@ bool Solver::Impl::covered(uint32_t p, const glm::dvec3& x) const {
     }
     return true;
   });
+}
+
+// Whether point x of patch p, on a piece or element of this radius, is covered by a surface just
+// in front of it (kCoverGap).
+bool Solver::Impl::gap_covered(uint32_t p, const glm::dvec3& x, double radius) const {
+  return covered(p, x, std::min(radius, kCoverGap * prep.diagonal));
+}
+
+// Whether element e is covered (gap_covered at its centre), once per element.
+bool Solver::Impl::leaf_covered(uint32_t e) {
+  if (e_cov[e] < 0) e_cov[e] = gap_covered(e_patch[e], e_centre[e], e_radius[e]) ? 1 : 0;
+  return e_cov[e] == 1;
+}
+
+// The share of the unshot power under `sources` (elements) that covered leaves hold: the part of a
+// shot that is light leaving through a gap (e_gap).
+double Solver::Impl::covered_share(std::span<const uint32_t> sources) {
+  if (!params.gather) return 0.0;
+  double all = 0.0, hidden = 0.0;
+  for (uint32_t s : sources)
+    for_leaves(s, [&](uint32_t e) {
+      const double power = channel_sum(e_unshot[e]) * e_area[e];
+      all += power;
+      if (power > 0.0 && leaf_covered(e)) hidden += power;
+    });
+  return all > 0.0 ? hidden / all : 0.0;
 }
 
 }  // namespace hemibake::solver

@@ -45,7 +45,9 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   HEMIBAKE_DCHECK(hemicube_share(accepted) <= 1.0 + 1e-4);
   if (!settled) record_broken = true;  // kMaxRounds still splitting: no headroom to record
   if (recording != nullptr) record_piece(piece, coarse, split_room, accepted);
+  gap_share = covered_share(piece.src);
   distribute(piece.dB, accepted);
+  gap_share = 0.0;
   return near;
 }
 

@@ -33,8 +33,10 @@ bool Solver::Impl::replay(uint32_t unit) {
   if (!replayed_radiosities(r, dBs)) return false;
   for (size_t i = 0; i < r.pieces.size(); ++i) {
     const ShotRecord::Piece& rp = r.pieces[i];
+    gap_share = covered_share(std::span(r.src.data() + rp.src_begin, rp.src_end - rp.src_begin));
     for (uint32_t k = rp.recv_begin; k < rp.recv_end; ++k)
       if (!stale[k] && r.f[k] > 0.0f) receive(r.recv[k], dBs[i], r.f[k]);
+    gap_share = 0.0;
   }
   if (stale_count == 0) return true;
 

@@ -96,6 +96,7 @@ void Solver::Impl::receive(uint32_t e, const glm::dvec3& dB, double f) {
   const glm::dvec3 gain = patches[q].reflectance * dB * f;
   e_b[e] += gain;
   e_unshot[e] += gain;
+  e_gap[e] += gap_share * gain;
   p_unshot[q] += channel_sum(gain) * e_area[e];
   u_unshot[p_unit[q]] += channel_sum(gain) * e_area[e];
 }

@@ -106,6 +106,13 @@ constexpr double kRoundingLength = 1e-9;
 // A receiver counts as close (is_close) only where the piece lies in front of it, and it in front
 // of the piece, by more than this share of the scene's diagonal.
 constexpr double kCloseFacingLength = 1e-6;
+// A surface facing a point of another closer than the point's piece or element radius (at most this
+// share of the scene's diagonal) covers it (gap_covered): the ceiling above a lamp hung 1 mm under
+// it, 40 times brighter than the rest. Its light leaves only through the gap, at grazing angles: a
+// gather would take it through the pixels along the lamp's outline instead (the anti-aliased
+// hemicube takes a pixel's layers as independent), so such light reaches the mesh as the shots
+// spread it (e_gap), and gathers see covered elements dark.
+constexpr double kCoverGap = 0.01;
 // A shot is repeated after splits (refine) at most this many times; one still splitting after them
 // is not recorded for replays.
 constexpr int kMaxRounds = 64;
@@ -272,7 +279,10 @@ struct Solver::Impl {
   bool absorber_close(const Piece& piece) const;
   bool uneven_piece(uint32_t element) const;
   double front_share(const Piece& piece, uint32_t e) const;
-  bool covered(uint32_t p, const glm::dvec3& x) const;
+  bool covered(uint32_t p, const glm::dvec3& x, double gap = 0.0) const;
+  bool gap_covered(uint32_t p, const glm::dvec3& x, double radius) const;
+  bool leaf_covered(uint32_t e);
+  double covered_share(std::span<const uint32_t> sources);
   static double point_piece_form_factor(const Piece& piece, const glm::dvec3& x, const glm::dvec3& n);
   double element_piece_form_factor(const Piece& piece, uint32_t e, int side) const;
   double exact_form_factor(const Piece& piece, uint32_t e, int side);
@@ -414,6 +424,14 @@ struct Solver::Impl {
   // (v_inward), and the irradiance gathered there (v_irr, in radiosity units: sum of F B), valid
   // where v_gathered.
   std::vector<glm::dvec3> e_light, e_mean;
+  // Per element: the radiosity that covered elements' unshot power gave it (gap_covered: the
+  // ceiling above a lamp hung just under it), light that leaves through the gap, where no gather
+  // sees it; like e_light, the mesh shows it as the elements' mean. e_cov caches gap_covered per
+  // element (-1: not known yet); gap_share is the covered part of the shot under way.
+  std::vector<glm::dvec3> e_gap;
+  std::vector<int8_t> e_cov;
+  double gap_share = 0.0;
+  std::vector<double> e_low, e_high;  // per element: the least and greatest mean(B) of its leaves
   std::vector<glm::dvec3> v_normal, v_inward, v_irr;
   std::vector<uint8_t> v_gathered;
   std::vector<uint32_t> gather_queue;
@@ -434,7 +452,7 @@ struct Solver::Impl::GatherPoint {
   Kind kind;
   uint32_t id;             // the vertex; the element whose edge (k) or centre it is
   uint32_t edge;           // kMidpoint: which edge of the element
-  glm::dvec3 x, n, inward;
+  glm::dvec3 x, n, inward;  // gathers at x + inward (a point on a surface's outline: inside it)
   glm::dvec3 irr{0.0};     // the result
   uint32_t cost = 0;       // nodes projected for it
 };
@@ -448,6 +466,7 @@ struct Solver::Impl::GatherWorker {
   std::vector<Fragment> frags;
   std::vector<uint32_t> list, stack, group_of, order, pixel_start;
   std::vector<uint8_t> inside;  // per solid: its box holds the point
+  std::vector<double> seen, open;  // per listed node: visible and unoccluded share of the view
 };
 
 template <typename Near, typename Found>
