@@ -324,4 +324,73 @@ Scene make_cluttered_room(uint32_t small_boxes, uint32_t seed) {
   return s;
 }
 
+namespace {
+
+// A UV sphere of triangles, facing outward, `rings` x `segments`.
+void add_uv_sphere(Scene& s, const glm::dvec3& centre, double radius, int rings, int segments,
+                   const glm::dvec3& rho, const glm::dvec3& e, uint32_t material) {
+  auto at = [&](int i, int j) {
+    const double th = 3.14159265358979323846 * i / rings, ph = 2.0 * 3.14159265358979323846 * j / segments;
+    return centre + radius * glm::dvec3(std::sin(th) * std::cos(ph), std::cos(th), std::sin(th) * std::sin(ph));
+  };
+  auto tri = [&](const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c) {
+    Patch p;
+    p.corners = {a, c, b, glm::dvec3(0.0)};  // (a, b, c) run clockwise seen from outside
+    p.corner_count = 3;
+    p.reflectance = rho;
+    p.emission = e;
+    p.material = material;
+    s.patches.push_back(p);
+  };
+  for (int i = 0; i < rings; ++i)
+    for (int j = 0; j < segments; ++j) {
+      if (i > 0) tri(at(i, j), at(i + 1, j + 1), at(i, j + 1));
+      if (i < rings - 1) tri(at(i, j), at(i + 1, j), at(i + 1, j + 1));
+    }
+}
+
+}  // namespace
+
+Scene make_lava_field() {
+  using V = glm::dvec3;
+  Scene s;
+  const glm::dvec3 ground(0.5, 0.45, 0.4), none(0.0);
+  add_quad(s, V(-10, 0, -10), V(-10, 0, 10), V(10, 0, 10), V(10, 0, -10), ground, none, 0);
+  Lcg rng{7};
+  uint32_t material = 1;
+  // 36 objects on a jittered 6 x 6 grid: spheres of 16 x 24 (720 triangles) and boxes whose five
+  // faces are 4 x 4 grids.
+  for (int i = 0; i < 6; ++i)
+    for (int k = 0; k < 6; ++k) {
+      const double x = -8.0 + 3.2 * i + rng.in(-0.6, 0.6), z = -8.0 + 3.2 * k + rng.in(-0.6, 0.6);
+      const glm::dvec3 rho(rng.in(0.3, 0.8), rng.in(0.3, 0.8), rng.in(0.3, 0.8));
+      if ((i + k) % 2 == 0) {
+        const double r = rng.in(0.3, 0.8);
+        add_uv_sphere(s, V(x, r, z), r, 16, 24, rho, none, material++);
+      } else {
+        const double w = rng.in(0.4, 1.2), h = rng.in(0.4, 1.5);
+        const V lo(x - w / 2, 0.0, z - w / 2), hi(x + w / 2, h, z + w / 2), d = hi - lo;
+        auto rect = [&](V o, V u, V v) {
+          for (int a = 0; a < 4; ++a)
+            for (int b = 0; b < 4; ++b) {
+              const V c = o + u * (a / 4.0) + v * (b / 4.0);
+              add_quad(s, c, c + u / 4.0, c + u / 4.0 + v / 4.0, c + v / 4.0, rho, none, material);
+            }
+        };
+        rect(V(lo.x, hi.y, lo.z), V(0, 0, d.z), V(d.x, 0, 0));
+        rect(lo, V(0, d.y, 0), V(d.x, 0, 0));
+        rect(V(lo.x, lo.y, hi.z), V(d.x, 0, 0), V(0, d.y, 0));
+        rect(lo, V(0, 0, d.z), V(0, d.y, 0));
+        rect(V(hi.x, lo.y, lo.z), V(0, d.y, 0), V(0, 0, d.z));
+        ++material;
+      }
+    }
+  // Six lava spheres between the objects, 0.4 m, 24 x 24 (1104 triangles each).
+  for (int n = 0; n < 6; ++n) {
+    const double x = -6.4 + 3.2 * (n % 3) * 2.0 + 1.6, z = n < 3 ? -3.2 : 3.2;
+    add_uv_sphere(s, V(x, 0.45, z), 0.4, 24, 24, glm::dvec3(0.2), glm::dvec3(20.0, 6.0, 1.0), material++);
+  }
+  return s;
+}
+
 }  // namespace hemibake::solver

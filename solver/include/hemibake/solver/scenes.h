@@ -33,6 +33,11 @@ Scene make_furnished_room(uint32_t target_patches = 6300);
 /// patch). Deterministic (its own generator, seed `seed`).
 Scene make_cluttered_room(uint32_t small_boxes = 390, uint32_t seed = 1);
 
+/// Many small emitters, like an engine's example scene lit by lava spheres: a 20 x 20 m floor (one
+/// quad), 36 objects (tessellated spheres and boxes) and six emissive spheres, about 20 000 patches
+/// in all, open to the sky (nothing else emits). Deterministic.
+Scene make_lava_field();
+
 /// Appends a quad (counter-clockwise seen from the front) as one patch, or as two triangles when
 /// its corners are not coplanar.
 void add_quad(Scene& scene, const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c,
