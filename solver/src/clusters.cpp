@@ -14,9 +14,9 @@
 namespace hemibake::solver {
 namespace {
 
-// The class of a group of patches by the dominant axis and sign of their summed normal (six
-// classes): faces of small objects cluster with faces of like orientation only.
-int orientation_class_of(const glm::dvec3& n) {
+// The class of a normal by its dominant axis and sign (six classes): faces of small objects
+// cluster with faces of like orientation only.
+int orientation_class(const glm::dvec3& n) {
   const glm::dvec3 a = glm::abs(n);
   const int axis = a.x >= a.y && a.x >= a.z ? 0 : a.y >= a.z ? 1 : 2;
   return 2 * axis + (n[axis] < 0.0 ? 1 : 0);
@@ -24,11 +24,6 @@ int orientation_class_of(const glm::dvec3& n) {
 
 }  // namespace
 
-int Solver::Impl::orientation_class(const std::vector<uint32_t>& members) const {
-  glm::dvec3 n(0.0);
-  for (uint32_t q : members) n += prep.normal[q] * prep.area[q];
-  return orientation_class_of(n);
-}
 
 // Cluster node `id` over cluster_patch[begin, end), and its subtree.
 void Solver::Impl::build_cluster(uint32_t id, uint32_t begin, uint32_t end) {
@@ -95,9 +90,9 @@ void Solver::Impl::build_clusters() {
         hi = glm::max(hi, patches[q].corners[k]);
       }
     if (params.cluster_across && glm::distance(lo, hi) <= 0.5 * limit) {
+      // Each patch by its own normal: a small sphere's facets go to six pools, not one.
       const glm::dvec3& e = patches[members[0]].emission;
-      std::vector<uint32_t>& pool_of = pooled[{orientation_class(members), {e.x, e.y, e.z}}];
-      pool_of.insert(pool_of.end(), members.begin(), members.end());
+      for (uint32_t q : members) pooled[{orientation_class(prep.normal[q]), {e.x, e.y, e.z}}].push_back(q);
       continue;
     }
     if (members.size() >= 2) cut_into_units(members, limit, false);

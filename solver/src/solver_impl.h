@@ -241,7 +241,6 @@ struct Solver::Impl {
   void find_surfaces();
   std::vector<std::vector<uint32_t>> cluster_candidates(double limit) const;
   void cut_into_units(const std::vector<uint32_t>& members, double limit, bool across);
-  int orientation_class(const std::vector<uint32_t>& members) const;
   void build_cluster(uint32_t id, uint32_t begin, uint32_t end);
 
   // shooters.cpp: a unit breaks into pieces, each of which shoot_piece shoots.
