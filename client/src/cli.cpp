@@ -16,7 +16,7 @@
 namespace hemibake::client {
 namespace {
 
-bool is_local_builtin(const std::string& command) { return command == "cornell" || command == "room"; }
+bool is_local_builtin(const std::string& command) { return command == "cornell" || command == "room" || command == "clutter" || command == "lava"; }
 
 bool is_remote(const std::string& command) {
   return command == "submit" || command == "status" || command == "watch" || command == "fetch" || command == "cancel" ||
@@ -90,6 +90,8 @@ std::string usage() {
          "  hemibake bake IN.glb|IN.gltf -o OUT.glb [options]   bake a glTF scene\n"
          "  hemibake cornell [options]                          bake the built-in Cornell box\n"
          "  hemibake room [--patches N] [options]               bake the benchmarks' furnished room\n"
+         "  hemibake clutter [options]                          bake the benchmarks' cluttered room\n"
+         "  hemibake lava [options]                             bake a floor lit by six emissive spheres\n"
          "  hemibake bake --server URL IN -o OUT.glb [options]  bake on a hemibake-server\n"
          "  hemibake submit IN [options]                        submit to the server; prints the job id\n"
          "  hemibake status ID | watch ID | cancel ID           a job's state, live progress, cancel it\n"
@@ -169,6 +171,8 @@ int run(const CommandLine& o, const Console& console) {
   }
   if (o.command == "cornell") return run_cornell(o, console);
   if (o.command == "room") return run_room(o, console);
+  if (o.command == "clutter") return run_clutter(o, console);
+  if (o.command == "lava") return run_lava(o, console);
   if (o.command == "render") return run_render(o, console);
   if (o.command == "bake" && o.server.empty()) return run_bake(o, console);
   // The commands that talk to a server.

@@ -1,4 +1,7 @@
-// Clusters: small patches of one surface that shoot together, as binary trees of median cuts.
+// Clusters: small patches that shoot together, as binary trees of median cuts: patches of one
+// surface (a wall in tiles), and faces of small objects across objects (boxes on a table), pooled by
+// orientation so that each cluster shoots along one direction class (Sillion 1995 and Smits et al.
+// 1994 split a volume cluster's emission the same way, by where it faces).
 #include "solver_impl.h"
 
 #include <glm/common.hpp>
@@ -9,6 +12,18 @@
 #include <numeric>
 
 namespace hemibake::solver {
+namespace {
+
+// The class of a normal by its dominant axis and sign (six classes): faces of small objects
+// cluster with faces of like orientation only.
+int orientation_class(const glm::dvec3& n) {
+  const glm::dvec3 a = glm::abs(n);
+  const int axis = a.x >= a.y && a.x >= a.z ? 0 : a.y >= a.z ? 1 : 2;
+  return 2 * axis + (n[axis] < 0.0 ? 1 : 0);
+}
+
+}  // namespace
+
 
 // Cluster node `id` over cluster_patch[begin, end), and its subtree.
 void Solver::Impl::build_cluster(uint32_t id, uint32_t begin, uint32_t end) {
@@ -63,8 +78,27 @@ void Solver::Impl::build_clusters() {
   const double limit = params.cluster_size * prep.diagonal;
   find_surfaces();
   p_unit.assign(patches.size(), kNone);
-  for (const std::vector<uint32_t>& members : cluster_candidates(limit))
-    if (members.size() >= 2) cut_into_units(members, limit);
+  // Surfaces no wider than half the limit (the faces of small boxes, chair legs) cluster across
+  // objects, pooled by orientation class and emission; wider ones (a wall in tiles) among their
+  // own patches.
+  std::map<std::pair<int, std::array<double, 3>>, std::vector<uint32_t>> pooled;
+  for (const std::vector<uint32_t>& members : cluster_candidates(limit)) {
+    glm::dvec3 lo(std::numeric_limits<double>::max()), hi(std::numeric_limits<double>::lowest());
+    for (uint32_t q : members)
+      for (uint32_t k = 0; k < patches[q].corner_count; ++k) {
+        lo = glm::min(lo, patches[q].corners[k]);
+        hi = glm::max(hi, patches[q].corners[k]);
+      }
+    if (params.cluster_across && glm::distance(lo, hi) <= 0.5 * limit) {
+      // Each patch by its own normal: a small sphere's facets go to six pools, not one.
+      const glm::dvec3& e = patches[members[0]].emission;
+      for (uint32_t q : members) pooled[{orientation_class(prep.normal[q]), {e.x, e.y, e.z}}].push_back(q);
+      continue;
+    }
+    if (members.size() >= 2) cut_into_units(members, limit, false);
+  }
+  for (auto& [key, members] : pooled)
+    if (members.size() >= 2) cut_into_units(members, limit, true);
   for (uint32_t p = 0; p < patches.size(); ++p) {
     if (p_unit[p] != kNone) continue;
     p_unit[p] = static_cast<uint32_t>(unit_patch.size());
@@ -113,12 +147,29 @@ std::vector<std::vector<uint32_t>> Solver::Impl::cluster_candidates(double limit
 
 // Builds the cluster tree over `members` and cuts it from the top until the pieces are narrow
 // enough and flat enough (kClusterCone); each piece of two or more patches becomes a unit.
-void Solver::Impl::cut_into_units(const std::vector<uint32_t>& members, double limit) {
+void Solver::Impl::cut_into_units(const std::vector<uint32_t>& members, double limit, bool across) {
   const uint32_t begin = static_cast<uint32_t>(cluster_patch.size());
   cluster_patch.insert(cluster_patch.end(), members.begin(), members.end());
   const uint32_t root = static_cast<uint32_t>(c_nodes.size());
   c_nodes.emplace_back();
   build_cluster(root, begin, static_cast<uint32_t>(cluster_patch.size()));
+  // A cluster across objects holds faces at different depths along its normal (box tops of
+  // several heights): its centroid may lie inside one of the boxes, whose inner faces are absorbing
+  // backs. Its hemicube stands in front of all of its patches instead.
+  if (across)
+    for (uint32_t c = root; c < c_nodes.size(); ++c) {
+      ClusterNode& node = c_nodes[c];
+      double back = 0.0;
+      for (uint32_t i = node.begin; i < node.end; ++i) {
+        const Patch& patch = patches[cluster_patch[i]];
+        for (uint32_t k = 0; k < patch.corner_count; ++k) {
+          const double d = glm::dot(node.normal, patch.corners[k] - node.centre);
+          node.front = std::max(node.front, d);
+          back = std::max(back, -d);
+        }
+      }
+      node.depth = node.front + back;
+    }
   std::vector<uint32_t> stack{root};
   while (!stack.empty()) {
     const uint32_t c = stack.back();

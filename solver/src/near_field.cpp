@@ -50,7 +50,7 @@ bool Solver::Impl::is_close(const Piece& piece, uint32_t e) const {
   if (hi <= eps || (!within && lo >= -eps)) return false;
   bool in_front = false;
   for (uint32_t i = 0; i < corner_count(e) && !in_front; ++i)
-    in_front = glm::dot(piece.normal, vpos[e_corner[e][i]] - centre) > eps;
+    in_front = glm::dot(piece.normal, vpos[e_corner[e][i]] - centre) > eps - piece.rear;
   return in_front;
 }
 

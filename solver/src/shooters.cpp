@@ -152,7 +152,8 @@ void Solver::Impl::shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bo
   piece.area = node.area;
   piece.dB = power / node.area;
   piece.power = channel_sum(piece.dB) * piece.area;
-  piece.centre = node.centre;
+  piece.centre = node.centre + node.normal * node.front;
+  piece.rear = node.depth;
   piece.up = node.box[1] - node.box[0];
   if (glm::length(glm::cross(piece.up, piece.normal)) < kRoundingLength * prep.diagonal) piece.up = node.box[2] - node.box[0];
   piece.diameter = node.diameter;

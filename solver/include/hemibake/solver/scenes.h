@@ -27,6 +27,17 @@ Scene make_closed_box(double size, uint32_t cells, const glm::dvec3& reflectance
 /// of small patches, about `target_patches` in all (the paper's had 6276). Deterministic.
 Scene make_furnished_room(uint32_t target_patches = 6300);
 
+/// A cluttered room built the way a user's export is: a 8 x 3 x 6 m room whose walls, floor and
+/// ceiling are 0.25 m tiles, lit by six ceiling panels; six tables and 24 chairs with legs, five
+/// cabinets, and `small_boxes` boxes 4 to 18 cm wide on the tables and the floor (each face one
+/// patch). Deterministic (its own generator, seed `seed`).
+Scene make_cluttered_room(uint32_t small_boxes = 390, uint32_t seed = 1);
+
+/// Many small emitters, like an engine's example scene lit by lava spheres: a 20 x 20 m floor (one
+/// quad), 36 objects (tessellated spheres and boxes) and six emissive spheres, about 20 000 patches
+/// in all, open to the sky (nothing else emits). Deterministic.
+Scene make_lava_field();
+
 /// Appends a quad (counter-clockwise seen from the front) as one patch, or as two triangles when
 /// its corners are not coplanar.
 void add_quad(Scene& scene, const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c,

@@ -86,6 +86,9 @@ struct Params {
   double cluster_size = 0.15;   ///< non-emitting patches narrower than half this (times the scene's
                                 ///< diagonal) shoot together with their surface's neighbours, in
                                 ///< clusters up to this wide; 0 = every patch shoots alone
+  bool cluster_across = true;   ///< surfaces narrower than half cluster_size (faces of small
+                                ///< objects) cluster with nearby faces of like orientation on other
+                                ///< objects; false = only within a surface
   bool reuse_visibility = true; ///< children take visibility from their parent's pixels; false
                                 ///< re-projects the whole scene after every split (for comparison)
   bool gather = true;           ///< after the shots, every vertex of the mesh gathers the radiosity of
