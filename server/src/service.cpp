@@ -259,7 +259,15 @@ std::map<std::string, std::pair<std::string, std::string>> parse_multipart(const
 Service::Service(const ServiceOptions& o) : options_(o) {}
 
 std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::string& err) {
-  auto store = Store::open(options.data_dir, err);
+  std::unique_ptr<Store> store;
+  if (!options.store_uri.empty()) {
+    PgOptions po;
+    po.lease_seconds = options.lease_seconds;
+    po.max_attempts = options.max_attempts;
+    store = Store::open_postgres(options.store_uri, po, err);
+  } else {
+    store = Store::open(options.data_dir, err);
+  }
   if (!store) return nullptr;
   return start(options, std::move(store), err);
 }
@@ -267,6 +275,16 @@ std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::stri
 std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::unique_ptr<Store> store, std::string&) {
   std::unique_ptr<Service> s(new Service(options));
   s->store_ = std::move(store);
+  // Other nodes' changes (a shared store): new jobs wake the workers, new events the streams, and a
+  // job this node lost (cancelled elsewhere, or its lease expired) stops at its next shot.
+  StoreListener listener;
+  listener.job_queued = [p = s.get()] { p->wake_.notify_all(); };
+  listener.event = [p = s.get()](const std::string& id) { p->wake_streams(id); };
+  listener.lost = [p = s.get()](const std::string& id) {
+    std::lock_guard lock(p->mutex_);
+    if (auto it = p->active_.find(id); it != p->active_.end()) it->second.token->cancel();
+  };
+  s->store_->set_listener(std::move(listener));
   // An accepted job is never lost: what a crash left running runs again (up to max_attempts).
   s->store_->recover(options.max_attempts);
   s->store_->expire(options.expire_seconds);
@@ -285,6 +303,7 @@ std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::uniq
 Service::~Service() { stop(); }
 
 void Service::stop() {
+  if (store_) store_->set_listener({});  // returns once no call from the store runs into this service
   std::vector<Reply> waiting;
   std::vector<std::function<void(EventBatch)>> streams;
   {
@@ -399,12 +418,16 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
   solver::CancelToken token;
   if (!register_job(id, &token)) {
     store_->requeue(id);
+    store_->release(id);
     return;
   }
   struct Unregister {
     Service* s;
     const std::string& id;
-    ~Unregister() { s->unregister_job(id); }
+    ~Unregister() {
+      s->unregister_job(id);
+      s->store_->release(id);
+    }
   } unregister{this, id};
   if (const auto rec = store_->get(id); rec && rec->state == JobState::kCancelled) {
     // Cancelled between the claim and the registration, when no token could be reached.
@@ -864,7 +887,11 @@ std::optional<Response> Service::answer_at_once(const Request& req, const std::s
   const bool get = req.method == "GET";
   if ((path == "/healthz" || path == "/readyz" || path == "/metrics" || path == "/openapi.json") && !get) return not_allowed("GET, HEAD");
   if (path == "/healthz") return Response{200, {}, R"({"status":"ok"})"};
-  if (path == "/readyz") return running_ ? Response{200, {}, R"({"status":"ready"})"} : error(503, "not ready");
+  if (path == "/readyz") {
+    if (!running_) return error(503, "not ready");
+    if (!store_->healthy()) return error(503, "the job store cannot be reached; reconnecting");
+    return Response{200, {}, R"({"status":"ready"})"};
+  }
   if (path == "/openapi.json") return Response{200, {}, openapi_document()};
   return std::nullopt;
 }
@@ -963,17 +990,26 @@ void Service::read_events(const std::string& id, uint64_t after, std::chrono::st
 
 void Service::emit(const std::string& id, const std::string& type, const std::string& data) {
   store_->add_event(id, type, data);
-  std::vector<EventWait> waits;
+  wake_streams(id);
+}
+
+void Service::wake_streams(const std::string& id) {
+  std::vector<std::pair<std::string, EventWait>> waits;
   {
     std::lock_guard lock(mutex_);
+    if (!running_) return;
     ++events_written_;
-    if (auto it = event_waits_.find(id); it != event_waits_.end()) {
-      waits = std::move(it->second);
-      event_waits_.erase(it);
+    for (auto it = event_waits_.begin(); it != event_waits_.end();) {
+      if (!id.empty() && it->first != id) {
+        ++it;
+        continue;
+      }
+      for (auto& w : it->second) waits.emplace_back(it->first, std::move(w));
+      it = event_waits_.erase(it);
     }
   }
-  for (auto& w : waits) {
-    auto work = [this, id, w] { read_events(id, w.after, w.until, w.reply); };
+  for (auto& [job, w] : waits) {
+    auto work = [this, job, w] { read_events(job, w.after, w.until, w.reply); };
     if (!lookups_->post(std::move(work), [reply = w.reply] { reply(EventBatch{503, {}, false}); })) w.reply(EventBatch{503, {}, false});
   }
 }
