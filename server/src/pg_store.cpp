@@ -438,7 +438,14 @@ class PgStore final : public Store {
       }
     }
     Result r = run(c, sql, params, binary_result);
-    if (!r.ok() && PQstatus(c) != CONNECTION_OK) healthy_ = false;
+    if (!r.ok() && PQstatus(c) != CONNECTION_OK) {
+      // The server restarted or the connection dropped since this connection's last use: once
+      // more on a new connection. Writes are safe to repeat: each is conditional on the state (and
+      // fence) it changes from, or inserts a key that cannot be inserted twice.
+      PQreset(c);
+      if (PQstatus(c) == CONNECTION_OK) r = run(c, sql, params, binary_result);
+      if (!r.ok() && PQstatus(c) != CONNECTION_OK) healthy_ = false;
+    }
     give_back(c);
     return r;
   }

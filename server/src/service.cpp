@@ -517,7 +517,17 @@ bool Service::end_job(const std::string& id, const std::string* result, std::str
   };
   Change c;
   if (result) {
-    c = store_->succeed(id, *result, "\"" + sha256_hex(*result) + "\"");
+    const std::string etag = "\"" + sha256_hex(*result) + "\"";
+    c = store_->succeed(id, *result, etag);
+    // A shared store that cannot be reached: the result is written once it is back, not turned
+    // into a failure. If that takes longer than the lease, the job has gone back to the queue and
+    // the write is refused; another run then makes the same result.
+    for (int wait = 1; !c.made && !c.error.empty() && !store_->healthy() && wait <= 32; wait *= 2) {
+      std::unique_lock lock(mutex_);
+      if (wake_.wait_for(lock, std::chrono::seconds(wait), [&] { return !running_.load(); })) break;
+      lock.unlock();
+      c = store_->succeed(id, *result, etag);
+    }
     if (c.made) {
       emit(id, "state", state_event("succeeded", {}));
       return true;
