@@ -48,7 +48,9 @@ class Nodes : public ::testing::Test {
 };
 
 // A small bake (a fraction of a second), different for each `i` so that none is a cache hit.
-std::string small_job(int i) { return "/v1/jobs?convergence=" + std::to_string(0.05 + 0.001 * i) + "&resolution=32"; }
+std::string small_job(int i) {
+  return "/v1/jobs?max_shots=20&resolution=16&max_elements=200&convergence=" + std::to_string(0.05 + 0.001 * i);
+}
 
 // 20 jobs over three nodes; one node is killed mid-bake. Every job succeeds exactly once (one
 // "succeeded" event and one stored result each), the killed node's job ran again, and every node
