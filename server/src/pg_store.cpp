@@ -66,6 +66,7 @@ constexpr const char* kSchema1 =
     "CREATE TABLE results (job TEXT PRIMARY KEY, data BYTEA NOT NULL);"
     "CREATE TABLE events (job TEXT NOT NULL, seq BIGINT NOT NULL, type TEXT NOT NULL, data TEXT NOT NULL,"
     "  PRIMARY KEY (job, seq));"
+    "CREATE TABLE previews (job TEXT PRIMARY KEY, data BYTEA NOT NULL);"
     "CREATE TABLE hemibake_maintenance (one BOOLEAN PRIMARY KEY DEFAULT true CHECK (one),"
     "  last_expiry TIMESTAMPTZ NOT NULL DEFAULT '-infinity');"
     "INSERT INTO hemibake_maintenance DEFAULT VALUES;";
@@ -193,6 +194,24 @@ class PgStore final : public Store {
   void release(const std::string& id) override {
     std::lock_guard lock(mutex_);
     owned_.erase(id);
+  }
+
+  bool runs_here(const std::string& id) override {
+    std::lock_guard lock(mutex_);
+    return owned_.count(id) > 0;
+  }
+  bool ask_preview(const std::string& id) override {
+    return exec("SELECT pg_notify('hemibake_preview_ask', $1)", {text(id)}).ok();
+  }
+  void put_preview(const std::string& id, const std::string& glb) override {
+    exec("WITH p AS (INSERT INTO previews (job, data) VALUES ($1, $2) ON CONFLICT (job) DO UPDATE SET data = EXCLUDED.data"
+         " RETURNING job) SELECT pg_notify('hemibake_preview', job) FROM p",
+         {text(id), bytes(glb)});
+  }
+  std::optional<std::string> take_preview(const std::string& id) override {
+    Result r = exec("SELECT data FROM previews WHERE job = $1", {text(id)}, true);
+    if (r.rows() == 0) return std::nullopt;
+    return r.get(0, 0);
   }
 
   Created create(const std::string& scene, const std::string& content_type, const std::string& params,
@@ -379,6 +398,7 @@ class PgStore final : public Store {
                         " e AS (DELETE FROM events WHERE job IN (SELECT id FROM old)),"
                         " s AS (DELETE FROM scenes WHERE job IN (SELECT id FROM old)),"
                         " r AS (DELETE FROM results WHERE job IN (SELECT id FROM old)),"
+                        " p AS (DELETE FROM previews WHERE job IN (SELECT id FROM old)),"
                         " j AS (DELETE FROM jobs WHERE id IN (SELECT id FROM old) RETURNING 1)"
                         " SELECT count(*) FROM j",
                     {num(age_seconds), num(options_.expiry_interval)});
@@ -540,7 +560,8 @@ class PgStore final : public Store {
         std::string error;
         c = connect(uri_, error);
         if (c) {
-          Result r(PQexec(c, "LISTEN hemibake_job; LISTEN hemibake_event; LISTEN hemibake_cancel"));
+          Result r(PQexec(c, "LISTEN hemibake_job; LISTEN hemibake_event; LISTEN hemibake_cancel;"
+                              " LISTEN hemibake_preview_ask; LISTEN hemibake_preview"));
           if (!r.ok()) {
             PQfinish(c);
             c = nullptr;
@@ -580,6 +601,8 @@ class PgStore final : public Store {
           if (channel == "hemibake_job" && l.job_queued) l.job_queued();
           else if (channel == "hemibake_event" && l.event) l.event(payload);
           else if (channel == "hemibake_cancel" && mine && l.lost) l.lost(payload);
+          else if (channel == "hemibake_preview_ask" && mine && l.preview_asked) l.preview_asked(payload);
+          else if (channel == "hemibake_preview" && l.preview_ready) l.preview_ready(payload);
         });
       }
     }

@@ -284,6 +284,37 @@ std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::uniq
     std::lock_guard lock(p->mutex_);
     if (auto it = p->active_.find(id); it != p->active_.end()) it->second.token->cancel();
   };
+  listener.preview_asked = [p = s.get()](const std::string& id) {
+    std::lock_guard lock(p->mutex_);
+    if (auto it = p->active_.find(id); it != p->active_.end()) {
+      it->second.preview_wanted = true;
+      it->second.remote_wanted = true;
+    }
+  };
+  listener.preview_ready = [p = s.get()](const std::string& id) {
+    std::vector<PreviewWait> waits;
+    {
+      std::lock_guard lock(p->mutex_);
+      auto it = p->remote_previews_.find(id);
+      if (it == p->remote_previews_.end()) return;
+      waits = std::move(it->second);
+      p->remote_previews_.erase(it);
+    }
+    auto work = [p, id, waits] {
+      const auto glb = p->store_->take_preview(id);
+      Response r;
+      if (!glb) {
+        r = error(503, "the preview could not be read from the job store; retry");
+      } else {
+        r.body = *glb;
+        r.content_type = "model/gltf-binary";
+        r.headers.emplace_back("Cache-Control", "no-store");
+      }
+      for (auto& w : waits) w.reply(r);
+    };
+    if (!p->lookups_->post(std::move(work), [waits] { for (auto& w : waits) w.reply(stopping()); }))
+      for (auto& w : waits) w.reply(stopping());
+  };
   s->store_->set_listener(std::move(listener));
   // An accepted job is never lost: what a crash left running runs again (up to max_attempts).
   s->store_->recover(options.max_attempts);
@@ -318,6 +349,9 @@ void Service::stop() {
     for (auto& [id, waits] : unregistered_)
       for (auto& w : waits) waiting.push_back(std::move(w.reply));
     unregistered_.clear();
+    for (auto& [id, waits] : remote_previews_)
+      for (auto& w : waits) waiting.push_back(std::move(w.reply));
+    remote_previews_.clear();
     for (auto& [id, waits] : event_waits_)
       for (auto& w : waits) streams.push_back(std::move(w.reply));
     event_waits_.clear();
@@ -354,6 +388,10 @@ void Service::clock_loop() {
       }
     };
     for (auto& [id, a] : active_) sweep(a.waits, preview_missed);
+    for (auto it = remote_previews_.begin(); it != remote_previews_.end();) {
+      sweep(it->second, preview_missed);
+      it = it->second.empty() ? remote_previews_.erase(it) : std::next(it);
+    }
     // Not registered in time: the job is taken to have ended (its state was read as running).
     for (auto it = unregistered_.begin(); it != unregistered_.end();) {
       sweep(it->second, [] {
@@ -781,12 +819,21 @@ Response Service::metrics() {
 void Service::preview(const std::string& id, const Reply& reply) {
   const auto state = store_->get(id);
   if (!state) return reply(error(404, "no job " + id));
+  // Running on another node (a shared store): that node makes it after its next shot.
+  const bool elsewhere = state->state == JobState::kRunning && !store_->runs_here(id);
   std::unique_lock lock(mutex_);
   if (!running_) {
     lock.unlock();
     return reply(stopping());
   }
   const auto now = std::chrono::steady_clock::now();
+  if (elsewhere) {
+    remote_previews_[id].push_back({now + kPreviewWait, reply});
+    lock.unlock();
+    clock_wake_.notify_one();
+    store_->ask_preview(id);
+    return;
+  }
   auto it = active_.find(id);
   if (it == active_.end() && state->state == JobState::kRunning) {
     // Claimed by a worker that has not registered it yet: it waits a moment for that.
@@ -868,6 +915,7 @@ bool Service::take_preview_request(const std::string& id) {
 // one shot older than they are).
 void Service::give_preview(const std::string& id, const std::vector<uint8_t>& glb, const std::string& failure) {
   std::vector<PreviewWait> waits;
+  bool remote = false;
   {
     std::lock_guard lock(mutex_);
     auto it = active_.find(id);
@@ -875,7 +923,10 @@ void Service::give_preview(const std::string& id, const std::vector<uint8_t>& gl
     waits = std::move(it->second.waits);
     it->second.waits.clear();
     it->second.preview_wanted = false;
+    remote = it->second.remote_wanted;
+    it->second.remote_wanted = false;
   }
+  if (remote && !glb.empty()) store_->put_preview(id, std::string(glb.begin(), glb.end()));
   if (waits.empty()) return;
   Response r;
   if (glb.empty()) {
@@ -964,6 +1015,20 @@ void Service::events_async(const std::string& id, uint64_t after, std::chrono::m
 
 // Reads the events after `after`; with none, and the job still going, waits for the next (the
 // stream's end is an event too). No stream polls the store: each read follows an event.
+// Whether the last event of finished job `r` says how it ended. The worker of a running job writes
+// that event after the state changed (a DELETE changes it first), on another node with a shared
+// store; a stream that ended in between would miss it. Jobs that end with no such event (failed at
+// a restart after their last attempt) end their streams after a grace period.
+bool Service::final_event_written(const JobRecord& r) {
+  if (unix_now() - r.finished > 3.0 || r.last_event == 0) return true;
+  const auto last = store_->events_after(r.id, r.last_event - 1, 1);
+  if (last.empty() || last[0].type != "state") return false;
+  const json j = json::parse(last[0].data, nullptr, false);
+  if (!j.is_object() || !j.contains("state") || !j["state"].is_string()) return false;
+  const auto state = job_state_from(j["state"].get<std::string>());
+  return state && finished(*state);
+}
+
 void Service::read_events(const std::string& id, uint64_t after, std::chrono::steady_clock::time_point until,
                           std::function<void(EventBatch)> reply) {
   for (;;) {
@@ -978,7 +1043,8 @@ void Service::read_events(const std::string& id, uint64_t after, std::chrono::st
       const auto rec = store_->get(id);
       // Finished, and no event came between the read above and the record's: the stream ends.
       if (!rec) b.status = 404;
-      else b.end = finished(rec->state) && b.events.empty() && store_->events_after(id, after, 1).empty();
+      else b.end = finished(rec->state) && b.events.empty() && store_->events_after(id, after, 1).empty() &&
+                   final_event_written(*rec);
     } catch (const std::exception& e) {
       std::fprintf(stderr, "hemibake-server: reading the events of %s failed: %s\n", id.c_str(), e.what());
       b = EventBatch{503, {}, false};

@@ -180,10 +180,10 @@ TEST_F(Nodes, SameIdempotencyKeyOnTwoNodesAtOnceMakesOneJob) {
   EXPECT_EQ(sql("SELECT count(*) FROM jobs"), "5");
 }
 
-// A DELETE on one node stops the bake on the node that runs it at once (the lease is long, so only
-// the notification can do it), and a stream on the other node, resumed with Last-Event-ID, sees
-// the owner's events up to "cancelled".
-TEST_F(Nodes, CancelAndEventStreamsWorkAcrossNodes) {
+// A preview asked of one node comes from the node that runs the job; a DELETE on one node stops the
+// bake on the node that runs it at once (the lease is long, so only the notification can do it);
+// a stream on the other node, resumed with Last-Event-ID, sees the owner's events up to "cancelled".
+TEST_F(Nodes, PreviewCancelAndEventStreamsWorkAcrossNodes) {
   auto a = node(30);
   const Reply posted = request(a->port(), http::verb::post, "/v1/jobs?convergence=0.00001&resolution=64", cornell(), kGltf);
   ASSERT_EQ(posted.status, 202) << posted.body;
@@ -198,6 +198,11 @@ TEST_F(Nodes, CancelAndEventStreamsWorkAcrossNodes) {
     stream_done = true;
   });
   std::this_thread::sleep_for(300ms);
+  // A preview of the job running on a, asked of b: a makes it after its next shot.
+  const Reply preview = request(b->port(), http::verb::get, "/v1/jobs/" + id + "/preview");
+  EXPECT_EQ(preview.status, 200) << preview.body;
+  EXPECT_EQ(preview.body.substr(0, 4), "glTF");
+  EXPECT_EQ(preview.headers.at("content-type"), "model/gltf-binary");
   const auto t0 = std::chrono::steady_clock::now();
   const Reply del = request(b->port(), http::verb::delete_, "/v1/jobs/" + id);
   EXPECT_EQ(del.status, 200) << del.body;

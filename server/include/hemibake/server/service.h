@@ -122,6 +122,7 @@ class Service {
   bool end_job(const std::string& id, const std::string* result, std::string failure);
   /// Stores an event of job `id` and wakes the streams that wait for one.
   void emit(const std::string& id, const std::string& type, const std::string& data);
+  bool final_event_written(const JobRecord& r);
   /// Wakes the streams that wait for an event of job `id` (of any job if `id` is empty).
   void wake_streams(const std::string& id);
   /// events_async's work on a lookup thread: reads, and waits if there is nothing to read.
@@ -157,8 +158,12 @@ class Service {
     solver::CancelToken* token = nullptr;
     bool previews = true;  // false while no displayable solution exists (hr, reference tracing)
     bool preview_wanted = false;
+    bool remote_wanted = false;  // another node asked (a shared store): the preview goes to the store
     std::vector<PreviewWait> waits;
   };
+  // Previews of jobs that run on another node (a shared store): answered when that node has stored
+  // one (the store's preview_ready), or by the clock.
+  std::map<std::string, std::vector<PreviewWait>> remote_previews_;
   std::map<std::string, Active> active_;
   // Event streams with nothing to send, waiting for their job's next event, or for `until` (then
   // the clock answers them with an empty batch, for a heartbeat).

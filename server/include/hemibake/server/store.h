@@ -66,6 +66,8 @@ struct StoreListener {
   std::function<void(const std::string& id)> event;      ///< job `id` has a new event; empty id: any job may have
   std::function<void(const std::string& id)> lost;       ///< this node no longer owns running job `id`
                                                          ///< (cancelled elsewhere, or its lease expired): stop it
+  std::function<void(const std::string& id)> preview_asked;  ///< another node wants a preview of job `id`
+  std::function<void(const std::string& id)> preview_ready;  ///< a preview of job `id` was stored (put_preview)
 };
 
 /// Options of the PostgreSQL store.
@@ -95,6 +97,14 @@ class Store {
   virtual bool healthy() { return true; }
   /// The worker of job `id` is done with it (whatever the outcome): the store stops renewing its lease.
   virtual void release(const std::string&) {}
+  /// Whether running job `id` runs on this node. A store of one node: always.
+  virtual bool runs_here(const std::string&) { return true; }
+  /// Previews of a job running on another node: ask its node for one (false if this store cannot),
+  /// which stores it (put_preview) after its next shot; then every node hears preview_ready and reads
+  /// it (take_preview).
+  virtual bool ask_preview(const std::string&) { return false; }
+  virtual void put_preview(const std::string&, const std::string&) {}
+  virtual std::optional<std::string> take_preview(const std::string&) { return std::nullopt; }
 
   /// A new queued job. `idempotency_key` may be empty; if another job holds it, that job is named
   /// instead (`existed`) and nothing is written.
