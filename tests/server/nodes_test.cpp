@@ -33,7 +33,9 @@ class Nodes : public ::testing::Test {
     uri_ = pg().create_database(db_);
   }
   // A node with its own (unused) data directory, `lease` seconds leases and one worker.
-  std::unique_ptr<ServerProcess> node(double lease = 1.0) {
+  // Leases of 2 s: short enough for quick tests, long enough that a loaded machine (the sanitizer
+  // build, parallel tests) does not lose them by a slow renewal.
+  std::unique_ptr<ServerProcess> node(double lease = 2.0) {
     const std::string dir = temp_dir(db_ + std::to_string(nodes_++));
     auto p = std::make_unique<ServerProcess>(dir, std::vector<std::string>{"--store", uri_, "--workers", "1", "--lease-seconds",
                                                                              std::to_string(lease), "--max-attempts", "5"});
@@ -109,7 +111,7 @@ TEST_F(Nodes, NodePausedPastItsLeaseHasItsLateWritesRefused) {
                                  " WHERE j.id = '" + id + "'");
   const int events_before = sql_int("SELECT count(*) FROM events WHERE job = '" + id + "'");
   kill(a->pid(), SIGCONT);
-  std::this_thread::sleep_for(2500ms);  // a's bake goes on, then a learns it lost the job
+  std::this_thread::sleep_for(2500ms);  // a's bake goes on, then a learns it lost the job (renewals every second)
   EXPECT_EQ(sql("SELECT event_seq || ' ' || progress || ' ' || md5(r.data) FROM jobs j JOIN results r ON r.job = j.id"
                 " WHERE j.id = '" + id + "'"),
             before);
@@ -123,7 +125,7 @@ TEST_F(Nodes, NodePausedPastItsLeaseHasItsLateWritesRefused) {
 // recover, and every job finishes.
 TEST_F(Nodes, DatabaseRestartMidRunLosesNoJob) {
   std::vector<std::unique_ptr<ServerProcess>> nodes;
-  for (int i = 0; i < 3; ++i) nodes.push_back(node(2.0));
+  for (int i = 0; i < 3; ++i) nodes.push_back(node());
   std::vector<std::string> ids;
   for (int i = 0; i < 9; ++i) {
     const Reply r = request(nodes[i % 3]->port(), http::verb::post, small_job(100 + i), cornell(), kGltf);
@@ -215,7 +217,7 @@ TEST_F(Nodes, PreviewCancelAndEventStreamsWorkAcrossNodes) {
   }
   const double stopped = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   EXPECT_NE(last.find("cancelled"), std::string::npos);
-  EXPECT_LT(stopped, 1.5) << "the owning node took " << stopped << " s to stop";
+  EXPECT_LT(stopped, 3.0) << "the owning node took " << stopped << " s to stop";
   for (int i = 0; i < 100 && !stream_done; ++i) std::this_thread::sleep_for(50ms);
   ASSERT_TRUE(stream_done) << "the stream on the other node did not end";
   reader.join();
