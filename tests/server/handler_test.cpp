@@ -3,6 +3,7 @@
 
 #include "dark_glb.h"
 #include "faulty_store.h"
+#include "pg_server.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -30,6 +31,22 @@ namespace {
 
 using nlohmann::json;
 
+// HEMIBAKE_TEST_STORE=postgresql runs these tests on the shared store (a PostgreSQL started for
+// them, a fresh database per fixture); CTest does that as handler_tests_postgresql.
+bool on_postgres() {
+  const char* e = std::getenv("HEMIBAKE_TEST_STORE");
+  return e && std::string(e) == "postgresql";
+}
+std::string postgres_database() {
+  static hemibake_test::PgServer server;
+  static int n = 0;
+  if (!server.available()) {
+    ADD_FAILURE() << "HEMIBAKE_TEST_STORE=postgresql but " << server.why();
+    return {};
+  }
+  return server.create_database("handler" + std::to_string(getpid()) + "_" + std::to_string(n++));
+}
+
 struct Fixture {
   std::string dir;
   std::unique_ptr<Service> service;
@@ -39,9 +56,10 @@ struct Fixture {
     std::filesystem::remove_all(dir);
     o.data_dir = dir;
     o.workers = 1;
+    if (on_postgres()) o.store_uri = postgres_database();
     std::string error;
     if (fault) {
-      auto real = Store::open(dir, error);
+      auto real = o.store_uri.empty() ? Store::open(dir, error) : Store::open_postgres(o.store_uri, PgOptions{}, error);
       EXPECT_TRUE(real) << error;
       auto faulty = std::make_unique<test::FaultyStore>(std::move(real), std::move(fault));
       store = faulty.get();
