@@ -37,15 +37,23 @@ bool on_postgres() {
   const char* e = std::getenv("HEMIBAKE_TEST_STORE");
   return e && std::string(e) == "postgresql";
 }
-std::string postgres_database() {
+hemibake_test::PgServer& postgres() {
   static hemibake_test::PgServer server;
-  static int n = 0;
-  if (!server.available()) {
-    ADD_FAILURE() << "HEMIBAKE_TEST_STORE=postgresql but " << server.why();
-    return {};
-  }
-  return server.create_database("handler" + std::to_string(getpid()) + "_" + std::to_string(n++));
+  return server;
 }
+std::string postgres_database() {
+  static int n = 0;
+  return postgres().create_database("handler" + std::to_string(getpid()) + "_" + std::to_string(n++));
+}
+// Without PostgreSQL's binaries every test skips, saying why.
+class PostgresEnvironment : public ::testing::Environment {
+ public:
+  void SetUp() override {
+    if (!postgres().available()) GTEST_SKIP() << "PostgreSQL tests skipped: " << postgres().why();
+  }
+};
+[[maybe_unused]] ::testing::Environment* const postgres_environment =
+    on_postgres() ? ::testing::AddGlobalTestEnvironment(new PostgresEnvironment) : nullptr;
 
 struct Fixture {
   std::string dir;
