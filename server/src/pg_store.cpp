@@ -279,12 +279,20 @@ class PgStore final : public Store {
   }
 
   bool claim(std::string& id, std::string& scene, std::string& params) override {
-    Result r = exec(std::string("WITH c AS (SELECT id FROM jobs WHERE state = 'queued' ORDER BY created, id LIMIT 1"
-                                " FOR UPDATE SKIP LOCKED)"
+    // Not a job this node still holds: one whose lease it lost and whose old run has not yet
+    // stopped (its fence and its entry in owned_ belong to that run).
+    std::string held = "{";
+    {
+      std::lock_guard lock(mutex_);
+      for (const auto& [job, attempt] : owned_) held += (held.size() > 1 ? "," : "") + job;
+    }
+    held += "}";
+    Result r = exec(std::string("WITH c AS (SELECT id FROM jobs WHERE state = 'queued' AND NOT (id = ANY($3::text[]))"
+                                " ORDER BY created, id LIMIT 1 FOR UPDATE SKIP LOCKED)"
                                 " UPDATE jobs j SET state = 'running', owner = $1, attempts = j.attempts + 1, started = ") + kNow +
                         ", lease_until = clock_timestamp() + $2 * interval '1 second'"
                         " FROM c WHERE j.id = c.id RETURNING j.id, j.params, j.attempts",
-                    {text(node_), num(options_.lease_seconds)});
+                    {text(node_), num(options_.lease_seconds), text(held)});
     if (r.rows() == 0) return false;
     id = r.get(0, 0);
     params = r.get(0, 1);
