@@ -6,7 +6,10 @@
 //      renews; the bake itself is left out, so the time is the store's alone;
 //   3. event delay: an event written by node A's worker (through the store) to an SSE client of a
 //      real hemibake-server, node B, via LISTEN/NOTIFY.
-// Usage: hemibake-nodes-bench [jobs]   (default 1000)
+//   4. with --http N: N tiny bakes (the Cornell box, one shot, 8x8 hemicubes) submitted over HTTP to
+//      1, 2 and 3 real hemibake-server processes (one worker each): jobs per second end to end,
+//      which on a 2-core machine measures mostly the solver and the CPU, not the store.
+// Usage: hemibake-nodes-bench [jobs] [--http N]   (default 1000 jobs, no HTTP run)
 #include "hemibake/server/store.h"
 #include "pg_server.h"
 #include "server_process.h"
@@ -44,7 +47,11 @@ std::unique_ptr<Store> open(const std::string& uri) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  const int jobs = argc > 1 ? std::atoi(argv[1]) : 1000;
+  int jobs = 1000, http_jobs = 0;
+  for (int i = 1; i < argc; ++i) {
+    if (std::string(argv[i]) == "--http" && i + 1 < argc) http_jobs = std::atoi(argv[++i]);
+    else jobs = std::atoi(argv[i]);
+  }
   PgServer pg;
   if (!pg.available()) {
     std::fprintf(stderr, "nodes-bench: %s\n", pg.why().c_str());
@@ -102,14 +109,14 @@ int main(int argc, char** argv) {
   {  // 3. event delay from node A's worker to an SSE client on node B
     const std::string uri = pg.create_database("events");
     auto a = open(uri);
-    ServerProcess b(temp_dir("nodes-bench"), {"--store", uri, "--workers", "0"});
-    // --workers 0 means one per core: keep B from claiming the job by claiming it first.
+    // A's worker holds the job before B starts (B's workers would claim it).
     const Created c = a->create(scene, "model/gltf+json", R"({})", "k", "");
     std::string id, sc, params;
     if (!a->claim(id, sc, params) || id != c.id) {
       std::fprintf(stderr, "nodes-bench: could not claim the event job\n");
       return 1;
     }
+    ServerProcess b(temp_dir("nodes-bench"), {"--store", uri, "--workers", "1"});
     net::io_context io;
     beast::tcp_stream stream(io);
     stream.connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), b.port()));
@@ -138,6 +145,31 @@ int main(int argc, char** argv) {
     }
     std::printf("event delay, node A's worker to an SSE client on node B (100 events): median %.2f ms, p90 %.2f ms, max %.2f ms\n",
                 pct(delays, 0.5), pct(delays, 0.9), pct(delays, 1.0));
+  }
+  // 4. tiny bakes end to end on 1, 2, 3 nodes
+  for (int nodes = 1; nodes <= 3 && http_jobs > 0; ++nodes) {
+    const std::string uri = pg.create_database("http" + std::to_string(nodes));
+    std::vector<std::unique_ptr<ServerProcess>> servers;
+    for (int n = 0; n < nodes; ++n)
+      servers.push_back(std::make_unique<ServerProcess>(temp_dir("nodes-bench-http" + std::to_string(n)),
+                                                        std::vector<std::string>{"--store", uri, "--workers", "1", "--max-queue", "100000"}));
+    const auto t0 = Clock::now();
+    std::vector<std::string> ids;
+    for (int i = 0; i < http_jobs; ++i) {
+      const Reply r = request(servers[i % nodes]->port(), http::verb::post,
+                              "/v1/jobs?max_shots=1&resolution=8&max_elements=100&convergence=" + std::to_string(0.1 + 0.0001 * i),
+                              cornell(), {{"Content-Type", "model/gltf+json"}});
+      if (r.status != 202) {
+        std::fprintf(stderr, "nodes-bench: submit answered %d: %s\n", r.status, r.body.c_str());
+        return 1;
+      }
+      ids.push_back(r.js()["id"]);
+    }
+    int ok = 0;
+    for (const auto& id : ids) ok += wait_finished(servers[0]->port(), id, 600s)["state"] == "succeeded";
+    const double total = ms(Clock::now() - t0);
+    std::printf("HTTP, %d node%s x 1 worker: %d of %d tiny bakes succeeded in %.0f ms: %.1f jobs/s\n", nodes, nodes > 1 ? "s" : "",
+                ok, http_jobs, total, ok * 1000.0 / total);
   }
   return 0;
 }
