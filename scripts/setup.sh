@@ -10,7 +10,7 @@ packages=(
   build-essential cmake pkg-config
   libglm-dev
   libtinygltf-dev libdraco-dev libstb-dev nlohmann-json3-dev
-  libboost1.81-dev libsqlite3-dev libssl-dev libembree-dev zlib1g-dev
+  libboost1.81-dev libsqlite3-dev libpq-dev libssl-dev libembree-dev zlib1g-dev
   libgtest-dev libgmock-dev libbenchmark-dev
 )
 # Node.js and npm: the build embeds the web page's three.js from npm (web/), and the tests' glTF
@@ -21,6 +21,9 @@ fi
 if [[ "${1:-}" == "--test" ]]; then
   # Chromium for the three.js render checks and the web page's browser tests.
   packages+=(chromium)
+  # PostgreSQL 15 for the shared store's tests (tests/server/pg_server.h starts one on loopback):
+  # initdb, pg_ctl and psql.
+  packages+=(postgresql-15 postgresql-client-15)
   # clang and libFuzzer for the fuzz targets in tests/fuzz.
   packages+=(clang-14 libclang-rt-14-dev)
 fi

@@ -23,6 +23,10 @@ void usage(FILE* out) {
       "usage: hemibake-server [options]\n"
       "  --listen HOST:PORT      address to serve on (default 127.0.0.1:8080)\n"
       "  --data DIR              data directory for the embedded job store (default ./hemibake-data)\n"
+      "  --store URI             keep jobs in PostgreSQL instead, shared by any number of nodes:\n"
+      "                          postgresql://USER[:PASSWORD]@HOST:PORT/DATABASE (a libpq URI)\n"
+      "  --lease-seconds S       with --store: a node that has not renewed a running job's lease for S seconds\n"
+      "                          loses it and the job runs again elsewhere (default 30)\n"
       "  --workers N             concurrent bakes (default: number of cores)\n"
       "  --solver-threads N      threads inside each bake (default 1)\n"
       "  --tokens FILE           bearer tokens, one per line (also HEMIBAKE_TOKENS, comma-separated);\n"
@@ -64,7 +68,8 @@ int main(int argc, char** argv) {
     static const char* const kOptions[] = {"--listen", "--data", "--workers", "--solver-threads", "--tokens", "--max-body",
                                            "--max-queue", "--max-streams", "--idle-timeout", "--header-timeout", "--min-rate", "--check-threads", "--max-checks",
                                            "--job-seconds", "--max-elements",
-                                           "--max-shot-cache-mb", "--max-triangles", "--max-job-mb", "--max-image-pixels", "--max-attempts", "--expire-hours"};
+                                           "--max-shot-cache-mb", "--max-triangles", "--max-job-mb", "--max-image-pixels", "--max-attempts", "--expire-hours",
+                                           "--store", "--lease-seconds"};
     if (std::find(std::begin(kOptions), std::end(kOptions), opt) == std::end(kOptions)) {
       std::fprintf(stderr, "hemibake-server: unknown option '%s' (try --help)\n", opt.c_str());
       return 2;
@@ -106,6 +111,14 @@ int main(int argc, char** argv) {
       }
       ho.port = static_cast<unsigned short>(port);
     } else if (opt == "--data") so.data_dir = val;
+    else if (opt == "--store") so.store_uri = val;
+    else if (opt == "--lease-seconds") {
+      so.lease_seconds = need_num();
+      if (so.lease_seconds < 0.3) {
+        std::fprintf(stderr, "hemibake-server: --lease-seconds needs at least 0.3 (got '%s')\n", val.c_str());
+        return 2;
+      }
+    }
     else if (opt == "--workers") so.workers = static_cast<unsigned>(need_count(1024));
     else if (opt == "--solver-threads") so.solver_threads = static_cast<unsigned>(need_count(1024));
     else if (opt == "--tokens") tokens_file = val;
@@ -163,8 +176,9 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "hemibake-server: %s\n", error.c_str());
     return 1;
   }
-  std::printf("hemibake-server: serving http://%s:%u/ (data in %s, %s)\n", ho.host.c_str(), http->port(),
-              so.data_dir.c_str(), so.tokens.empty() ? "no authentication" : "bearer tokens required");
+  const std::string where = so.store_uri.empty() ? "data in " + so.data_dir : "jobs in PostgreSQL";
+  std::printf("hemibake-server: serving http://%s:%u/ (%s, %s)\n", ho.host.c_str(), http->port(),
+              where.c_str(), so.tokens.empty() ? "no authentication" : "bearer tokens required");
   std::printf("  submit:  curl -sS -X POST --data-binary @scene.glb -H 'Content-Type: model/gltf-binary' "
               "http://%s:%u/v1/jobs\n", ho.host.c_str(), http->port());
   std::fflush(stdout);

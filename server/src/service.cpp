@@ -259,7 +259,15 @@ std::map<std::string, std::pair<std::string, std::string>> parse_multipart(const
 Service::Service(const ServiceOptions& o) : options_(o) {}
 
 std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::string& err) {
-  auto store = Store::open(options.data_dir, err);
+  std::unique_ptr<Store> store;
+  if (!options.store_uri.empty()) {
+    PgOptions po;
+    po.lease_seconds = options.lease_seconds;
+    po.max_attempts = options.max_attempts;
+    store = Store::open_postgres(options.store_uri, po, err);
+  } else {
+    store = Store::open(options.data_dir, err);
+  }
   if (!store) return nullptr;
   return start(options, std::move(store), err);
 }
@@ -267,6 +275,47 @@ std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::stri
 std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::unique_ptr<Store> store, std::string&) {
   std::unique_ptr<Service> s(new Service(options));
   s->store_ = std::move(store);
+  // Other nodes' changes (a shared store): new jobs wake the workers, new events the streams, and a
+  // job this node lost (cancelled elsewhere, or its lease expired) stops at its next shot.
+  StoreListener listener;
+  listener.job_queued = [p = s.get()] { p->wake_.notify_all(); };
+  listener.event = [p = s.get()](const std::string& id) { p->wake_streams(id); };
+  listener.lost = [p = s.get()](const std::string& id) {
+    std::lock_guard lock(p->mutex_);
+    if (auto it = p->active_.find(id); it != p->active_.end()) it->second.token->cancel();
+  };
+  listener.preview_asked = [p = s.get()](const std::string& id) {
+    std::lock_guard lock(p->mutex_);
+    if (auto it = p->active_.find(id); it != p->active_.end()) {
+      it->second.preview_wanted = true;
+      it->second.remote_wanted = true;
+    }
+  };
+  listener.preview_ready = [p = s.get()](const std::string& id) {
+    std::vector<PreviewWait> waits;
+    {
+      std::lock_guard lock(p->mutex_);
+      auto it = p->remote_previews_.find(id);
+      if (it == p->remote_previews_.end()) return;
+      waits = std::move(it->second);
+      p->remote_previews_.erase(it);
+    }
+    auto work = [p, id, waits] {
+      const auto glb = p->store_->take_preview(id);
+      Response r;
+      if (!glb) {
+        r = error(503, "the preview could not be read from the job store; retry");
+      } else {
+        r.body = *glb;
+        r.content_type = "model/gltf-binary";
+        r.headers.emplace_back("Cache-Control", "no-store");
+      }
+      for (auto& w : waits) w.reply(r);
+    };
+    if (!p->lookups_->post(std::move(work), [waits] { for (auto& w : waits) w.reply(stopping()); }))
+      for (auto& w : waits) w.reply(stopping());
+  };
+  s->store_->set_listener(std::move(listener));
   // An accepted job is never lost: what a crash left running runs again (up to max_attempts).
   s->store_->recover(options.max_attempts);
   s->store_->expire(options.expire_seconds);
@@ -285,6 +334,7 @@ std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::uniq
 Service::~Service() { stop(); }
 
 void Service::stop() {
+  if (store_) store_->set_listener({});  // returns once no call from the store runs into this service
   std::vector<Reply> waiting;
   std::vector<std::function<void(EventBatch)>> streams;
   {
@@ -299,6 +349,9 @@ void Service::stop() {
     for (auto& [id, waits] : unregistered_)
       for (auto& w : waits) waiting.push_back(std::move(w.reply));
     unregistered_.clear();
+    for (auto& [id, waits] : remote_previews_)
+      for (auto& w : waits) waiting.push_back(std::move(w.reply));
+    remote_previews_.clear();
     for (auto& [id, waits] : event_waits_)
       for (auto& w : waits) streams.push_back(std::move(w.reply));
     event_waits_.clear();
@@ -335,6 +388,10 @@ void Service::clock_loop() {
       }
     };
     for (auto& [id, a] : active_) sweep(a.waits, preview_missed);
+    for (auto it = remote_previews_.begin(); it != remote_previews_.end();) {
+      sweep(it->second, preview_missed);
+      it = it->second.empty() ? remote_previews_.erase(it) : std::next(it);
+    }
     // Not registered in time: the job is taken to have ended (its state was read as running).
     for (auto it = unregistered_.begin(); it != unregistered_.end();) {
       sweep(it->second, [] {
@@ -399,12 +456,16 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
   solver::CancelToken token;
   if (!register_job(id, &token)) {
     store_->requeue(id);
+    store_->release(id);
     return;
   }
   struct Unregister {
     Service* s;
     const std::string& id;
-    ~Unregister() { s->unregister_job(id); }
+    ~Unregister() {
+      s->unregister_job(id);
+      s->store_->release(id);
+    }
   } unregister{this, id};
   if (const auto rec = store_->get(id); rec && rec->state == JobState::kCancelled) {
     // Cancelled between the claim and the registration, when no token could be reached.
@@ -494,7 +555,17 @@ bool Service::end_job(const std::string& id, const std::string* result, std::str
   };
   Change c;
   if (result) {
-    c = store_->succeed(id, *result, "\"" + sha256_hex(*result) + "\"");
+    const std::string etag = "\"" + sha256_hex(*result) + "\"";
+    c = store_->succeed(id, *result, etag);
+    // A shared store that cannot be reached: the result is written once it is back, not turned
+    // into a failure. If that takes longer than the lease, the job has gone back to the queue and
+    // the write is refused; another run then makes the same result.
+    for (int wait = 1; !c.made && !c.error.empty() && !store_->healthy() && wait <= 32; wait *= 2) {
+      std::unique_lock lock(mutex_);
+      if (wake_.wait_for(lock, std::chrono::seconds(wait), [&] { return !running_.load(); })) break;
+      lock.unlock();
+      c = store_->succeed(id, *result, etag);
+    }
     if (c.made) {
       emit(id, "state", state_event("succeeded", {}));
       return true;
@@ -748,12 +819,21 @@ Response Service::metrics() {
 void Service::preview(const std::string& id, const Reply& reply) {
   const auto state = store_->get(id);
   if (!state) return reply(error(404, "no job " + id));
+  // Running on another node (a shared store): that node makes it after its next shot.
+  const bool elsewhere = state->state == JobState::kRunning && !store_->runs_here(id);
   std::unique_lock lock(mutex_);
   if (!running_) {
     lock.unlock();
     return reply(stopping());
   }
   const auto now = std::chrono::steady_clock::now();
+  if (elsewhere) {
+    remote_previews_[id].push_back({now + kPreviewWait, reply});
+    lock.unlock();
+    clock_wake_.notify_one();
+    store_->ask_preview(id);
+    return;
+  }
   auto it = active_.find(id);
   if (it == active_.end() && state->state == JobState::kRunning) {
     // Claimed by a worker that has not registered it yet: it waits a moment for that.
@@ -835,6 +915,7 @@ bool Service::take_preview_request(const std::string& id) {
 // one shot older than they are).
 void Service::give_preview(const std::string& id, const std::vector<uint8_t>& glb, const std::string& failure) {
   std::vector<PreviewWait> waits;
+  bool remote = false;
   {
     std::lock_guard lock(mutex_);
     auto it = active_.find(id);
@@ -842,7 +923,10 @@ void Service::give_preview(const std::string& id, const std::vector<uint8_t>& gl
     waits = std::move(it->second.waits);
     it->second.waits.clear();
     it->second.preview_wanted = false;
+    remote = it->second.remote_wanted;
+    it->second.remote_wanted = false;
   }
+  if (remote && !glb.empty()) store_->put_preview(id, std::string(glb.begin(), glb.end()));
   if (waits.empty()) return;
   Response r;
   if (glb.empty()) {
@@ -864,7 +948,11 @@ std::optional<Response> Service::answer_at_once(const Request& req, const std::s
   const bool get = req.method == "GET";
   if ((path == "/healthz" || path == "/readyz" || path == "/metrics" || path == "/openapi.json") && !get) return not_allowed("GET, HEAD");
   if (path == "/healthz") return Response{200, {}, R"({"status":"ok"})"};
-  if (path == "/readyz") return running_ ? Response{200, {}, R"({"status":"ready"})"} : error(503, "not ready");
+  if (path == "/readyz") {
+    if (!running_) return error(503, "not ready");
+    if (!store_->healthy()) return error(503, "the job store cannot be reached; reconnecting");
+    return Response{200, {}, R"({"status":"ready"})"};
+  }
   if (path == "/openapi.json") return Response{200, {}, openapi_document()};
   return std::nullopt;
 }
@@ -927,6 +1015,20 @@ void Service::events_async(const std::string& id, uint64_t after, std::chrono::m
 
 // Reads the events after `after`; with none, and the job still going, waits for the next (the
 // stream's end is an event too). No stream polls the store: each read follows an event.
+// Whether the last event of finished job `r` says how it ended. The worker of a running job writes
+// that event after the state changed (a DELETE changes it first), on another node with a shared
+// store; a stream that ended in between would miss it. Jobs that end with no such event (failed at
+// a restart after their last attempt) end their streams after a grace period.
+bool Service::final_event_written(const JobRecord& r) {
+  if (unix_now() - r.finished > 3.0 || r.last_event == 0) return true;
+  const auto last = store_->events_after(r.id, r.last_event - 1, 1);
+  if (last.empty() || last[0].type != "state") return false;
+  const json j = json::parse(last[0].data, nullptr, false);
+  if (!j.is_object() || !j.contains("state") || !j["state"].is_string()) return false;
+  const auto state = job_state_from(j["state"].get<std::string>());
+  return state && finished(*state);
+}
+
 void Service::read_events(const std::string& id, uint64_t after, std::chrono::steady_clock::time_point until,
                           std::function<void(EventBatch)> reply) {
   for (;;) {
@@ -941,7 +1043,8 @@ void Service::read_events(const std::string& id, uint64_t after, std::chrono::st
       const auto rec = store_->get(id);
       // Finished, and no event came between the read above and the record's: the stream ends.
       if (!rec) b.status = 404;
-      else b.end = finished(rec->state) && b.events.empty() && store_->events_after(id, after, 1).empty();
+      else b.end = finished(rec->state) && b.events.empty() && store_->events_after(id, after, 1).empty() &&
+                   final_event_written(*rec);
     } catch (const std::exception& e) {
       std::fprintf(stderr, "hemibake-server: reading the events of %s failed: %s\n", id.c_str(), e.what());
       b = EventBatch{503, {}, false};
@@ -963,17 +1066,26 @@ void Service::read_events(const std::string& id, uint64_t after, std::chrono::st
 
 void Service::emit(const std::string& id, const std::string& type, const std::string& data) {
   store_->add_event(id, type, data);
-  std::vector<EventWait> waits;
+  wake_streams(id);
+}
+
+void Service::wake_streams(const std::string& id) {
+  std::vector<std::pair<std::string, EventWait>> waits;
   {
     std::lock_guard lock(mutex_);
+    if (!running_) return;
     ++events_written_;
-    if (auto it = event_waits_.find(id); it != event_waits_.end()) {
-      waits = std::move(it->second);
-      event_waits_.erase(it);
+    for (auto it = event_waits_.begin(); it != event_waits_.end();) {
+      if (!id.empty() && it->first != id) {
+        ++it;
+        continue;
+      }
+      for (auto& w : it->second) waits.emplace_back(it->first, std::move(w));
+      it = event_waits_.erase(it);
     }
   }
-  for (auto& w : waits) {
-    auto work = [this, id, w] { read_events(id, w.after, w.until, w.reply); };
+  for (auto& [job, w] : waits) {
+    auto work = [this, job, w] { read_events(job, w.after, w.until, w.reply); };
     if (!lookups_->post(std::move(work), [reply = w.reply] { reply(EventBatch{503, {}, false}); })) w.reply(EventBatch{503, {}, false});
   }
 }

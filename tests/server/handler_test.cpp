@@ -3,6 +3,7 @@
 
 #include "dark_glb.h"
 #include "faulty_store.h"
+#include "pg_server.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -30,6 +31,30 @@ namespace {
 
 using nlohmann::json;
 
+// HEMIBAKE_TEST_STORE=postgresql runs these tests on the shared store (a PostgreSQL started for
+// them, a fresh database per fixture); CTest does that as handler_tests_postgresql.
+bool on_postgres() {
+  const char* e = std::getenv("HEMIBAKE_TEST_STORE");
+  return e && std::string(e) == "postgresql";
+}
+hemibake_test::PgServer& postgres() {
+  static hemibake_test::PgServer server;
+  return server;
+}
+std::string postgres_database() {
+  static int n = 0;
+  return postgres().create_database("handler" + std::to_string(getpid()) + "_" + std::to_string(n++));
+}
+// Without PostgreSQL's binaries every test skips, saying why.
+class PostgresEnvironment : public ::testing::Environment {
+ public:
+  void SetUp() override {
+    if (!postgres().available()) GTEST_SKIP() << "PostgreSQL tests skipped: " << postgres().why();
+  }
+};
+[[maybe_unused]] ::testing::Environment* const postgres_environment =
+    on_postgres() ? ::testing::AddGlobalTestEnvironment(new PostgresEnvironment) : nullptr;
+
 struct Fixture {
   std::string dir;
   std::unique_ptr<Service> service;
@@ -39,9 +64,10 @@ struct Fixture {
     std::filesystem::remove_all(dir);
     o.data_dir = dir;
     o.workers = 1;
+    if (on_postgres()) o.store_uri = postgres_database();
     std::string error;
     if (fault) {
-      auto real = Store::open(dir, error);
+      auto real = o.store_uri.empty() ? Store::open(dir, error) : Store::open_postgres(o.store_uri, PgOptions{}, error);
       EXPECT_TRUE(real) << error;
       auto faulty = std::make_unique<test::FaultyStore>(std::move(real), std::move(fault));
       store = faulty.get();

@@ -29,6 +29,8 @@ class Pool;
 
 struct ServiceOptions {
   std::string data_dir = "data";
+  std::string store_uri;            ///< postgresql://...: the shared store; empty: SQLite in data_dir
+  double lease_seconds = 30;        ///< shared store: a running job's lease, renewed every third of it
   unsigned workers = 0;             ///< bake threads; 0 = number of cores
   unsigned solver_threads = 1;      ///< threads inside each bake
   uint64_t max_body_bytes = 256ull << 20;
@@ -106,7 +108,7 @@ class Service {
   /// Stops the workers; jobs they were running go back to the queue. Previews asked for and
   /// requests not yet begun are answered 503; requests being answered finish first.
   void stop();
-  bool ready() const { return running_.load(); }
+  bool ready() const { return running_.load() && store_->healthy(); }
   void count_response(int status);
 
  private:
@@ -120,6 +122,9 @@ class Service {
   bool end_job(const std::string& id, const std::string* result, std::string failure);
   /// Stores an event of job `id` and wakes the streams that wait for one.
   void emit(const std::string& id, const std::string& type, const std::string& data);
+  bool final_event_written(const JobRecord& r);
+  /// Wakes the streams that wait for an event of job `id` (of any job if `id` is empty).
+  void wake_streams(const std::string& id);
   /// events_async's work on a lookup thread: reads, and waits if there is nothing to read.
   void read_events(const std::string& id, uint64_t after, std::chrono::steady_clock::time_point until,
                    std::function<void(EventBatch)> reply);
@@ -153,8 +158,12 @@ class Service {
     solver::CancelToken* token = nullptr;
     bool previews = true;  // false while no displayable solution exists (hr, reference tracing)
     bool preview_wanted = false;
+    bool remote_wanted = false;  // another node asked (a shared store): the preview goes to the store
     std::vector<PreviewWait> waits;
   };
+  // Previews of jobs that run on another node (a shared store): answered when that node has stored
+  // one (the store's preview_ready), or by the clock.
+  std::map<std::string, std::vector<PreviewWait>> remote_previews_;
   std::map<std::string, Active> active_;
   // Event streams with nothing to send, waiting for their job's next event, or for `until` (then
   // the clock answers them with an empty batch, for a heartbeat).

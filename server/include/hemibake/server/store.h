@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -58,6 +59,25 @@ struct Change {
   std::string error;                  ///< the store could not write the change (made is false)
 };
 
+/// What a shared store tells the service about changes made by other nodes. Called from the store's
+/// own thread; none may block.
+struct StoreListener {
+  std::function<void()> job_queued;                      ///< a job may be waiting to be claimed
+  std::function<void(const std::string& id)> event;      ///< job `id` has a new event; empty id: any job may have
+  std::function<void(const std::string& id)> lost;       ///< this node no longer owns running job `id`
+                                                         ///< (cancelled elsewhere, or its lease expired): stop it
+  std::function<void(const std::string& id)> preview_asked;  ///< another node wants a preview of job `id`
+  std::function<void(const std::string& id)> preview_ready;  ///< a preview of job `id` was stored (put_preview)
+};
+
+/// Options of the PostgreSQL store.
+struct PgOptions {
+  double lease_seconds = 30;     ///< a claimed job's lease; renewed every third of it
+  int max_attempts = 3;          ///< a job whose lease expired this many times fails
+  double expiry_interval = 300;  ///< expire() runs at most once in this many seconds across all nodes
+  int connections = 4;           ///< connections for requests and workers (one more listens)
+};
+
 /// Thread-safe.
 class Store {
  public:
@@ -65,7 +85,26 @@ class Store {
   /// `dir`/hemibake.lock while it lives. A database of an older layout is converted. Returns null and
   /// sets `error` on failure, also when another process holds the lock.
   static std::unique_ptr<Store> open(const std::string& dir, std::string& error);
+  /// The shared store: PostgreSQL at `uri` (a libpq URI, postgresql://USER@HOST:PORT/DB), for any
+  /// number of nodes. Creates or migrates the schema. Returns null and sets `error` if the URI is bad,
+  /// the server cannot be reached or the schema is newer than this build.
+  static std::unique_ptr<Store> open_postgres(const std::string& uri, const PgOptions& options, std::string& error);
   virtual ~Store() = default;
+
+  /// Where the service hears of other nodes' changes; a store of one node never calls it.
+  virtual void set_listener(StoreListener) {}
+  /// False while the store cannot be reached (the service then answers 503 on /readyz).
+  virtual bool healthy() { return true; }
+  /// The worker of job `id` is done with it (whatever the outcome): the store stops renewing its lease.
+  virtual void release(const std::string&) {}
+  /// Whether running job `id` runs on this node. A store of one node: always.
+  virtual bool runs_here(const std::string&) { return true; }
+  /// Previews of a job running on another node: ask its node for one (false if this store cannot),
+  /// which stores it (put_preview) after its next shot; then every node hears preview_ready and reads
+  /// it (take_preview).
+  virtual bool ask_preview(const std::string&) { return false; }
+  virtual void put_preview(const std::string&, const std::string&) {}
+  virtual std::optional<std::string> take_preview(const std::string&) { return std::nullopt; }
 
   /// A new queued job. `idempotency_key` may be empty; if another job holds it, that job is named
   /// instead (`existed`) and nothing is written.

@@ -1,0 +1,244 @@
+// Several hemibake-server processes on one PostgreSQL (started for these tests on loopback): jobs
+// submitted anywhere are baked once, survive a node's death and the database's restart, a paused
+// node's late writes are refused, and cancels and event streams work across nodes. What happened
+// is read from the database with psql and from every node's HTTP answers, not from the servers'
+// own accounts.
+#include "pg_server.h"
+#include "server_process.h"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <memory>
+#include <mutex>
+#include <set>
+
+namespace {
+
+using namespace hemibake_test;
+
+hemibake_test::PgServer& pg() {
+  static hemibake_test::PgServer server;
+  return server;
+}
+
+const std::map<std::string, std::string> kGltf = {{"Content-Type", "model/gltf+json"}};
+
+class Nodes : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!pg().available()) GTEST_SKIP() << "PostgreSQL tests skipped: " << pg().why();
+    db_ = std::string("nodes_") + ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    for (auto& ch : db_) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+    uri_ = pg().create_database(db_);
+  }
+  // A node with its own (unused) data directory, `lease` seconds leases and one worker.
+  // Leases of 2 s: short enough for quick tests, long enough that a loaded machine (the sanitizer
+  // build, parallel tests) does not lose them by a slow renewal.
+  std::unique_ptr<ServerProcess> node(double lease = 2.0) {
+    const std::string dir = temp_dir(db_ + std::to_string(nodes_++));
+    auto p = std::make_unique<ServerProcess>(dir, std::vector<std::string>{"--store", uri_, "--workers", "1", "--lease-seconds",
+                                                                             std::to_string(lease), "--max-attempts", "5"});
+    EXPECT_NE(p->port(), 0) << "the node did not start";
+    return p;
+  }
+  std::string sql(const std::string& q) { return pg().psql(db_, q); }
+  int sql_int(const std::string& q) { return std::atoi(sql(q).c_str()); }
+
+  std::string db_, uri_;
+  int nodes_ = 0;
+};
+
+// A small bake (a fraction of a second), different for each `i` so that none is a cache hit.
+std::string small_job(int i) {
+  return "/v1/jobs?max_shots=20&resolution=16&max_elements=200&convergence=" + std::to_string(0.05 + 0.001 * i);
+}
+
+// 20 jobs over three nodes; one node is killed mid-bake. Every job succeeds exactly once (one
+// "succeeded" event and one stored result each), the killed node's job ran again, and every node
+// gives the same bytes for every result.
+TEST_F(Nodes, SigkillOfANodeMidBakeLosesNoJobAndRunsNoneTwice) {
+  std::vector<std::unique_ptr<ServerProcess>> nodes;
+  for (int i = 0; i < 3; ++i) nodes.push_back(node());
+  std::vector<std::string> ids;
+  for (int i = 0; i < 20; ++i) {
+    const Reply r = request(nodes[i % 3]->port(), http::verb::post, small_job(i), cornell(), kGltf);
+    ASSERT_EQ(r.status, 202) << r.body;
+    ids.push_back(r.js()["id"]);
+  }
+  // Kill node 0 while all three are busy (the queue is still long).
+  for (int i = 0; i < 200 && sql_int("SELECT count(*) FROM jobs WHERE state = 'succeeded'") < 3; ++i)
+    std::this_thread::sleep_for(20ms);
+  ASSERT_GE(sql_int("SELECT count(*) FROM jobs WHERE state = 'queued'"), 3);
+  nodes[0]->stop(SIGKILL);
+  for (const auto& id : ids) {
+    const json j = wait_finished(nodes[1]->port(), id, 60s);
+    EXPECT_EQ(j["state"], "succeeded") << j.dump();
+  }
+  EXPECT_EQ(sql("SELECT count(*) FROM jobs WHERE state = 'succeeded'"), "20");
+  EXPECT_GE(sql_int("SELECT count(*) FROM jobs WHERE attempts = 2"), 1) << "no job was cut short by the kill";
+  EXPECT_EQ(sql("SELECT count(*) FROM results"), "20");
+  EXPECT_EQ(sql("SELECT count(*) FROM (SELECT job FROM events WHERE type = 'state' AND data LIKE '%succeeded%'"
+                " GROUP BY job HAVING count(*) = 1) once"),
+            "20");
+  for (const auto& id : ids) {
+    const Reply a = request(nodes[1]->port(), http::verb::get, "/v1/jobs/" + id + "/result");
+    const Reply b = request(nodes[2]->port(), http::verb::get, "/v1/jobs/" + id + "/result");
+    ASSERT_EQ(a.status, 200);
+    EXPECT_EQ(a.body.substr(0, 4), "glTF");
+    EXPECT_EQ(a.body, b.body);
+    EXPECT_EQ(sql("SELECT length(data) FROM results WHERE job = '" + id + "'"), std::to_string(a.body.size()));
+  }
+}
+
+// A node paused (SIGSTOP) for longer than its lease loses the job to another node, which finishes
+// it. When the paused node goes on (SIGCONT), mid-bake, none of its writes for the job apply: the
+// job's events, progress and result stay as the other node left them.
+TEST_F(Nodes, NodePausedPastItsLeaseHasItsLateWritesRefused) {
+  auto a = node();
+  const Reply posted = request(a->port(), http::verb::post, "/v1/jobs?convergence=0.0005&resolution=64", cornell(), kGltf);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = posted.js()["id"];
+  for (int i = 0; i < 200 && sql("SELECT state FROM jobs WHERE id = '" + id + "'") != "running"; ++i) std::this_thread::sleep_for(10ms);
+  std::this_thread::sleep_for(300ms);  // mid-bake
+  ASSERT_EQ(sql("SELECT state FROM jobs WHERE id = '" + id + "'"), "running");
+  kill(a->pid(), SIGSTOP);
+  auto b = node();
+  const json done = wait_finished(b->port(), id, 60s);
+  ASSERT_EQ(done["state"], "succeeded") << done.dump();
+  EXPECT_EQ(done["attempts"], 2);
+  const std::string before = sql("SELECT event_seq || ' ' || progress || ' ' || md5(r.data) FROM jobs j JOIN results r ON r.job = j.id"
+                                 " WHERE j.id = '" + id + "'");
+  const int events_before = sql_int("SELECT count(*) FROM events WHERE job = '" + id + "'");
+  kill(a->pid(), SIGCONT);
+  std::this_thread::sleep_for(2500ms);  // a's bake goes on, then a learns it lost the job (renewals every second)
+  EXPECT_EQ(sql("SELECT event_seq || ' ' || progress || ' ' || md5(r.data) FROM jobs j JOIN results r ON r.job = j.id"
+                " WHERE j.id = '" + id + "'"),
+            before);
+  EXPECT_EQ(sql_int("SELECT count(*) FROM events WHERE job = '" + id + "'"), events_before);
+  EXPECT_EQ(sql("SELECT state FROM jobs WHERE id = '" + id + "'"), "succeeded");
+  // a is well and takes new work.
+  EXPECT_EQ(request(a->port(), http::verb::get, "/readyz").status, 200);
+}
+
+// PostgreSQL stops mid-run and comes back: the nodes answer 503 on /readyz meanwhile, then
+// recover, and every job finishes.
+TEST_F(Nodes, DatabaseRestartMidRunLosesNoJob) {
+  std::vector<std::unique_ptr<ServerProcess>> nodes;
+  for (int i = 0; i < 3; ++i) nodes.push_back(node());
+  std::vector<std::string> ids;
+  for (int i = 0; i < 9; ++i) {
+    const Reply r = request(nodes[i % 3]->port(), http::verb::post, small_job(100 + i), cornell(), kGltf);
+    ASSERT_EQ(r.status, 202) << r.body;
+    ids.push_back(r.js()["id"]);
+  }
+  for (int i = 0; i < 200 && sql_int("SELECT count(*) FROM jobs WHERE state = 'running'") < 2; ++i) std::this_thread::sleep_for(10ms);
+  pg().stop();
+  bool unready = false;
+  for (int i = 0; i < 50 && !unready; ++i) {
+    unready = request(nodes[2]->port(), http::verb::get, "/readyz").status == 503;
+    std::this_thread::sleep_for(100ms);
+  }
+  EXPECT_TRUE(unready) << "/readyz stayed 200 while the database was down";
+  std::this_thread::sleep_for(1s);
+  ASSERT_TRUE(pg().start());
+  for (const auto& id : ids) {
+    const json j = wait_finished(nodes[0]->port(), id, 60s);
+    EXPECT_EQ(j["state"], "succeeded") << j.dump();
+  }
+  EXPECT_EQ(sql("SELECT count(*) FROM jobs WHERE state = 'succeeded'"), "9");
+  bool ready = false;
+  for (int i = 0; i < 50 && !ready; ++i) {
+    ready = true;
+    for (auto& n : nodes) ready = ready && request(n->port(), http::verb::get, "/readyz").status == 200;
+    if (!ready) std::this_thread::sleep_for(100ms);
+  }
+  EXPECT_TRUE(ready);
+}
+
+// Two nodes given the same Idempotency-Key at the same moment make one job.
+TEST_F(Nodes, SameIdempotencyKeyOnTwoNodesAtOnceMakesOneJob) {
+  auto a = node(), b = node();
+  for (int round = 0; round < 5; ++round) {
+    const std::string key = "same-" + std::to_string(round);
+    std::atomic<bool> go{false};
+    Reply ra, rb;
+    std::thread ta([&] {
+      while (!go) std::this_thread::yield();
+      ra = request(a->port(), http::verb::post, small_job(200 + round), cornell(), {{"Content-Type", "model/gltf+json"}, {"Idempotency-Key", key}});
+    });
+    std::thread tb([&] {
+      while (!go) std::this_thread::yield();
+      rb = request(b->port(), http::verb::post, small_job(200 + round), cornell(), {{"Content-Type", "model/gltf+json"}, {"Idempotency-Key", key}});
+    });
+    go = true;
+    ta.join();
+    tb.join();
+    ASSERT_TRUE(ra.status == 202 || ra.status == 200) << ra.status << " " << ra.body;
+    ASSERT_TRUE(rb.status == 202 || rb.status == 200) << rb.status << " " << rb.body;
+    EXPECT_EQ(ra.js()["id"], rb.js()["id"]);
+    EXPECT_EQ(sql("SELECT count(*) FROM jobs WHERE idempotency_key = '" + key + "'"), "1");
+  }
+  EXPECT_EQ(sql("SELECT count(*) FROM jobs"), "5");
+}
+
+// A preview asked of one node comes from the node that runs the job; a DELETE on one node stops the
+// bake on the node that runs it at once (the lease is long, so only the notification can do it);
+// a stream on the other node, resumed with Last-Event-ID, sees the owner's events up to "cancelled".
+TEST_F(Nodes, PreviewCancelAndEventStreamsWorkAcrossNodes) {
+  auto a = node(30);
+  const Reply posted = request(a->port(), http::verb::post, "/v1/jobs?convergence=0.00001&resolution=64", cornell(), kGltf);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = posted.js()["id"];
+  for (int i = 0; i < 300 && sql_int("SELECT count(*) FROM events WHERE job = '" + id + "' AND type = 'progress'") < 1; ++i)
+    std::this_thread::sleep_for(10ms);
+  auto b = node(30);  // started after the claim: a owns the job
+  std::atomic<bool> stream_done{false};
+  std::vector<std::tuple<uint64_t, std::string, std::string>> seen;
+  std::thread reader([&] {
+    seen = events(b->port(), id, 1);
+    stream_done = true;
+  });
+  std::this_thread::sleep_for(300ms);
+  // A preview of the job running on a, asked of b: a makes it after its next shot.
+  const Reply preview = request(b->port(), http::verb::get, "/v1/jobs/" + id + "/preview");
+  EXPECT_EQ(preview.status, 200) << preview.body;
+  EXPECT_EQ(preview.body.substr(0, 4), "glTF");
+  EXPECT_EQ(preview.headers.at("content-type"), "model/gltf-binary");
+  const auto t0 = std::chrono::steady_clock::now();
+  const Reply del = request(b->port(), http::verb::delete_, "/v1/jobs/" + id);
+  EXPECT_EQ(del.status, 200) << del.body;
+  // a writes "cancelled" when its bake has stopped.
+  std::string last;
+  while (std::chrono::steady_clock::now() - t0 < 5s) {
+    last = sql("SELECT data FROM events WHERE job = '" + id + "' ORDER BY seq DESC LIMIT 1");
+    if (last.find("cancelled") != std::string::npos) break;
+    std::this_thread::sleep_for(10ms);
+  }
+  const double stopped = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_NE(last.find("cancelled"), std::string::npos);
+  EXPECT_LT(stopped, 3.0) << "the owning node took " << stopped << " s to stop";
+  for (int i = 0; i < 100 && !stream_done; ++i) std::this_thread::sleep_for(50ms);
+  ASSERT_TRUE(stream_done) << "the stream on the other node did not end";
+  reader.join();
+  ASSERT_FALSE(seen.empty());
+  EXPECT_EQ(std::get<0>(seen.front()), 2u);  // resumed after event 1
+  EXPECT_NE(std::get<2>(seen.back()).find("cancelled"), std::string::npos);
+  EXPECT_EQ(std::to_string(seen.size() + 1), sql("SELECT count(*) FROM events WHERE job = '" + id + "'"));
+}
+
+TEST(NodesStart, BadStoreUriAndUnreachableDatabaseAreReportedAtStart) {
+  for (const std::string uri : {"mysql://u@h/db", "postgresql://u@127.0.0.1:1/db"}) {
+    const std::string cmd = std::string(HEMIBAKE_SERVER) + " --listen 127.0.0.1:0 --store '" + uri + "' 2>&1";
+    FILE* p = popen(cmd.c_str(), "r");
+    std::string out;
+    char buf[1024];
+    while (size_t n = fread(buf, 1, sizeof buf, p)) out.append(buf, n);
+    const int rc = pclose(p);
+    EXPECT_NE(rc, 0);
+    EXPECT_NE(out.find(uri.substr(0, 10)), std::string::npos) << out;
+    EXPECT_NE(out.find(uri[0] == 'm' ? "PostgreSQL URI" : "cannot connect"), std::string::npos) << out;
+  }
+}
+
+}  // namespace
