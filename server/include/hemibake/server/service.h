@@ -63,7 +63,7 @@ struct Response {
   /// A body too large to hold whole (a result), sent in parts instead of `body`: `parts(offset,
   /// size)` gives up to `size` bytes from `offset` (fewer only at the end), or nullopt if they
   /// can no longer be read (the connection is then closed short of `parts_size`).
-  std::function<std::optional<std::string>(uint64_t offset, size_t size)> parts;
+  std::function<std::optional<std::string>(uint64_t offset, size_t size)> parts{};
   uint64_t parts_size = 0;
 };
 
