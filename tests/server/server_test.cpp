@@ -4,6 +4,7 @@
 
 #include <boost/asio/connect.hpp>
 #include <boost/asio/ip/tcp.hpp>
+#include <boost/asio/read.hpp>
 #include <boost/asio/read_until.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
@@ -1204,11 +1205,11 @@ TEST(Server, ResultsAreStreamedFromTheStoreNotHeldWhole) {
 }
 
 // SIGKILL at random moments while clients submit and cancel jobs, over HEMIBAKE_KILL_RUNS runs on
-// one data directory (10 by default; the test labelled slow runs 100): every job whose submission
+// one data directory (4 by default; the test labelled slow runs 100): every job whose submission
 // was acknowledged is still there after the restarts and ends; no job both cancelled and
 // succeeded (by its state, its stream and its result); a cancellation acknowledged is kept.
 TEST(Server, RandomSigkillsLoseNoAcknowledgedJob) {
-  const int runs = std::getenv("HEMIBAKE_KILL_RUNS") ? std::atoi(std::getenv("HEMIBAKE_KILL_RUNS")) : 10;
+  const int runs = std::getenv("HEMIBAKE_KILL_RUNS") ? std::atoi(std::getenv("HEMIBAKE_KILL_RUNS")) : 4;
   const unsigned seed = std::random_device{}();
   std::printf("seed %u, %d runs\n", seed, runs);
   std::mt19937 rng(seed);
@@ -1229,7 +1230,7 @@ TEST(Server, RandomSigkillsLoseNoAcknowledgedJob) {
         while (!stop) {
           try {
             // Parameters that differ each time, so that no submission is a cache hit of another.
-            const double convergence = 0.05 + std::uniform_real_distribution<double>(0, 0.25)(r);
+            const double convergence = 0.2 + std::uniform_real_distribution<double>(0, 0.3)(r);
             const Reply posted = request(port, http::verb::post, "/v1/jobs?convergence=" + std::to_string(convergence), cornell(), kGltf);
             std::string id;
             if (posted.status == 202 || posted.status == 200) {
