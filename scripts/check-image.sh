@@ -10,15 +10,7 @@ cd "$(dirname "$0")/.."
 image=localhost/hemibake:check
 base=docker.io/library/debian:bookworm-slim
 work=${HEMIBAKE_IMAGE_WORK:-/tmp/hemibake-image}
-need=()
-command -v podman >/dev/null || need+=(podman)
-command -v debootstrap >/dev/null || need+=(debootstrap)
-command -v curl >/dev/null || need+=(curl)
-if ((${#need[@]})); then
-  sudo=""; [[ $(id -u) -eq 0 ]] || sudo=sudo
-  $sudo apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${need[@]}" >/dev/null
-fi
+scripts/setup.sh --container
 mkdir -p "$work"
 if [[ "${1:-}" != --no-build ]]; then
   if ! podman image exists "$base"; then
