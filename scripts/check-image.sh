@@ -22,7 +22,10 @@ if [[ "${1:-}" != --no-build ]]; then
   fi
   echo "check-image: podman build (the project is compiled inside; some minutes)" >&2
   start=$SECONDS
-  podman build --isolation=chroot --pull=never -f docker/Dockerfile -t "$image" . >"$work/build.log" 2>&1 ||
+  # A proxy's CA, where node is told of one (NODE_EXTRA_CA_CERTS), for npm inside the build.
+  ca=()
+  [[ -n "${NODE_EXTRA_CA_CERTS:-}" && -s "${NODE_EXTRA_CA_CERTS}" ]] && ca=(--volume "$NODE_EXTRA_CA_CERTS:/etc/ssl/build-ca.crt:ro")
+  podman build --isolation=chroot --pull=never "${ca[@]}" -f docker/Dockerfile -t "$image" . >"$work/build.log" 2>&1 ||
     { tail -30 "$work/build.log"; echo "check-image: podman build failed; log in $work/build.log" >&2; exit 1; }
   echo "check-image: built in $((SECONDS - start)) s" >&2
 fi
