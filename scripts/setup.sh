@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs the Debian packages hemibake needs to build and run, and with --test also those its tests
 # need; then the web page's three.js from npm (web/, at the versions in its package-lock.json), which
-# the build embeds into hemibake-server. Idempotent: when everything is present it only checks
+# the build embeds into hemibake-server (--container: what scripts/check-image.sh needs). Idempotent: when everything is present it only checks
 # (dpkg-query, file dates) and returns in well under a second.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -17,6 +17,10 @@ packages=(
 # checks run under node (a newer node already on the machine is kept).
 if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
   packages+=(nodejs npm)
+fi
+# --container: podman, debootstrap and curl, for scripts/check-image.sh.
+if [[ "${1:-}" == "--container" ]]; then
+  packages+=(podman debootstrap curl)
 fi
 if [[ "${1:-}" == "--test" ]]; then
   # Chromium for the three.js render checks and the web page's browser tests.

@@ -277,6 +277,7 @@ class Session : public std::enable_shared_from_this<Session> {
 
   void send(const Response& r) {
     service_.count_response(r.status);
+    if (r.parts) return send_parts(r);
     auto res = std::make_shared<http::response<http::string_body>>(static_cast<http::status>(r.status), 11);
     res->set(http::field::server, "hemibake");
     if (!r.content_type.empty()) res->set(http::field::content_type, r.content_type);
@@ -293,6 +294,45 @@ class Session : public std::enable_shared_from_this<Session> {
       if (ec || !self->keep_alive_) return self->close();
       self->read();
     });
+  }
+
+  // A body sent in parts (a result): the header with the whole length, then one part at a time,
+  // each read from the store when the previous one has gone out. The connection holds one part.
+  void send_parts(const Response& r) {
+    auto res = std::make_shared<http::response<http::empty_body>>(static_cast<http::status>(r.status), 11);
+    res->set(http::field::server, "hemibake");
+    if (!r.content_type.empty()) res->set(http::field::content_type, r.content_type);
+    for (const auto& [k, v] : r.headers) res->insert(k, v);
+    res->content_length(r.parts_size);
+    res->keep_alive(keep_alive_);
+    auto sr = std::make_shared<http::response_serializer<http::empty_body>>(*res);
+    stream_.expires_after(seconds(options_.idle_timeout));
+    http::async_write_header(stream_, *sr, [self = shared_from_this(), res, sr, parts = r.parts, size = r.parts_size](beast::error_code ec, size_t) {
+      if (ec) return self->close();
+      if (self->head_) return self->sent();
+      self->send_part(parts, 0, size);
+    });
+  }
+
+  static constexpr size_t kPart = 1 << 20;
+
+  void send_part(std::function<std::optional<std::string>(uint64_t, size_t)> parts, uint64_t at, uint64_t size) {
+    if (at >= size) return sent();
+    auto part = std::make_shared<std::string>();
+    if (auto p = parts(at, static_cast<size_t>(std::min<uint64_t>(kPart, size - at))); p && !p->empty()) *part = std::move(*p);
+    else return close();  // gone (expired) or unreadable: the client sees a short body, not a wrong one
+    const double transfer = options_.min_rate > 0 ? static_cast<double>(part->size()) / options_.min_rate : 0.0;
+    stream_.expires_after(seconds(options_.idle_timeout + transfer));
+    net::async_write(stream_, net::buffer(*part), [self = shared_from_this(), part, parts = std::move(parts), at, size](beast::error_code ec, size_t n) mutable {
+      if (ec) return self->close();
+      self->send_part(std::move(parts), at + n, size);
+    });
+  }
+
+  // A response has gone out: the next request, or the end of the connection.
+  void sent() {
+    if (!keep_alive_) return close();
+    read();
   }
 
   // Server-Sent Events: every event since Last-Event-ID, then new ones as they come, a heartbeat

@@ -436,6 +436,7 @@ void Service::count_response(int status) {
 void Service::worker_loop() {
   lower_thread_priority(kBackgroundNice);  // a bake never delays a request's answer
   while (running_) {
+    write_unwritten();
     std::string id, scene, params;
     if (!store_->claim(id, scene, params)) {
       // Idle: now and then, delete finished jobs past their time.
@@ -544,19 +545,39 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
 // The end of running job `id`: succeeded with `result` when it is given, else failed with `failure`.
 // The store's change is one atomic step from "running", so a DELETE that came first wins: the
 // stream is then told "cancelled" (the DELETE of a running job leaves that to the worker), and the
-// result is dropped. A result the store cannot write (a full disk) fails the job with the reason;
-// a failure is a small write, tried again for a few seconds, so that no job stays running with no
-// worker. Returns true if the job succeeded.
+// result is dropped. A result the store cannot write (a full disk) fails the job with the reason.
+// A store that is busy (another program holds its lock) is tried again for a few seconds. If the
+// end still cannot be written, the worker leaves it with write_unwritten(), which tries again
+// before each claim, and takes the next job: no worker waits on a broken store, and the job ends
+// (its stream too) once the store writes again. Returns true if the job succeeded.
 bool Service::end_job(const std::string& id, const std::string* result, std::string failure) {
+  Unwritten end{result ? std::optional<std::string>(*result) : std::nullopt, std::move(failure)};
+  for (int attempt = 0;; ++attempt) {
+    const Change c = write_end(id, end);
+    if (c.made || c.error.empty()) return c.made && end.result;
+    if (!c.busy || attempt == 2) break;
+    std::unique_lock lock(mutex_);
+    if (wake_.wait_for(lock, std::chrono::seconds(1 << attempt), [&] { return !running_.load(); })) break;
+  }
+  std::fprintf(stderr, "hemibake-server: the end of job %s could not be stored (%s); it is stored when the store writes again\n",
+               id.c_str(), end.failure.c_str());
+  std::lock_guard lock(unwritten_mutex_);
+  unwritten_[id] = std::move(end);
+  return false;
+}
+
+// One try at writing a job's end. A result that cannot be written for any reason but a busy store
+// becomes a failure with that reason, tried at once. Events go out for what was made.
+Change Service::write_end(const std::string& id, Unwritten& end) {
   auto state_event = [](const char* state, const std::string& why) {
     json j = {{"state", state}};
     if (!why.empty()) j["error"] = why;
     return j.dump(-1, ' ', false, kReplaceInvalid);
   };
   Change c;
-  if (result) {
-    const std::string etag = "\"" + sha256_hex(*result) + "\"";
-    c = store_->succeed(id, *result, etag);
+  if (end.result) {
+    const std::string etag = "\"" + sha256_hex(*end.result) + "\"";
+    c = store_->succeed(id, *end.result, etag);
     // A shared store that cannot be reached: the result is written once it is back, not turned
     // into a failure. If that takes longer than the lease, the job has gone back to the queue and
     // the write is refused; another run then makes the same result.
@@ -564,38 +585,52 @@ bool Service::end_job(const std::string& id, const std::string* result, std::str
       std::unique_lock lock(mutex_);
       if (wake_.wait_for(lock, std::chrono::seconds(wait), [&] { return !running_.load(); })) break;
       lock.unlock();
-      c = store_->succeed(id, *result, etag);
+      c = store_->succeed(id, *end.result, etag);
     }
     if (c.made) {
       emit(id, "state", state_event("succeeded", {}));
-      return true;
+      return c;
     }
-    if (!c.error.empty()) {
-      std::fprintf(stderr, "hemibake-server: the result of %s could not be stored: %s\n", id.c_str(), c.error.c_str());
-      failure = "the result could not be stored: " + c.error;
+    // Busy, or a shared store still away: the result is kept for a later try (end_job).
+    if (c.error.empty() || c.busy || !store_->healthy()) {
+      if (c.error.empty()) note_cancelled(id);
+      return c;
     }
+    std::fprintf(stderr, "hemibake-server: the result of %s could not be stored: %s\n", id.c_str(), c.error.c_str());
+    end.failure = "the result could not be stored: " + c.error;
+    end.result.reset();
   }
-  if (!result || !c.error.empty()) {
-    for (int attempt = 0;; ++attempt) {
-      c = store_->fail(id, failure);
-      if (c.made) {
-        emit(id, "state", state_event("failed", failure));
-        return false;
-      }
-      if (c.error.empty() || attempt == 3) break;
-      std::unique_lock lock(mutex_);
-      if (wake_.wait_for(lock, std::chrono::seconds(1 << attempt), [&] { return !running_.load(); })) break;
-    }
+  c = store_->fail(id, end.failure);
+  if (c.made) emit(id, "state", state_event("failed", end.failure));
+  else if (c.error.empty()) note_cancelled(id);
+  return c;
+}
+
+// A job's end found it no longer running: a DELETE came first, and its stream is told so.
+void Service::note_cancelled(const std::string& id) {
+  if (const auto rec = store_->get(id); rec && rec->state == JobState::kCancelled)
+    emit(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
+}
+
+void Service::write_unwritten() {
+  std::map<std::string, Unwritten> ends;
+  {
+    std::lock_guard lock(unwritten_mutex_);
+    if (unwritten_.empty()) return;
+    ends.swap(unwritten_);
   }
-  if (!c.error.empty()) {
-    // Not even the failure could be written: the store has the job running, and the next start
-    // re-queues it.
-    std::fprintf(stderr, "hemibake-server: job %s could not be marked failed (%s); it runs again after a restart\n",
-                 id.c_str(), c.error.c_str());
-  } else if (const auto rec = store_->get(id); rec && rec->state == JobState::kCancelled) {
-    emit(id, "state", state_event("cancelled", {}));
+  for (auto it = ends.begin(); it != ends.end();) {
+    const Change c = write_end(it->first, it->second);
+    it = c.made || c.error.empty() ? ends.erase(it) : std::next(it);
   }
-  return false;
+  std::lock_guard lock(unwritten_mutex_);
+  ends.merge(unwritten_);
+  unwritten_.swap(ends);
+}
+
+size_t Service::unwritten() {
+  std::lock_guard lock(unwritten_mutex_);
+  return unwritten_.size();
 }
 
 protocol::LoadLimits Service::load_limits() const {
@@ -761,6 +796,7 @@ Response Service::submit(const Request& req, const std::string& query) {
   const Created created = store_->create(scene, content_type, params, cache_key, idem);
   if (created.id.empty()) {
     std::fprintf(stderr, "hemibake-server: a job could not be stored: %s\n", created.error.c_str());
+    if (created.busy) return unavailable("the job store is busy (another program holds its lock); retry in a moment", 5);
     return error(500, "the job could not be stored");
   }
   if (created.existed && created.cache_key != cache_key) return reused(created.id);  // taken meanwhile
@@ -1003,7 +1039,17 @@ Response Service::handle(const Request& request) {
   auto done = std::make_shared<std::promise<Response>>();
   auto answered = done->get_future();
   handle_async(request, [done](Response r) { done->set_value(std::move(r)); });
-  return answered.get();
+  Response r = answered.get();
+  if (r.parts) {
+    for (uint64_t at = 0; at < r.parts_size;) {
+      const auto part = r.parts(at, 1 << 20);
+      if (!part || part->empty()) break;
+      r.body += *part;
+      at += part->size();
+    }
+    r.parts = nullptr;
+  }
+  return r;
 }
 
 void Service::events_async(const std::string& id, uint64_t after, std::chrono::milliseconds wait,
@@ -1171,10 +1217,12 @@ Response Service::route(const Request& req, const std::string& path, const std::
         r.content_type.clear();
         return r;
       }
-      auto data = store_->result(id);
-      if (!data) return error(404, "the result has expired");
+      // Sent in parts read from the store as the connection takes them: a request holds one part,
+      // never the whole result (64 event streams and downloads of a 36 MB job held it each).
+      if (!store_->result_part(id, 0, 0)) return error(404, "the result has expired");
       Response r;
-      r.body = std::move(*data);
+      r.parts_size = rec->result_bytes;
+      r.parts = [store = store_.get(), id](uint64_t offset, size_t size) { return store->result_part(id, offset, size); };
       r.content_type = "model/gltf-binary";
       r.headers.emplace_back("ETag", rec->etag);
       r.headers.emplace_back("Content-Disposition", "attachment; filename=\"" + id + ".glb\"");

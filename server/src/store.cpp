@@ -6,6 +6,8 @@
 #include <sys/file.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <chrono>
 #include <cstring>
@@ -136,11 +138,14 @@ bool exec(sqlite3* db, const char* sql, std::string& error) {
   return false;
 }
 
-// SQLite in WAL mode; one connection, calls serialised by a mutex.
+// SQLite in WAL mode; one connection, calls serialised by a mutex. Parts of results are read
+// through a second, read-only connection with a mutex of its own: in WAL mode a reader never waits
+// for the writer, so a download goes on while a bake's result or a scene is written.
 class SqliteStore final : public Store {
  public:
-  SqliteStore(sqlite3* db, int lock_fd) : db_(db), lock_fd_(lock_fd) {}
+  SqliteStore(sqlite3* db, sqlite3* reader, int lock_fd) : db_(db), reader_(reader), lock_fd_(lock_fd) {}
   ~SqliteStore() override {
+    sqlite3_close(reader_);
     sqlite3_close(db_);
     ::close(lock_fd_);
   }
@@ -174,6 +179,7 @@ class SqliteStore final : public Store {
     if (!ok || !t.commit()) {
       c.error = t.error();
       c.full = t.full();
+      c.busy = t.busy();
       return c;
     }
     c.id = id;
@@ -274,7 +280,7 @@ class SqliteStore final : public Store {
                              [&](Stmt& s) { s.text(2, etag).integer(3, static_cast<int64_t>(result.size())).real(4, unix_now()); });
     if (!c.made) return c;
     Stmt d(db_, "INSERT OR REPLACE INTO results (job, data) VALUES (?, ?)");
-    if (!d.text(1, id).blob(2, result).run() || !t.commit()) return Change{false, c.from, t.error()};
+    if (!d.text(1, id).blob(2, result).run() || !t.commit()) return unmade(t, c.from);
     return c;
   }
 
@@ -283,7 +289,7 @@ class SqliteStore final : public Store {
     Transaction t(*this);
     Change c = change_locked(t, id, "state = 'failed', error = ?2, finished = ?3", "('running')",
                              [&](Stmt& s) { s.text(2, error).real(3, unix_now()); });
-    return c.made && !t.commit() ? Change{false, c.from, t.error()} : c;
+    return c.made && !t.commit() ? unmade(t, c.from) : c;
   }
 
   Change cancel(const std::string& id) override {
@@ -291,14 +297,43 @@ class SqliteStore final : public Store {
     Transaction t(*this);
     Change c = change_locked(t, id, "state = 'cancelled', finished = ?2", "('queued', 'running')",
                              [&](Stmt& s) { s.real(2, unix_now()); });
-    return c.made && !t.commit() ? Change{false, c.from, t.error()} : c;
+    return c.made && !t.commit() ? unmade(t, c.from) : c;
   }
 
   Change requeue(const std::string& id) override {
     std::lock_guard lock(mutex_);
     Transaction t(*this);
     Change c = change_locked(t, id, "state = 'queued'", "('running')", [](Stmt&) {});
-    return c.made && !t.commit() ? Change{false, c.from, t.error()} : c;
+    return c.made && !t.commit() ? unmade(t, c.from) : c;
+  }
+
+  std::optional<std::string> result_part(const std::string& id, uint64_t offset, size_t size) override {
+    std::lock_guard lock(reader_mutex_);
+    // The row and its length first (length() of a blob reads its header, not its pages); then
+    // the part through incremental blob I/O, which reads only the pages that hold it. One short
+    // read transaction per part: a slow download does not hold back the WAL's checkpoints.
+    int64_t rowid = 0, bytes = 0;
+    {
+      Stmt s(reader_, "SELECT r.rowid, length(r.data) FROM results r JOIN jobs j ON j.id = r.job"
+                      " WHERE r.job = ? AND j.state = 'succeeded'");
+      s.text(1, id);
+      if (!s.row()) return std::nullopt;
+      rowid = s.col_int(0);
+      bytes = s.col_int(1);
+    }
+    if (offset > static_cast<uint64_t>(bytes)) return std::nullopt;
+    const auto n = static_cast<int>(std::min<uint64_t>(size, static_cast<uint64_t>(bytes) - offset));
+    std::string part(static_cast<size_t>(n), '\0');
+    if (n == 0) return part;
+    sqlite3_blob* blob = nullptr;
+    if (sqlite3_blob_open(reader_, "main", "results", "data", rowid, 0, &blob) != SQLITE_OK) {
+      sqlite3_blob_close(blob);
+      return std::nullopt;
+    }
+    const bool ok = sqlite3_blob_read(blob, part.data(), n, static_cast<int>(offset)) == SQLITE_OK;
+    sqlite3_blob_close(blob);
+    if (!ok) return std::nullopt;
+    return part;
   }
 
   std::optional<std::string> result(const std::string& id) override {
@@ -364,6 +399,10 @@ class SqliteStore final : public Store {
       note();
       return full_;
     }
+    bool busy() {
+      note();
+      return busy_;
+    }
 
    private:
     void note() {
@@ -371,22 +410,27 @@ class SqliteStore final : public Store {
       if (code != SQLITE_OK && code != SQLITE_DONE && code != SQLITE_ROW) {
         error_ = sqlite3_errmsg(db_);
         full_ = full_ || code == SQLITE_FULL;
+        busy_ = code == SQLITE_BUSY || code == SQLITE_LOCKED;
       }
     }
     sqlite3* db_;
-    bool ok_ = false, committed_ = false, full_ = false;
+    bool ok_ = false, committed_ = false, full_ = false, busy_ = false;
     std::string error_;
   };
+
+  // A change that could not be written, and why.
+  static Change unmade(Transaction& t, JobState from) {
+    Change c{false, from, t.error()};
+    c.busy = t.busy();
+    return c;
+  }
 
   // Sets `set` on job `id` if its state is one of `from` (an SQL list), in transaction `t`; ?1 is
   // the id, `bind` binds the rest. The read of the state before and the update are one step.
   template <typename Bind>
   Change change_locked(Transaction& t, const std::string& id, const char* set, const char* from, Bind bind) {
     Change c;
-    if (!t.ok()) {
-      c.error = t.error();
-      return c;
-    }
+    if (!t.ok()) return unmade(t, c.from);
     Stmt q(db_, "SELECT state FROM jobs WHERE id = ?");
     q.text(1, id);
     if (!q.row()) return c;
@@ -394,10 +438,7 @@ class SqliteStore final : public Store {
     Stmt s(db_, (std::string("UPDATE jobs SET ") + set + " WHERE id = ?1 AND state IN " + from).c_str());
     s.text(1, id);
     bind(s);
-    if (!s.run()) {
-      c.error = t.error();
-      return c;
-    }
+    if (!s.run()) return unmade(t, c.from);
     c.made = sqlite3_changes(db_) > 0;
     return c;
   }
@@ -410,8 +451,10 @@ class SqliteStore final : public Store {
   }
 
   sqlite3* db_;
+  sqlite3* reader_;  ///< read-only, for parts of results
   int lock_fd_;  ///< flock'ed: one server per data directory
   std::mutex mutex_;
+  std::mutex reader_mutex_;
 };
 
 }  // namespace
@@ -437,7 +480,7 @@ std::optional<JobState> job_state_from(const std::string& s) {
   return std::nullopt;
 }
 
-std::unique_ptr<Store> Store::open(const std::string& dir, std::string& error) {
+std::unique_ptr<Store> Store::open(const std::string& dir, std::string& error, int busy_ms) {
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) {
@@ -470,7 +513,7 @@ std::unique_ptr<Store> Store::open(const std::string& dir, std::string& error) {
     return fail("cannot open " + path + ": " + (db ? sqlite3_errmsg(db) : "out of memory"));
   // WAL: readers never wait for the writer; synchronous=FULL: a committed job survives power loss.
   std::string why;
-  if (!exec(db, "PRAGMA journal_mode=WAL; PRAGMA synchronous=FULL; PRAGMA busy_timeout=10000;", why))
+  if (sqlite3_busy_timeout(db, busy_ms) != SQLITE_OK || !exec(db, "PRAGMA journal_mode=WAL; PRAGMA synchronous=FULL;", why))
     return fail("cannot set up the job store " + path + ": " + why);
   int layout = 0;
   bool layout1 = false;
@@ -489,7 +532,14 @@ std::unique_ptr<Store> Store::open(const std::string& dir, std::string& error) {
     return fail("cannot set up the job store " + path + ": " + why);
   }
   if (layout1) exec(db, "VACUUM", why);  // the old rows' space back; not needed to go on
-  return std::make_unique<SqliteStore>(db, lock_fd);
+  sqlite3* reader = nullptr;
+  if (sqlite3_open_v2(path.c_str(), &reader, SQLITE_OPEN_READONLY | SQLITE_OPEN_FULLMUTEX, nullptr) != SQLITE_OK ||
+      sqlite3_busy_timeout(reader, busy_ms) != SQLITE_OK) {
+    const std::string what = "cannot open " + path + " for reading: " + (reader ? sqlite3_errmsg(reader) : "out of memory");
+    sqlite3_close(reader);
+    return fail(what);
+  }
+  return std::make_unique<SqliteStore>(db, reader, lock_fd);
 }
 
 }  // namespace hemibake::server

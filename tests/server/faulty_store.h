@@ -77,6 +77,9 @@ class FaultyStore final : public server::Store {
     return inner_->requeue(id);
   }
   std::optional<std::string> result(const std::string& id) override { return inner_->result(id); }
+  std::optional<std::string> result_part(const std::string& id, uint64_t offset, size_t size) override {
+    return inner_->result_part(id, offset, size);
+  }
   int recover(int max_attempts) override { return inner_->recover(max_attempts); }
   int expire(double age_seconds) override { return inner_->expire(age_seconds); }
   size_t count(JobState state) override { return inner_->count(state); }

@@ -12,6 +12,7 @@
 #define STB_IMAGE_WRITE_IMPLEMENTATION
 #include <stb_image_write.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -59,7 +60,7 @@ struct Fixture {
   std::string dir;
   std::unique_ptr<Service> service;
   test::FaultyStore* store = nullptr;  // with a `fault`: the service's store
-  explicit Fixture(ServiceOptions o = {}, test::FaultyStore::Fault fault = nullptr) {
+  explicit Fixture(ServiceOptions o = {}, test::FaultyStore::Fault fault = nullptr, int busy_ms = 10000) {
     dir = (std::filesystem::temp_directory_path() / ("hemibake-handler-" + std::to_string(getpid()))).string();
     std::filesystem::remove_all(dir);
     o.data_dir = dir;
@@ -67,7 +68,7 @@ struct Fixture {
     if (on_postgres()) o.store_uri = postgres_database();
     std::string error;
     if (fault) {
-      auto real = o.store_uri.empty() ? Store::open(dir, error) : Store::open_postgres(o.store_uri, PgOptions{}, error);
+      auto real = o.store_uri.empty() ? Store::open(dir, error, busy_ms) : Store::open_postgres(o.store_uri, PgOptions{}, error);
       EXPECT_TRUE(real) << error;
       auto faulty = std::make_unique<test::FaultyStore>(std::move(real), std::move(fault));
       store = faulty.get();
@@ -530,6 +531,101 @@ TEST(Handler, ResultThatCannotBeStoredFailsTheJob) {
   const Response next = f.call("POST", "/v1/jobs?convergence=0.21", cornell(), gltf);
   ASSERT_EQ(next.status, 202) << next.body;
   EXPECT_EQ(wait_finished(f, json::parse(next.body)["id"])["state"], "succeeded");
+}
+
+// The end of a job that the store cannot write at all (neither the result nor the failure): the
+// worker does not wait for the store (the next job bakes), and the job ends, failed with the
+// reason, once the store writes again. It used to stay "running" until the server restarted.
+TEST(Handler, EndThatCannotBeWrittenIsWrittenWhenTheStoreIsBack) {
+  std::atomic<bool> broken{true};
+  std::mutex m;
+  std::string first;  // the first job to reach its end
+  Fixture f({}, [&](const std::string& write, const std::string& id) {
+    if (write != "succeed" && write != "fail") return std::string();
+    std::lock_guard lock(m);
+    if (first.empty()) first = id;
+    return broken && id == first ? std::string("disk I/O error") : std::string();
+  });
+  const std::map<std::string, std::string> gltf = {{"content-type", "model/gltf+json"}};
+  const Response a = f.call("POST", "/v1/jobs?convergence=0.2", cornell(), gltf);
+  ASSERT_EQ(a.status, 202) << a.body;
+  const std::string id = json::parse(a.body)["id"];
+  // The next job takes the only worker and succeeds while the first one's end is still unwritten.
+  const Response b = f.call("POST", "/v1/jobs?convergence=0.21", cornell(), gltf);
+  ASSERT_EQ(b.status, 202) << b.body;
+  EXPECT_EQ(wait_finished(f, json::parse(b.body)["id"])["state"], "succeeded");
+  {
+    std::lock_guard lock(m);
+    ASSERT_EQ(first, id);
+  }
+  EXPECT_EQ(json::parse(f.call("GET", "/v1/jobs/" + id).body)["state"], "running");
+  broken = false;
+  bool ended = false;
+  const auto events = read_stream(*f.service, id, std::chrono::seconds(30), &ended);
+  EXPECT_TRUE(ended) << "the stream did not end";
+  EXPECT_EQ(last_state(events), "failed");
+  const json job = json::parse(f.call("GET", "/v1/jobs/" + id).body);
+  EXPECT_EQ(job["state"], "failed");
+  EXPECT_NE(job.value("error", "").find("result could not be stored: disk I/O error"), std::string::npos) << job.dump();
+}
+
+// Another program holding the store's write lock (an operator's sqlite3 shell, a backup) past the
+// store's busy timeout: a submission gets 503 with Retry-After, and a bake that ends meanwhile is
+// written once the lock is gone, succeeded, not failed and not lost.
+TEST(Handler, StoreThatAnswersBusyFailsAndLosesNoJob) {
+  struct WriteLock {  // a second connection's open write transaction
+    sqlite3* db = nullptr;
+    bool held = false;
+    explicit WriteLock(const std::string& dir) {
+      sqlite3_open((dir + "/hemibake.db").c_str(), &db);
+      held = sqlite3_exec(db, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) == SQLITE_OK;
+    }
+    ~WriteLock() {
+      sqlite3_exec(db, "ROLLBACK", nullptr, nullptr, nullptr);
+      sqlite3_close(db);
+    }
+  };
+  std::string dir;
+  std::atomic<int> locks{0};
+  std::thread holder;
+  Fixture f({}, [&](const std::string& write, const std::string&) {
+    // At the first result's write: the lock for 3 s, far past the store's 100 ms.
+    if (write == "succeed" && locks.fetch_add(1) == 0) {
+      std::promise<bool> taken;
+      auto held = taken.get_future();
+      holder = std::thread([&dir, &taken] {
+        WriteLock lock(dir);
+        taken.set_value(lock.held);
+        std::this_thread::sleep_for(std::chrono::seconds(3));
+      });
+      EXPECT_TRUE(held.get());
+    }
+    return std::string();
+  }, 100);
+  dir = f.dir;
+  const std::map<std::string, std::string> gltf = {{"content-type", "model/gltf+json"}};
+  {
+    WriteLock lock(dir);
+    ASSERT_TRUE(lock.held);
+    const Response refused = f.call("POST", "/v1/jobs?convergence=0.2", cornell(), gltf);
+    EXPECT_EQ(refused.status, 503) << refused.body;
+    EXPECT_TRUE(std::any_of(refused.headers.begin(), refused.headers.end(), [](const auto& h) { return h.first == "Retry-After"; }));
+  }
+  const Response posted = f.call("POST", "/v1/jobs?convergence=0.2", cornell(), gltf);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = json::parse(posted.body)["id"];
+  bool ended = false;
+  const auto events = read_stream(*f.service, id, std::chrono::seconds(60), &ended);
+  holder.join();
+  EXPECT_GE(locks.load(), 2) << "the result's write met the lock and was tried again";
+  EXPECT_TRUE(ended) << "the stream did not end";
+  EXPECT_EQ(last_state(events), "succeeded");
+  const json job = json::parse(f.call("GET", "/v1/jobs/" + id).body);
+  EXPECT_EQ(job["state"], "succeeded") << job.dump();
+  EXPECT_EQ(job["attempts"], 1);
+  const Response result = f.call("GET", "/v1/jobs/" + id + "/result");
+  EXPECT_EQ(result.status, 200);
+  EXPECT_EQ(result.body.substr(0, 4), "glTF");
 }
 
 // A DELETE that lands while the result is written: one of the two wins, and the job's state, its

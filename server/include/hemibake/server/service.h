@@ -62,6 +62,11 @@ struct Response {
   std::vector<std::pair<std::string, std::string>> headers;
   std::string body;
   std::string content_type = "application/json";
+  /// A body too large to hold whole (a result), sent in parts instead of `body`: `parts(offset,
+  /// size)` gives up to `size` bytes from `offset` (fewer only at the end), or nullopt if they
+  /// can no longer be read (the connection is then closed short of `parts_size`).
+  std::function<std::optional<std::string>(uint64_t offset, size_t size)> parts{};
+  uint64_t parts_size = 0;
 };
 
 /// Takes a request's response. Called exactly once, from any thread (the caller's, a pool's, a
@@ -90,7 +95,8 @@ class Service {
   /// a preview when the job's worker makes one between two shots (no thread waits for it); the
   /// rest, which reads the store, from a small lookup pool.
   void handle_async(Request request, Reply reply);
-  /// handle_async, waited for: for tests and tools without an event loop.
+  /// handle_async, waited for: for tests and tools without an event loop. A body sent in parts
+  /// is read whole into `body`.
   Response handle(const Request& request);
   /// For event streams: the events of job `id` after sequence number `after`, read on the lookup
   /// pool and given to `reply` (which, like a Reply, must not block). If there are none yet and the
@@ -105,6 +111,9 @@ class Service {
   std::optional<Response> check_auth(const Request& request) const;
 
   Store& store() { return *store_; }
+  /// Jobs whose end (result or failure) the store could not write yet; they show "running" until
+  /// a worker writes it, or a restart queues them again.
+  size_t unwritten();
   /// Stops the workers; jobs they were running go back to the queue. Previews asked for and
   /// requests not yet begun are answered 503; requests being answered finish first.
   void stop();
@@ -120,6 +129,16 @@ class Service {
   protocol::LoadLimits load_limits() const;
   /// Ends running job `id`: succeeded with `result`, or failed with `failure` if there is none.
   bool end_job(const std::string& id, const std::string* result, std::string failure);
+  /// A job's end that the store could not write yet: its result (kept only while the store is
+  /// busy), or the failure.
+  struct Unwritten {
+    std::optional<std::string> result;
+    std::string failure;
+  };
+  Change write_end(const std::string& id, Unwritten& end);
+  void note_cancelled(const std::string& id);
+  /// Tries the ends not written yet again (a worker, before it claims a job).
+  void write_unwritten();
   /// Stores an event of job `id` and wakes the streams that wait for one.
   void emit(const std::string& id, const std::string& type, const std::string& data);
   bool final_event_written(const JobRecord& r);
@@ -180,6 +199,8 @@ class Service {
   std::condition_variable clock_wake_;  // a new deadline, or the stop
   std::thread clock_;                   // answers previews whose time is up
   std::unique_ptr<Pool> checks_;        // loads and checks submitted scenes
+  std::mutex unwritten_mutex_;
+  std::map<std::string, Unwritten> unwritten_;
   std::unique_ptr<Pool> lookups_;       // requests that read or write the store
   std::atomic<double> last_expiry_{0.0};
   // Metrics.

@@ -49,6 +49,7 @@ struct Created {
   std::string cache_key;   ///< when `existed`: that job's cache key (scene and parameters)
   std::string error;       ///< the store could not write the job (disk full, ...)
   bool full = false;       ///< ... because the disk or the store's size limit is full
+  bool busy = false;       ///< ... because another connection held the store's lock too long
 };
 
 /// What a state change did. Each change is one atomic step in the store that applies only from the
@@ -57,6 +58,8 @@ struct Change {
   bool made = false;                  ///< the job was in a state this change applies to, and now is changed
   JobState from = JobState::kQueued;  ///< when made: the state it was in before
   std::string error;                  ///< the store could not write the change (made is false)
+  bool busy = false;                  ///< ... because another connection held the store's lock too
+                                      ///< long: the same change may be made when tried again
 };
 
 /// What a shared store tells the service about changes made by other nodes. Called from the store's
@@ -83,8 +86,10 @@ class Store {
  public:
   /// The embedded store: opens (creating) `dir`/hemibake.db and holds an exclusive lock on
   /// `dir`/hemibake.lock while it lives. A database of an older layout is converted. Returns null and
-  /// sets `error` on failure, also when another process holds the lock.
-  static std::unique_ptr<Store> open(const std::string& dir, std::string& error);
+  /// sets `error` on failure, also when another process holds the lock. A write waits up to
+  /// `busy_ms` for another connection's lock (a backup, an operator's sqlite3 shell), then fails
+  /// with `busy` set.
+  static std::unique_ptr<Store> open(const std::string& dir, std::string& error, int busy_ms = 10000);
   /// The shared store: PostgreSQL at `uri` (a libpq URI, postgresql://USER@HOST:PORT/DB), for any
   /// number of nodes. Creates or migrates the schema. Returns null and sets `error` if the URI is bad,
   /// the server cannot be reached or the schema is newer than this build.
@@ -134,6 +139,15 @@ class Store {
   virtual Change requeue(const std::string& id) = 0;
   /// The result of a succeeded job.
   virtual std::optional<std::string> result(const std::string& id) = 0;
+  /// Up to `size` bytes of a succeeded job's result from byte `offset` (fewer only at its end): for
+  /// answers sent in parts, so that no request holds a whole result. nullopt if the job has no
+  /// result (any more) or it cannot be read. This default reads the whole result each time; the
+  /// embedded store reads only the part asked for.
+  virtual std::optional<std::string> result_part(const std::string& id, uint64_t offset, size_t size) {
+    auto whole = result(id);
+    if (!whole || offset > whole->size()) return std::nullopt;
+    return whole->substr(static_cast<size_t>(offset), size);
+  }
   /// At start: jobs left running by a crash are queued again, or failed after `max_attempts`.
   /// Returns how many were re-queued.
   virtual int recover(int max_attempts) = 0;
