@@ -50,12 +50,14 @@ bool whole_in(const std::string& text, uint64_t lo, uint64_t hi, uint64_t& out) 
   return true;
 }
 
-// The job parameter that --FLAG (or --no-FLAG, for a flag that defaults on) names, or null.
-const protocol::ParamInfo* param_of_flag(const std::string& opt, bool& negated) {
+// The job parameter that --FLAG names (a flag that defaults off is turned on so), or --no-FLAG
+// (a flag turned off), or null.
+const protocol::ParamInfo* param_of_flag(const std::string& opt, bool& negated, bool& set) {
   for (const auto& p : protocol::param_table()) {
-    negated = false;
-    if (opt == std::string("--") + p.flag && p.kind != protocol::ParamInfo::Kind::kFlag) return &p;
-    if (p.kind == protocol::ParamInfo::Kind::kFlag && opt == std::string("--no-") + p.flag) return negated = true, &p;
+    negated = set = false;
+    const bool flag = p.kind == protocol::ParamInfo::Kind::kFlag;
+    if (opt == std::string("--") + p.flag) return set = flag, &p;
+    if (flag && opt == std::string("--no-") + p.flag) return negated = true, &p;
   }
   return nullptr;
 }
@@ -127,9 +129,10 @@ std::string parse_command_line(std::span<const std::string> args, CommandLine& o
       continue;
     }
     bool negated = false;
-    const protocol::ParamInfo* param = param_of_flag(opt, negated);
-    if (param != nullptr && negated) {
-      values[param->name] = "false";
+    bool set = false;
+    const protocol::ParamInfo* param = param_of_flag(opt, negated, set);
+    if (param != nullptr && (negated || set)) {
+      values[param->name] = negated ? "false" : "true";
       continue;
     }
     if (opt.empty() || opt[0] != '-') {

@@ -45,7 +45,7 @@ const ParamInfo kParams[] = {
      [](const JobSpec& s) { return s.params.reuse_visibility ? 1.0 : 0.0; },
      [](JobSpec& s, double v) { s.params.reuse_visibility = v != 0.0; }},
     {"gather", "gather", Kind::kFlag, 0, 1,
-     "aa, classical: after the shots every vertex gathers the light it sees, and faces split where it is not linear (off: vertices average their elements)",
+     "aa, classical: after the shots every vertex gathers the light it sees, and faces split where it is not linear (off: vertices average their elements; see README)",
      [](const JobSpec& s) { return s.params.gather ? 1.0 : 0.0; },
      [](JobSpec& s, double v) { s.params.gather = v != 0.0; }},
     {"cluster_size", "cluster-size", Kind::kNumber, 0, kNoLimit,
@@ -258,7 +258,7 @@ std::string params_usage() {
   for (const ParamInfo& p : kParams) {
     const double v = p.get(defaults);
     std::string head = "  --";
-    if (p.kind == Kind::kFlag && v != 0.0) head += std::string("no-") + p.flag;
+    if (p.kind == Kind::kFlag) head += (v != 0.0 ? std::string("no-") : std::string()) + p.flag;
     else head += std::string(p.flag) + (p.kind == Kind::kMethod ? " M" : p.kind == Kind::kWhole ? " N" : p.kind == Kind::kColour ? " R,G,B" : " X");
     if (head.size() < 26) head.resize(26, ' ');
     else head += ' ';

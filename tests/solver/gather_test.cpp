@@ -128,7 +128,9 @@ TEST(Gather, WallOnAGlowingFloorFollowsTheFalloff) {
   add_quad(scene, {-1, 0, -1}, {1, 0, -1}, {1, 2, -1}, {-1, 2, -1}, rho, glm::dvec3(0.0), 1);
   ASSERT_EQ(validate(scene), "");
   const std::vector<glm::dvec3> floor{{-1, 0, -1}, {-1, 0, 1}, {1, 0, 1}, {1, 0, -1}};
-  Solver solver(scene, Params{});
+  Params params;
+  params.gather = true;
+  Solver solver(scene, params);
   ASSERT_TRUE(solver.run().converged);
   const Mesh mesh = solver.mesh();
   double worst = 0.0;
@@ -174,7 +176,9 @@ TEST(Gather, FloorUnderABoxStaysDark) {
   add_quad(scene, {-a, 0, -a}, {-a, 0, a}, {-a, h, a}, {-a, h, -a}, rho, glm::dvec3(0.0), 0); // -x
   add_quad(scene, {-0.5, 2, -0.5}, {0.5, 2, -0.5}, {0.5, 2, 0.5}, {-0.5, 2, 0.5}, glm::dvec3(0.0), e, 1);
   ASSERT_EQ(validate(scene), "");
-  Solver solver(scene, Params{});
+  Params params;
+  params.gather = true;
+  Solver solver(scene, params);
   ASSERT_TRUE(solver.run().converged);
   const Mesh mesh = solver.mesh();
   double inside = 0.0, outside = 0.0;
@@ -207,7 +211,9 @@ TEST(Gather, OpenFloorUnderTheSky) {
     add_quad(scene, {i, 0, 0}, {i, 0, 1}, {i + 1.0, 0, 1}, {i + 1.0, 0, 0}, rho, glm::dvec3(0.0), 0);
   scene.sky = glm::dvec3(0.2, 0.3, 0.1);
   ASSERT_EQ(validate(scene), "");
-  Solver solver(scene, Params{});
+  Params params;
+  params.gather = true;
+  Solver solver(scene, params);
   ASSERT_TRUE(solver.run().converged);
   EXPECT_GT(solver.stats().gathers, 0u);
   const Mesh mesh = solver.mesh();

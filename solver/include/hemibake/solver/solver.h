@@ -91,7 +91,7 @@ struct Params {
                                 ///< objects; false = only within a surface
   bool reuse_visibility = true; ///< children take visibility from their parent's pixels; false
                                 ///< re-projects the whole scene after every split (for comparison)
-  bool gather = true;           ///< after the shots, every vertex of the mesh gathers the radiosity of
+  bool gather = false;          ///< after the shots, every vertex of the mesh gathers the radiosity of
                                 ///< what it sees through a hemicube of the solve's method, and
                                 ///< elements split where the light gathered across them is not linear
                                 ///< (see README); false: vertices average their elements
