@@ -124,8 +124,25 @@ TEST(CommandLine, BadUsageIsNamed) {
 
 TEST(CommandLine, HelpListsEveryParameterWithItsDefault) {
   const std::string text = usage();
-  for (const auto& p : protocol::param_table()) EXPECT_NE(text.find(std::string("--") + (p.kind == protocol::ParamInfo::Kind::kFlag ? "no-" : "") + p.flag), std::string::npos) << p.flag;
+  const protocol::JobSpec defaults;
+  for (const auto& p : protocol::param_table()) {
+    // A flag is named the way it changes the default: --no-FLAG when on, --FLAG when off.
+    const bool on_flag = p.kind == protocol::ParamInfo::Kind::kFlag && p.get(defaults) != 0.0;
+    EXPECT_NE(text.find(std::string("--") + (on_flag ? "no-" : "") + p.flag + " "), std::string::npos) << p.flag;
+  }
   EXPECT_NE(text.find("(default 100)"), std::string::npos);  // the resolution's
+}
+
+// A flag that defaults off is turned on by --FLAG, one that defaults on off by --no-FLAG.
+TEST(CommandLine, FlagsTurnOnAndOff) {
+  CommandLine cl;
+  ASSERT_EQ(parse({"bake", "in.glb", "-o", "out.glb", "--gather", "--no-reuse"}, cl), "");
+  EXPECT_TRUE(cl.spec.params.gather);
+  EXPECT_FALSE(cl.spec.params.reuse_visibility);
+  CommandLine plain;
+  ASSERT_EQ(parse({"bake", "in.glb", "-o", "out.glb"}, plain), "");
+  EXPECT_FALSE(plain.spec.params.gather);
+  EXPECT_TRUE(plain.spec.params.reuse_visibility);
 }
 
 // A local bake through the library, read back by the baked-file reader: lit, finite, and the
