@@ -36,7 +36,6 @@
 #include <algorithm>
 #include <limits>
 #include <thread>
-#include <cstdlib>
 
 namespace hemibake::solver {
 
