@@ -1130,7 +1130,10 @@ void Service::wake_streams(const std::string& id) {
       it = event_waits_.erase(it);
     }
   }
-  for (auto& [job, w] : waits) {
+  // Named copies, not structured bindings: clang 14 (the sanitizer build's) cannot capture those.
+  for (auto& entry : waits) {
+    const auto& job = entry.first;
+    const auto& w = entry.second;
     auto work = [this, job, w] { read_events(job, w.after, w.until, w.reply); };
     if (!lookups_->post(std::move(work), [reply = w.reply] { reply(EventBatch{503, {}, false}); })) w.reply(EventBatch{503, {}, false});
   }
