@@ -179,43 +179,37 @@ int run_cornell(const CommandLine& o, const Console& c) {
   return render_pngs(solution.mesh, o, o.camera.value_or(cam), c) ? 0 : 1;
 }
 
-// The furnished room of the benchmarks (the paper's second scene), about `patches` patches.
-int run_room(const CommandLine& o, const Console& c) {
-  const auto scene = solver::make_furnished_room(o.patches);
-  std::fprintf(c.out, "furnished room, %zu patches, %s, resolution %u\n", scene.patches.size(), method_title(o.spec.method),
+// A built-in scene: its size, the solve, and renders from `cam` unless --camera says otherwise.
+int run_builtin(const char* title, const solver::Scene& scene, const Camera& cam, const CommandLine& o, const Console& c) {
+  std::fprintf(c.out, "%s, %zu patches, %s, resolution %u\n", title, scene.patches.size(), method_title(o.spec.method),
                o.spec.params.resolution);
   const auto solution = solve_builtin(scene, o, c);
-  Camera cam;  // inside, from a top corner, looking at the table
-  cam.position = {5.7, 2.7, 4.7};
-  cam.target = {2.6, 0.5, 1.9};
-  cam.fov_y_degrees = 60.0;
   return render_pngs(solution.mesh, o, o.camera.value_or(cam), c) ? 0 : 1;
+}
+
+Camera camera_at(const glm::dvec3& position, const glm::dvec3& target) {
+  Camera cam;
+  cam.position = position;
+  cam.target = target;
+  cam.fov_y_degrees = 60.0;
+  return cam;
+}
+
+// The furnished room of the benchmarks (the paper's second scene), about `patches` patches.
+int run_room(const CommandLine& o, const Console& c) {
+  // Inside, from a top corner, looking at the table.
+  return run_builtin("furnished room", solver::make_furnished_room(o.patches), camera_at({5.7, 2.7, 4.7}, {2.6, 0.5, 1.9}), o, c);
 }
 
 // The cluttered room of the benchmarks: furniture with legs and about 390 small boxes.
 int run_clutter(const CommandLine& o, const Console& c) {
-  const auto scene = solver::make_cluttered_room();
-  std::fprintf(c.out, "cluttered room, %zu patches, %s, resolution %u\n", scene.patches.size(), method_title(o.spec.method),
-               o.spec.params.resolution);
-  const auto solution = solve_builtin(scene, o, c);
-  Camera cam;  // inside, from a top corner, looking over the tables
-  cam.position = {7.7, 2.7, 5.7};
-  cam.target = {3.5, 0.5, 2.5};
-  cam.fov_y_degrees = 60.0;
-  return render_pngs(solution.mesh, o, o.camera.value_or(cam), c) ? 0 : 1;
+  // Inside, from a top corner, looking over the tables.
+  return run_builtin("cluttered room", solver::make_cluttered_room(), camera_at({7.7, 2.7, 5.7}, {3.5, 0.5, 2.5}), o, c);
 }
 
 // Many small emitters: lava spheres lighting a floor and 36 objects.
 int run_lava(const CommandLine& o, const Console& c) {
-  const auto scene = solver::make_lava_field();
-  std::fprintf(c.out, "lava field, %zu patches, %s, resolution %u\n", scene.patches.size(), method_title(o.spec.method),
-               o.spec.params.resolution);
-  const auto solution = solve_builtin(scene, o, c);
-  Camera cam;
-  cam.position = {12.0, 8.0, 12.0};
-  cam.target = {0.0, 0.0, 0.0};
-  cam.fov_y_degrees = 60.0;
-  return render_pngs(solution.mesh, o, o.camera.value_or(cam), c) ? 0 : 1;
+  return run_builtin("lava field", solver::make_lava_field(), camera_at({12.0, 8.0, 12.0}, {0.0, 0.0, 0.0}), o, c);
 }
 
 int run_render(const CommandLine& o, const Console& c) {
