@@ -1,6 +1,6 @@
-// The one translation unit that compiles tinygltf (with Draco decoding) and stb_image.
+// The one translation unit that compiles tinygltf and stb_image. Draco is decoded by the
+// project's own code after tinygltf has parsed the file (gltf_parse.cpp).
 #define TINYGLTF_IMPLEMENTATION
-#define TINYGLTF_ENABLE_DRACO
 #define STB_IMAGE_IMPLEMENTATION
 #define STB_IMAGE_WRITE_IMPLEMENTATION
 #include <tiny_gltf.h>

@@ -4,6 +4,8 @@
 // below can pass vacuously. The byte layout of GLB follows the glTF 2.0 specification, section 4.4.
 #include "gltf_builder.h"
 
+#include "document.h"
+
 #include "hemibake/protocol/bake.h"
 #include "hemibake/protocol/gltf.h"
 #include "hemibake/solver/solver.h"
@@ -929,6 +931,55 @@ TEST(GltfMalformedDraco, DracoAttributeAccessorOutOfRangeIsRefused) {
   }));
   record(r);
   EXPECT_TRUE(refused(r, {"accessor"}));
+}
+
+// Every input a fuzz target crashed on (tests/fuzz/crashes) loads or is refused cleanly. The
+// sanitizer build runs this too: there, undefined behaviour ends the test.
+// gltf-draco-normalized-not-bool.glb: an attribute whose bitstream "normalized" byte is 57, which
+// Draco stores unchecked in a bool that every conversion then read (undefined behaviour).
+TEST(GltfFuzzCrashes, EachLoadsOrIsRefusedCleanly) {
+  int files = 0;
+  for (const auto& entry : fs::directory_iterator(HEMIBAKE_SOURCE_DIR "/tests/fuzz/crashes")) {
+    const std::string ext = entry.path().extension().string();
+    if (ext != ".glb" && ext != ".gltf") continue;
+    SCOPED_TRACE(entry.path().filename().string());
+    std::ifstream in(entry.path(), std::ios::binary);
+    const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    ASSERT_FALSE(bytes.empty());
+    const LoadResult r = load(bytes);
+    if (r.document) {
+      EXPECT_TRUE(loaded(r));
+    } else {
+      EXPECT_FALSE(r.error.empty());
+    }
+    ++files;
+  }
+  EXPECT_GE(files, 1);
+}
+
+// The accessor, not the bitstream, says whether a Draco attribute's integers are normalized:
+// the writer's COLOR_0 is 16-bit normalized, so every decoded colour lies in 0..1.
+TEST(GltfMalformedDraco, DracoIntegerAttributeReadsAsItsAccessorSays) {
+  const std::vector<uint8_t> glb = draco_quad_glb();
+  const LoadResult r = load(glb);
+  ASSERT_TRUE(loaded(r));
+  const auto& m = r.document->model;
+  const auto& prim = m.meshes.at(0).primitives.at(0);
+  ASSERT_TRUE(prim.attributes.count("COLOR_0"));
+  const auto& a = m.accessors.at(static_cast<size_t>(prim.attributes.at("COLOR_0")));
+  ASSERT_EQ(a.componentType, 5126);
+  const auto& view = m.bufferViews.at(static_cast<size_t>(a.bufferView));
+  const auto& data = m.buffers.at(static_cast<size_t>(view.buffer)).data;
+  ASSERT_GE(data.size(), view.byteOffset + a.byteOffset + a.count * 3 * sizeof(float));
+  float brightest = 0;
+  for (size_t i = 0; i < a.count * 3; ++i) {
+    float v;
+    std::memcpy(&v, data.data() + view.byteOffset + a.byteOffset + i * sizeof(float), sizeof v);
+    EXPECT_GE(v, 0.0f);
+    EXPECT_LE(v, 1.0f);
+    brightest = std::max(brightest, v);
+  }
+  EXPECT_GT(brightest, 0.0f) << "the lit quad's colours are not all black";
 }
 
 // ---------------------------------------------------------------------------------------------
