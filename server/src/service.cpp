@@ -726,7 +726,6 @@ Response Service::submit(const Request& req, const std::string& query) {
     scene = s->second.second;
     content_type = s->second.first;
     if (const auto p = parts.find("params"); p != parts.end()) {
-      protocol::JobSpec from_json;
       const json j = json::parse(p->second.second, nullptr, false);
       if (j.is_discarded() || !j.is_object()) return error(400, "the 'params' part must be a JSON object");
       for (const auto& [k, v] : j.items())

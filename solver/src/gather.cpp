@@ -160,11 +160,11 @@ void Solver::Impl::start_gather() {
   std::vector<double> largest(vpos.size(), 0.0);
   for (uint32_t e : leaves)
     for (uint32_t k = 0; k < corner_count(e); ++k) largest[e_corner[e][k]] = std::max(largest[e_corner[e][k]], e_area[e]);
-  std::vector<uint32_t> order;
+  std::vector<uint32_t> by_size;
   for (uint32_t v = 0; v < vpos.size(); ++v)
-    if (v_area[v] > 0.0) order.push_back(v);
-  std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return largest[a] > largest[b]; });
-  for (uint32_t v : order) gather_pending.push_back({GatherPoint::Kind::kVertex, v, 0, vpos[v], v_normal[v], v_inward[v]});
+    if (v_area[v] > 0.0) by_size.push_back(v);
+  std::stable_sort(by_size.begin(), by_size.end(), [&](uint32_t a, uint32_t b) { return largest[a] > largest[b]; });
+  for (uint32_t v : by_size) gather_pending.push_back({GatherPoint::Kind::kVertex, v, 0, vpos[v], v_normal[v], v_inward[v]});
   gather_budget = static_cast<uint64_t>(kGatherBudget * static_cast<double>(stats.elements_projected));
 }
 
