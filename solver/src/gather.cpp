@@ -113,13 +113,18 @@ bool Solver::Impl::gather_step() {
 void Solver::Impl::start_gather() {
   gather_started = true;
   // Children come after their parents: a backward sweep meets every node after its children.
+  e_hidden.assign(e_patch.size(), 0);
   for (size_t i = e_patch.size(); i-- > 0;) {
     if (e_child[i] == kNone) {
       // A leaf covered by a surface just in front of it shows its light to no gather (kCoverGap).
-      e_mean[i] = leaf_covered(static_cast<uint32_t>(i)) ? glm::dvec3(0.0) : e_b[i];
+      const bool cov = leaf_covered(static_cast<uint32_t>(i));
+      e_mean[i] = cov ? glm::dvec3(0.0) : e_b[i];
       e_low[i] = e_high[i] = mean(e_mean[i]);
+      e_hidden[i] = cov ? 1 : 0;
       continue;
     }
+    e_hidden[i] = 1;
+    for (uint32_t k = 0; k < 4; ++k) e_hidden[i] &= e_hidden[e_child[i] + k];
     glm::dvec3 sum(0.0);
     double a = 0.0;
     e_low[i] = std::numeric_limits<double>::max();
@@ -216,6 +221,7 @@ void Solver::Impl::gather_round() {
   std::vector<uint32_t> next;
   for (uint32_t e : gather_queue) {
     if (e_area[e] < min_split_area() || leaves.size() + 3 * (1 + next.size() / 4) > params.max_elements) continue;
+    if (e_hidden[e]) continue;  // covered: seen by no one
     const uint32_t nc = corner_count(e);
     const std::array<uint32_t, 4> c = e_corner[e];
     const glm::dvec3& rho = patches[e_patch[e]].reflectance;
@@ -258,6 +264,7 @@ void Solver::Impl::gather_round() {
       v_irr[ctr] = got[4];
       v_gathered[ctr] = 1;
     }
+    e_hidden.resize(e_patch.size(), 0);
     for (uint32_t k = 0; k < 4; ++k) {
       e_mean[e_child[e] + k] = e_b[e];
       e_low[e_child[e] + k] = e_high[e_child[e] + k] = mean(e_b[e]);
@@ -313,6 +320,10 @@ glm::dvec3 Solver::Impl::gather_at(const GatherPoint& point, GatherWorker& w, ui
         while (!w.stack.empty()) {
           const uint32_t k = w.stack.back();
           w.stack.pop_back();
+          // Covered pieces lie right behind the surface that covers them (a ceiling above a lamp
+          // hung 1 mm under it): hidden from every point but through the gap, they are left out,
+          // and so is their depth, which at a grazing view competed pixel by pixel with the lamp's.
+          if (e_hidden[k]) continue;
           if (e_child[k] == kNone ||
               (2.0 * e_radius[k] < kGatherAngle * (glm::distance(x, e_centre[k]) - e_radius[k]) &&
                e_high[k] <= kGatherUneven * e_low[k] + gather_tolerance)) {

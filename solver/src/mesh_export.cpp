@@ -4,10 +4,63 @@
 
 #include <algorithm>
 #include <functional>
+#include <limits>
 #include <unordered_map>
 #include <unordered_set>
 
 namespace hemibake::solver {
+
+// A vertex covered by a surface resting on its own or hung just in front of it (covered, facing
+// either way: the floor under a block, the ceiling above a lamp 1 mm under it) is seen by no one,
+// yet the elements around it interpolate its value into what is seen: the ceiling above a one-sided
+// lamp is dark, and an element reaching from it past the lamp's outline showed a dark band 10 to
+// 30 cm wide beside the lamp (above a double-sided lamp, a bright halo). So does a vertex on the
+// outline of what covers it (on the loop of a covered element): the covered side's light shows only
+// through the gap. Such a vertex shows the mean of the other vertices on the loops of the
+// uncovered elements around it; one with none keeps its own light. `m` holds the mesh's elements
+// (in the order of `leaves`) and loops, and the radiosity of the solver's own vertices.
+void Solver::Impl::show_uncovered_light(const std::vector<uint32_t>& sorted, Mesh& m) const {
+  const size_t n = vpos.size();
+  std::vector<uint32_t> patch(n, kNone);
+  std::vector<double> radius(n, std::numeric_limits<double>::infinity());
+  for (uint32_t e : sorted)
+    for (uint32_t k = 0; k < corner_count(e); ++k) {
+      const uint32_t v = e_corner[e][k];
+      patch[v] = e_patch[e];
+      radius[v] = std::min(radius[v], e_radius[e]);
+    }
+  std::vector<char> hidden(n, 0), leaf_hidden(sorted.size(), 0);
+  bool any = false;
+  for (size_t v = 0; v < n; ++v)
+    if (patch[v] != kNone && covered(patch[v], vpos[v], std::min(radius[v], kCoverGap * prep.diagonal), true))
+      hidden[v] = any = true;
+  for (size_t i = 0; i < sorted.size(); ++i) {
+    const uint32_t e = sorted[i];
+    if (!gap_covered(e_patch[e], e_centre[e], e_radius[e])) continue;
+    leaf_hidden[i] = 1;
+    for (uint32_t a = m.elements[i].boundary_begin; a < m.elements[i].boundary_end; ++a)
+      if (m.boundary[a] < n) hidden[m.boundary[a]] = any = true;
+  }
+  if (!any) return;
+  std::vector<glm::dvec3> sum(n, glm::dvec3(0.0));
+  std::vector<uint32_t> count(n, 0);
+  for (size_t i = 0; i < sorted.size(); ++i) {
+    if (leaf_hidden[i]) continue;
+    const Mesh::Element& el = m.elements[i];
+    for (uint32_t a = el.boundary_begin; a < el.boundary_end; ++a) {
+      const uint32_t v = m.boundary[a];
+      if (v >= n || !hidden[v]) continue;
+      for (uint32_t b = el.boundary_begin; b < el.boundary_end; ++b) {
+        const uint32_t u = m.boundary[b];
+        if (u >= n || hidden[u]) continue;
+        sum[v] += m.radiosity[u];
+        ++count[v];
+      }
+    }
+  }
+  for (size_t v = 0; v < n; ++v)
+    if (count[v] > 0) m.radiosity[v] = sum[v] / static_cast<double>(count[v]);
+}
 
 Mesh Solver::mesh(bool ambient) const {
   const Impl& s = *impl_;
@@ -98,6 +151,7 @@ Mesh Solver::mesh(bool ambient) const {
   m.radiosity.resize(m.positions.size(), glm::dvec3(0.0));
   for (size_t v = 0; v < s.vpos.size(); ++v)
     if (weight[v] > 0.0) m.radiosity[v] = acc[v] / weight[v];
+  s.show_uncovered_light(leaves, m);
   // Extra vertices were created in order, each from an earlier vertex pair.
   for (size_t i = 0; i < lerp_from.size(); ++i) {
     const auto [a, b] = lerp_from[i];

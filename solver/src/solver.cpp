@@ -82,6 +82,7 @@ Solver::Impl::Impl(const Scene& scene, const Params& p)
   lights = scene.lights;
   sky = scene.sky;
   prepare_lights();
+  split_along_emitter_outlines();
 }
 
 // Element e takes rho dB F of a shot: radiosity and unshot radiosity alike, and the unshot power of

@@ -284,8 +284,12 @@ struct Solver::Impl {
   bool absorber_close(const Piece& piece) const;
   bool uneven_piece(uint32_t element) const;
   double front_share(const Piece& piece, uint32_t e) const;
-  bool covered(uint32_t p, const glm::dvec3& x, double gap = 0.0) const;
+  bool covered(uint32_t p, const glm::dvec3& x, double gap = 0.0, bool any_facing = false,
+               bool emitters_only = false) const;
+  void split_along_emitter_outlines();
   bool gap_covered(uint32_t p, const glm::dvec3& x, double radius) const;
+  // mesh_export.cpp: covered vertices show the light of their uncovered neighbours.
+  void show_uncovered_light(const std::vector<uint32_t>& leaves, Mesh& m) const;
   bool leaf_covered(uint32_t e);
   double covered_share(std::span<const uint32_t> sources);
   static double point_piece_form_factor(const Piece& piece, const glm::dvec3& x, const glm::dvec3& n);
@@ -436,6 +440,7 @@ struct Solver::Impl {
   std::vector<glm::dvec3> e_gap;
   std::vector<int8_t> e_cov;
   double gap_share = 0.0;
+  std::vector<uint8_t> e_hidden;  // per element: all its leaves covered (leaf_covered), for the gather
   std::vector<double> e_low, e_high;  // per element: the least and greatest mean(B) of its leaves
   std::vector<glm::dvec3> v_normal, v_inward, v_irr;
   std::vector<uint8_t> v_gathered;
