@@ -160,15 +160,22 @@ ReferencePoint Reference::radiosity_at(uint32_t patch, const glm::dvec3& x0, uin
           RTCIntersectContext sctx;
           rtcInitIntersectContext(&sctx);
           RTCRay sr{};
-          sr.org_x = static_cast<float>(x.x + n.x * s.eps);
-          sr.org_y = static_cast<float>(x.y + n.y * s.eps);
-          sr.org_z = static_cast<float>(x.z + n.z * s.eps);
-          sr.dir_x = static_cast<float>(dir.x);
-          sr.dir_y = static_cast<float>(dir.y);
-          sr.dir_z = static_cast<float>(dir.z);
+          // The shadow ray runs between the two points lifted off their surfaces by eps, so that
+          // it stays in front of both planes. (Lifting only x and aiming along x -> y made the
+          // ray meet the emitter's plane eps / cos_y short of y: at grazing angles every sample was
+          // occluded by the emitter itself, and a ceiling 1 m beside a lamp facing it got none of
+          // its direct light.)
+          const glm::dvec3 from = x + n * s.eps, target = y + s.normal[em.patch] * s.eps;
+          const glm::dvec3 seg = target - from;
+          const double seg_len = glm::length(seg);
+          sr.org_x = static_cast<float>(from.x);
+          sr.org_y = static_cast<float>(from.y);
+          sr.org_z = static_cast<float>(from.z);
+          sr.dir_x = static_cast<float>(seg.x / seg_len);
+          sr.dir_y = static_cast<float>(seg.y / seg_len);
+          sr.dir_z = static_cast<float>(seg.z / seg_len);
           sr.tnear = 0.0f;
-          // Stop short of the emitter itself (the origin is lifted off the surface by eps).
-          sr.tfar = static_cast<float>(glm::length(y - (x + n * s.eps)) * (1.0 - 1e-4) - s.eps);
+          sr.tfar = static_cast<float>(seg_len * (1.0 - 1e-4));
           sr.mask = 0xffffffffu;
           rtcOccluded1(s.scene, &sctx, &sr);
           if (sr.tfar >= 0.0f) {  // not occluded

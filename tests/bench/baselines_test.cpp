@@ -1,10 +1,12 @@
 // The baselines against closed forms: the path-traced reference and hierarchical radiosity.
 #include "hemibake/baselines/hierarchical.h"
 #include "hemibake/baselines/reference.h"
+#include "hemibake/solver/hemicube.h"
 #include "hemibake/solver/scenes.h"
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 
 namespace hemibake::baselines {
@@ -41,6 +43,28 @@ TEST(Reference, DirectLightMatchesThePointFormFactor) {
   const ReferencePoint r = reference.radiosity_at(0, {0, 0, 0}, 4000, 3);
   const double expected = 0.5 * 100.0 * 0.01 / (M_PI * 100.0);
   EXPECT_NEAR(r.radiosity.x, expected, 0.01 * expected);
+}
+
+// A ceiling beside a lamp that faces it, 30 cm below: the ceiling sees the lamp at grazing angles,
+// down to 10 degrees above its plane, and B = rho * E * F(point -> lamp) with Lambert's exact form
+// factor. (The shadow rays aimed from the lifted point at the unlifted lamp met the lamp's own
+// plane short of it: 1 m outside the lamp's edge the reference found nothing, 0.5 m outside a
+// third too little.)
+TEST(Reference, DirectLightAtGrazingAnglesMatchesTheExactFormFactor) {
+  solver::Scene scene;
+  const glm::dvec3 none(0.0);
+  const double y = 2.7;
+  solver::add_quad(scene, {-2, 3, -2}, {2, 3, -2}, {2, 3, 2}, {-2, 3, 2}, glm::dvec3(0.7), none, 0);  // facing down
+  const std::array<glm::dvec3, 4> lamp = {glm::dvec3(-0.5, y, -0.5), glm::dvec3(-0.5, y, 0.5), glm::dvec3(0.5, y, 0.5),
+                                          glm::dvec3(0.5, y, -0.5)};
+  solver::add_quad(scene, lamp[0], lamp[1], lamp[2], lamp[3], none, glm::dvec3(5.0), 1);  // facing up
+  const Reference reference(scene);
+  for (double x : {-1.5, -1.0, -0.75}) {
+    const glm::dvec3 point(x, 3.0, 0.0);
+    const double expected = 0.7 * 5.0 * solver::point_polygon_form_factor(point, glm::dvec3(0.0, -1.0, 0.0), lamp);
+    const ReferencePoint r = reference.radiosity_at(0, point, 20000, 11);
+    EXPECT_NEAR(r.radiosity.x, expected, 4.0 * r.std_error.x) << "x = " << x;
+  }
 }
 
 TEST(Hierarchical, ClosedBoxConvergesToEOverOneMinusRho) {
