@@ -86,6 +86,8 @@ TEST(CommandLine, EveryParameterHasTheWiresLimits) {
       values.push_back("abc");
     } else if (p.kind == protocol::ParamInfo::Kind::kMethod) {
       values = {"aa", "classical", "hr", "reference", "ray"};
+    } else if (p.kind == protocol::ParamInfo::Kind::kQuality) {
+      values = {"draft", "default", "high", "best"};
     } else {
       continue;  // flags: --no-FLAG, checked below
     }

@@ -90,6 +90,7 @@ std::string other_value(const ParamInfo& p, const JobSpec& defaults) {
   const double v = p.get(defaults);
   switch (p.kind) {
     case ParamInfo::Kind::kMethod: return v == 0.0 ? "classical" : "aa";
+    case ParamInfo::Kind::kQuality: return v == 2.0 ? "draft" : "high";
     case ParamInfo::Kind::kFlag: return v != 0.0 ? "false" : "true";
     case ParamInfo::Kind::kWhole: return std::to_string(static_cast<uint64_t>(v == p.max ? v - 2 : v + 2));
     case ParamInfo::Kind::kNumber: return std::to_string(v == 0.0 ? 0.25 : v * 0.5);
@@ -117,6 +118,36 @@ TEST(JobParams, EveryParameterChangesTheCacheKey) {
   JobSpec c;
   c.write.color_bits = 8;
   EXPECT_NE(params_json(a), params_json(c));
+}
+
+// A quality preset sets the settings it names; a parameter given with it overrides it whichever
+// comes first; the preset is kept with the job and reads back the same.
+TEST(JobParams, QualityPresetIsOverriddenByTheParametersGivenWithIt) {
+  const JobSpec defaults;
+  JobSpec high;
+  ASSERT_EQ(apply_params({{"quality", "high"}}, high), "");
+  EXPECT_TRUE(high.params.gather);
+  EXPECT_EQ(high.params.beps, defaults.params.beps);
+  JobSpec draft;
+  ASSERT_EQ(apply_params({{"quality", "draft"}}, draft), "");
+  EXPECT_FALSE(draft.params.gather);
+  EXPECT_LT(draft.params.resolution, defaults.params.resolution);
+  EXPECT_GT(draft.params.beps, defaults.params.beps);
+  EXPECT_GT(draft.params.convergence, defaults.params.convergence);
+  // "beps" sorts before "quality" and "resolution" after it: both override the preset.
+  JobSpec mixed;
+  ASSERT_EQ(apply_params({{"beps", "0.01"}, {"quality", "draft"}, {"resolution", "80"}, {"gather", "true"}}, mixed), "");
+  EXPECT_EQ(mixed.params.beps, 0.01);
+  EXPECT_EQ(mixed.params.resolution, 80u);
+  EXPECT_TRUE(mixed.params.gather);
+  EXPECT_EQ(mixed.params.convergence, draft.params.convergence);
+  JobSpec back;
+  ASSERT_EQ(parse_params_json(params_json(mixed), back), "");
+  EXPECT_EQ(params_json(back), params_json(mixed));
+  JobSpec bad;
+  const std::string e = apply_params({{"quality", "best"}}, bad);
+  EXPECT_NE(e.find("quality"), std::string::npos) << e;
+  EXPECT_NE(e.find("draft, default or high"), std::string::npos) << e;
 }
 
 // Each parameter is accepted at both ends of its range and refused just past them, with a message

@@ -17,8 +17,16 @@
 namespace hemibake::protocol {
 
 /// What a bake is asked to do.
+/// Presets of the solver's settings that trade time for quality (see README, "Quality"): a preset
+/// is applied first, and parameters given with it override it.
+enum class Quality : uint8_t { kDraft, kDefault, kHigh };
+
+const char* to_string(Quality quality);
+std::optional<Quality> quality_from(std::string_view name);
+
 struct JobSpec {
   Method method = Method::kAntiAliased;
+  Quality quality = Quality::kDefault;  ///< the preset the settings started from
   solver::Params params;   ///< the solver's settings; params.method is not read: `method` decides
                            ///< (solver_params() gives the solver what it runs)
   WriteOptions write;      ///< the output file
@@ -33,7 +41,7 @@ solver::Params solver_params(const JobSpec& spec);
 
 /// One job parameter. Values are numbers (a method's index in Method, a flag's 0 or 1).
 struct ParamInfo {
-  enum class Kind : uint8_t { kMethod, kWhole, kNumber, kFlag, kColour };
+  enum class Kind : uint8_t { kMethod, kWhole, kNumber, kFlag, kColour, kQuality };
   const char* name;     ///< on the wire: query, form field, JSON key
   const char* flag;     ///< on the command line, without the dashes; a kFlag that defaults on is
                         ///< turned off by --no-FLAG, any other parameter takes --FLAG VALUE
