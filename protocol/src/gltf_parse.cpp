@@ -217,6 +217,13 @@ std::string expand_draco_primitive(tinygltf::Model& m, tinygltf::Primitive& prim
     tinygltf::Accessor& a = m.accessors[static_cast<size_t>(accessor->second)];
     const int n = components_of(a.type);
     if (n == 0) return what + ": the accessor of " + name + " has no valid type";
+    switch (att->data_type()) {
+      case draco::DT_INT8: case draco::DT_UINT8: case draco::DT_INT16: case draco::DT_UINT16:
+      case draco::DT_UINT32: case draco::DT_FLOAT32: break;
+      default:  // a C++ bool read from the bitstream (DT_BOOL) is undefined beyond 0 and 1
+        return what + ": the Draco attribute " + name + " is stored as " + std::to_string(static_cast<int>(att->data_type())) +
+               ", which is not one of glTF's component types";
+    }
     att->set_normalized(a.normalized);  // written, never read, before the conversion below
     std::vector<unsigned char> bytes(points * static_cast<size_t>(n) * sizeof(float));
     std::vector<float> value(static_cast<size_t>(n));
