@@ -156,6 +156,44 @@ TEST_F(Nodes, DatabaseRestartMidRunLosesNoJob) {
   EXPECT_TRUE(ready);
 }
 
+// While the database is down, a node cannot tell a job from no job: a job that exists is answered
+// 503 with Retry-After and the cause (not 404 "no such job", not an empty list), on every route
+// that reads it; once the database is back the same requests are answered as before, and a job
+// that does not exist is 404 again.
+TEST_F(Nodes, JobReadsAnswer503WhileTheDatabaseIsDownNot404) {
+  auto a = node(30);
+  const Reply posted = request(a->port(), http::verb::post, small_job(300), cornell(), kGltf);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = posted.js()["id"];
+  ASSERT_EQ(wait_finished(a->port(), id, 60s)["state"], "succeeded");
+  const std::vector<std::string> reads = {"/v1/jobs/" + id, "/v1/jobs", "/v1/jobs/" + id + "/result",
+                                          "/v1/jobs/" + id + "/events", "/v1/jobs/" + id + "/preview"};
+  pg().stop();
+  struct Restart {  // the other tests need the database, whatever happens here
+    bool up = false;
+    ~Restart() {
+      if (!up) pg().start();
+    }
+  } restart;
+  for (const auto& target : reads) {
+    const Reply r = request(a->port(), http::verb::get, target);
+    EXPECT_EQ(r.status, 503) << target << ": " << r.body;
+    EXPECT_TRUE(r.headers.count("retry-after")) << target << " has no Retry-After";
+    const std::string why = r.js().value("error", "");
+    EXPECT_NE(why.find("the job store cannot be reached"), std::string::npos) << target << ": " << r.body;
+  }
+  ASSERT_TRUE(restart.up = pg().start());
+  Reply again;
+  for (int i = 0; i < 50 && again.status != 200; ++i) {
+    if (i) std::this_thread::sleep_for(100ms);
+    again = request(a->port(), http::verb::get, "/v1/jobs/" + id);
+  }
+  EXPECT_EQ(again.status, 200) << again.body;
+  EXPECT_EQ(again.js().value("state", ""), "succeeded");
+  EXPECT_EQ(request(a->port(), http::verb::get, "/v1/jobs/" + id + "/result").status, 200);
+  EXPECT_EQ(request(a->port(), http::verb::get, "/v1/jobs/0123456789abcdef0123456789abcdef").status, 404);
+}
+
 // Two nodes given the same Idempotency-Key at the same moment make one job.
 TEST_F(Nodes, SameIdempotencyKeyOnTwoNodesAtOnceMakesOneJob) {
   auto a = node(), b = node();
