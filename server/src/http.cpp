@@ -7,6 +7,7 @@
 #include <boost/asio/strand.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
+#include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <array>
@@ -370,7 +371,10 @@ class Session : public std::enable_shared_from_this<Session> {
       keep_alive_ = true;
       return send(Response{404, {}, R"({"error":"no such job"})"});
     }
-    if (batch.status != 200) return send(Response{503, {{"Retry-After", "5"}}, R"({"error":"the server is busy; retry later"})"});
+    if (batch.status != 200) {
+      const std::string why = batch.error.empty() ? "the server is busy; retry later" : batch.error + "; retry in a moment";
+      return send(Response{503, {{"Retry-After", "5"}}, nlohmann::json{{"error", why}}.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)});
+    }
     if (streams_.fetch_add(1) >= options_.max_streams) {
       streams_.fetch_sub(1);
       Response r{503, {{"Retry-After", "5"}}, R"({"error":"too many event streams; retry later"})"};

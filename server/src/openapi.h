@@ -29,6 +29,11 @@ inline constexpr const char* kOpenApi = R"json({
     },
     "parameters": {
       "id": {"name": "id", "in": "path", "required": true, "schema": {"type": "string"}}
+    },
+    "responses": {
+      "StoreUnavailable": {"description": "The job store is busy or cannot be reached (a shared database that is down); the error names the cause. Not an answer about the job: ask again after Retry-After",
+        "headers": {"Retry-After": {"schema": {"type": "integer"}}},
+        "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Error"}}}}
     }
   },
   "security": [{"bearer": []}, {}],
@@ -54,7 +59,8 @@ inline constexpr const char* kOpenApi = R"json({
           "431": {"description": "Request line and headers larger than 8 KB", "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Error"}}}},
           "415": {"description": "Unsupported content type"},
           "422": {"description": "The scene is not a usable glTF file, its images hold more pixels than --max-image-pixels, the job would need more memory than --max-job-mb, or the Idempotency-Key was used with another scene or other parameters", "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Error"}}}},
-          "429": {"description": "Queue full", "headers": {"Retry-After": {"schema": {"type": "integer"}}}}}},
+          "429": {"description": "Queue full", "headers": {"Retry-After": {"schema": {"type": "integer"}}}},
+          "503": {"description": "Too many scenes waiting to be checked, or the job store is busy or cannot be reached (the error says which)", "headers": {"Retry-After": {"schema": {"type": "integer"}}}}}},
       "get": {
         "summary": "List jobs, newest first",
         "parameters": [
@@ -63,23 +69,26 @@ inline constexpr const char* kOpenApi = R"json({
           {"name": "after", "in": "query", "description": "Paging cursor: the last id of the previous page", "schema": {"type": "string"}}],
         "responses": {"200": {"description": "A page of jobs; 'next' links the following page",
           "content": {"application/json": {"schema": {"type": "object", "properties": {
-            "jobs": {"type": "array", "items": {"$ref": "#/components/schemas/Job"}}, "next": {"type": "string"}}}}}}}}
+            "jobs": {"type": "array", "items": {"$ref": "#/components/schemas/Job"}}, "next": {"type": "string"}}}}}},
+          "503": {"$ref": "#/components/responses/StoreUnavailable"}}}
     },
     "/v1/jobs/{id}": {
       "parameters": [{"$ref": "#/components/parameters/id"}],
       "get": {"summary": "A job's state and progress", "responses": {
         "200": {"description": "The job", "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Job"}}}},
-        "404": {"description": "No such job"}}},
-      "delete": {"summary": "Cancel a queued or running job (the worker stops within one shot)", "responses": {
+        "404": {"description": "No such job"}, "503": {"$ref": "#/components/responses/StoreUnavailable"}}},
+      "delete": {"summary": "Cancel a queued or running job (the worker stops within one shot, on whichever node runs it)", "responses": {
         "200": {"description": "Cancelled", "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Job"}}}},
-        "404": {"description": "No such job"}, "409": {"description": "Already finished"}}}
+        "404": {"description": "No such job"}, "409": {"description": "Already finished"},
+        "503": {"$ref": "#/components/responses/StoreUnavailable"}}}
     },
     "/v1/jobs/{id}/events": {
       "parameters": [{"$ref": "#/components/parameters/id"},
                      {"name": "Last-Event-ID", "in": "header", "schema": {"type": "string"}}],
       "get": {"summary": "Server-Sent Events: 'progress' and 'state' events with ids, a heartbeat comment, and a final 'state' event when the job ends",
         "responses": {"200": {"description": "An event stream", "content": {"text/event-stream": {}}},
-                      "404": {"description": "No such job"}, "503": {"description": "Too many streams"}}}
+                      "404": {"description": "No such job"},
+                      "503": {"description": "Too many streams, or the job store is busy or cannot be reached (the error says which)", "headers": {"Retry-After": {"schema": {"type": "integer"}}}}}}
     },
     "/v1/jobs/{id}/result": {
       "parameters": [{"$ref": "#/components/parameters/id"},
@@ -88,13 +97,14 @@ inline constexpr const char* kOpenApi = R"json({
         "200": {"description": "The result", "headers": {"ETag": {"schema": {"type": "string"}}},
                 "content": {"model/gltf-binary": {"schema": {"type": "string", "format": "binary"}}}},
         "304": {"description": "Not modified"}, "404": {"description": "No such job"},
-        "409": {"description": "Not finished, failed or cancelled"}}}
+        "409": {"description": "Not finished, failed or cancelled"}, "503": {"$ref": "#/components/responses/StoreUnavailable"}}}
     },
     "/v1/jobs/{id}/preview": {
       "parameters": [{"$ref": "#/components/parameters/id"}],
       "get": {"summary": "The current, unconverged state of a running job as GLB (with the ambient term), made between two shots",
         "responses": {"200": {"description": "A preview", "content": {"model/gltf-binary": {"schema": {"type": "string", "format": "binary"}}}},
-                      "404": {"description": "No such job"}, "409": {"description": "The job is not running"}}}
+                      "404": {"description": "No such job"}, "409": {"description": "The job is not running"},
+                      "503": {"$ref": "#/components/responses/StoreUnavailable"}}}
     },
     "/healthz": {"get": {"summary": "Liveness", "security": [{}], "responses": {"200": {"description": "Alive"}}}},
     "/readyz": {"get": {"summary": "Readiness", "security": [{}], "responses": {"200": {"description": "Ready"}, "503": {"description": "Not ready"}}}},

@@ -97,14 +97,41 @@ class Result {
  public:
   explicit Result(PGresult* r = nullptr) : r_(r) {}
   ~Result() { PQclear(r_); }
-  Result(Result&& o) noexcept : r_(o.r_) { o.r_ = nullptr; }
+  Result(Result&& o) noexcept : r_(o.r_), unreachable_(std::move(o.unreachable_)) { o.r_ = nullptr; }
   Result& operator=(Result&& o) noexcept {
     std::swap(r_, o.r_);
+    std::swap(unreachable_, o.unreachable_);
     return *this;
   }
   bool ok() const {
     const auto s = PQresultStatus(r_);
     return r_ && (s == PGRES_TUPLES_OK || s == PGRES_COMMAND_OK);
+  }
+  /// The statement failed because the database could not be reached (`why`: libpq's account): the
+  /// same statement may succeed once it is back.
+  void set_unreachable(const std::string& why) {
+    // libpq's first line is the cause; the lines after it are hints ("Is the server running ...").
+    unreachable_ = why.substr(0, why.find('\n'));
+    if (unreachable_.empty()) unreachable_ = "no connection to the server";
+  }
+  bool unreachable() const { return !unreachable_.empty(); }
+  /// Why it failed, for a message.
+  std::string failure() const {
+    if (unreachable()) return "the job store cannot be reached (" + unreachable_ + ")";
+    return "the job store could not answer: " + error();
+  }
+  /// Says in `why` (if given) why the statement failed, if it did. True if it did not.
+  bool answered(ReadError* why) const {
+    if (ok()) return true;
+    // A key that is not text in the database's encoding (bytes that are not UTF-8 in a request's
+    // path) names nothing that could have been stored: nothing found, not a failure.
+    if (r_ && PQresultErrorField(r_, PG_DIAG_SQLSTATE) && std::strcmp(PQresultErrorField(r_, PG_DIAG_SQLSTATE), "22021") == 0)
+      return true;
+    if (why) {
+      why->error = failure();
+      why->busy = unreachable();
+    }
+    return false;
   }
   int rows() const { return ok() ? PQntuples(r_) : 0; }
   std::string get(int row, int col) const {
@@ -117,6 +144,7 @@ class Result {
 
  private:
   PGresult* r_;
+  std::string unreachable_;
 };
 
 Result run(PGconn* c, const std::string& sql, const std::vector<Param>& params = {}, bool binary_result = false) {
@@ -229,8 +257,9 @@ class PgStore final : public Store {
                     {text(id), text(params), text(cache_key), idempotency_key.empty() ? null() : text(idempotency_key),
                      text(content_type), integer(static_cast<int64_t>(scene.size())), bytes(scene)});
     if (!r.ok()) {
-      c.error = "the job store could not write: " + r.error();
+      c.error = r.unreachable() ? r.failure() : "the job store could not write: " + r.error();
       c.full = c.error.find("No space left") != std::string::npos || c.error.find("disk full") != std::string::npos;
+      c.busy = r.unreachable();
       return c;
     }
     if (r.rows() == 1) {
@@ -260,19 +289,20 @@ class PgStore final : public Store {
     return r.get(0, 0);
   }
 
-  std::optional<JobRecord> get(const std::string& id) override {
+  std::optional<JobRecord> get(const std::string& id, ReadError* why) override {
     Result r = exec(std::string("SELECT ") + kColumns + " FROM jobs WHERE id = $1", {text(id)});
-    if (r.rows() == 0) return std::nullopt;
+    if (!r.answered(why) || r.rows() == 0) return std::nullopt;
     return read_record(r, 0);
   }
 
-  std::vector<JobRecord> list(std::optional<JobState> state, size_t limit, const std::string& after) override {
+  std::vector<JobRecord> list(std::optional<JobState> state, size_t limit, const std::string& after, ReadError* why) override {
     Result r = exec(std::string("SELECT ") + kColumns +
                         " FROM jobs WHERE ($1::text IS NULL OR state = $1)"
                         " AND ($2::text IS NULL OR (created, id) < (SELECT created, id FROM jobs WHERE id = $2))"
                         " ORDER BY created DESC, id DESC LIMIT $3",
                     {state ? text(to_string(*state)) : null(), after.empty() ? null() : text(after),
                      integer(static_cast<int64_t>(limit))});
+    r.answered(why);
     std::vector<JobRecord> out;
     for (int i = 0; i < r.rows(); ++i) out.push_back(read_record(r, i));
     return out;
@@ -329,9 +359,10 @@ class PgStore final : public Store {
     return r.rows() == 1 ? static_cast<uint64_t>(r.get_int(0, 0)) : 0;
   }
 
-  std::vector<Event> events_after(const std::string& id, uint64_t after, size_t limit) override {
+  std::vector<Event> events_after(const std::string& id, uint64_t after, size_t limit, ReadError* why) override {
     Result r = exec("SELECT seq, type, data FROM events WHERE job = $1 AND seq > $2 ORDER BY seq LIMIT $3",
                     {text(id), integer(static_cast<int64_t>(after)), integer(static_cast<int64_t>(limit))});
+    r.answered(why);
     std::vector<Event> out;
     for (int i = 0; i < r.rows(); ++i) out.push_back({static_cast<uint64_t>(r.get_int(i, 0)), r.get(i, 1), r.get(i, 2)});
     return out;
@@ -372,10 +403,10 @@ class PgStore final : public Store {
     return c;
   }
 
-  std::optional<std::string> result(const std::string& id) override {
+  std::optional<std::string> result(const std::string& id, ReadError* why) override {
     Result r = exec("SELECT r.data FROM results r JOIN jobs j ON j.id = r.job WHERE r.job = $1 AND j.state = 'succeeded'",
                     {text(id)}, true);
-    if (r.rows() == 0) return std::nullopt;
+    if (!r.answered(why) || r.rows() == 0) return std::nullopt;
     return r.get(0, 0);
   }
 
@@ -442,7 +473,8 @@ class PgStore final : public Store {
                         " SELECT (SELECT state FROM prev), (SELECT count(*) FROM u)",
                     params);
     if (!r.ok()) {
-      c.error = "the job store could not write: " + r.error();
+      c.error = r.unreachable() ? r.failure() : "the job store could not write: " + r.error();
+      c.busy = r.unreachable();
       return c;
     }
     if (r.rows() == 0 || r.get(0, 0).empty()) return c;
@@ -456,13 +488,14 @@ class PgStore final : public Store {
   // the store reports itself unhealthy and the lease thread reconnects with backoff.
   Result exec(const std::string& sql, const std::vector<Param>& params, bool binary_result = false) {
     PGconn* c = acquire();
-    if (!c) return Result();
     if (PQstatus(c) != CONNECTION_OK) {
       PQreset(c);
       if (PQstatus(c) != CONNECTION_OK) {
         healthy_ = false;
+        Result lost;
+        lost.set_unreachable(PQerrorMessage(c));
         give_back(c);
-        return Result();
+        return lost;
       }
     }
     Result r = run(c, sql, params, binary_result);
@@ -472,7 +505,10 @@ class PgStore final : public Store {
       // fence) it changes from, or inserts a key that cannot be inserted twice.
       PQreset(c);
       if (PQstatus(c) == CONNECTION_OK) r = run(c, sql, params, binary_result);
-      if (!r.ok() && PQstatus(c) != CONNECTION_OK) healthy_ = false;
+      if (!r.ok() && PQstatus(c) != CONNECTION_OK) {
+        healthy_ = false;
+        r.set_unreachable(PQerrorMessage(c));
+      }
     }
     give_back(c);
     return r;

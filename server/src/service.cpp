@@ -84,6 +84,15 @@ Response unavailable(const std::string& message, int retry_after) {
 
 Response stopping() { return unavailable("the server is stopping; retry in a moment", 5); }
 
+// A store that could not answer a read or make a write: 503 while it is busy or cannot be reached
+// (the same request may be answered in a moment), 500 for anything else; both name the cause. A
+// read that failed is never answered as if it had found nothing (404, an empty list).
+Response store_failed(const std::string& cause, bool busy) {
+  if (busy) return unavailable(cause + "; retry in a moment", 5);
+  return error(500, cause);
+}
+Response store_failed(const ReadError& why) { return store_failed(why.error, why.busy); }
+
 // How long a preview waits for the worker's next shot, and for a claimed job to be registered.
 constexpr auto kPreviewWait = std::chrono::seconds(30);
 constexpr auto kRegisterWait = std::chrono::seconds(5);
@@ -357,7 +366,7 @@ void Service::stop() {
     event_waits_.clear();
   }
   for (auto& reply : waiting) reply(stopping());
-  for (auto& reply : streams) reply(EventBatch{503, {}, false});
+  for (auto& reply : streams) reply(EventBatch{503, {}, false, {}});
   wake_.notify_all();
   clock_wake_.notify_all();
   if (clock_.joinable()) clock_.join();
@@ -555,7 +564,9 @@ bool Service::end_job(const std::string& id, const std::string* result, std::str
   for (int attempt = 0;; ++attempt) {
     const Change c = write_end(id, end);
     if (c.made || c.error.empty()) return c.made && end.result;
-    if (!c.busy || attempt == 2) break;
+    // Only a lock is waited for here: a shared store that cannot be reached (busy too) is waited
+    // for by write_end, for a result, and the end is otherwise left for write_unwritten().
+    if (!c.busy || !store_->healthy() || attempt == 2) break;
     std::unique_lock lock(mutex_);
     if (wake_.wait_for(lock, std::chrono::seconds(1 << attempt), [&] { return !running_.load(); })) break;
   }
@@ -795,7 +806,7 @@ Response Service::submit(const Request& req, const std::string& query) {
   const Created created = store_->create(scene, content_type, params, cache_key, idem);
   if (created.id.empty()) {
     std::fprintf(stderr, "hemibake-server: a job could not be stored: %s\n", created.error.c_str());
-    if (created.busy) return unavailable("the job store is busy (another program holds its lock); retry in a moment", 5);
+    if (created.busy) return store_failed(created.error, true);
     return error(500, "the job could not be stored");
   }
   if (created.existed && created.cache_key != cache_key) return reused(created.id);  // taken meanwhile
@@ -852,7 +863,9 @@ Response Service::metrics() {
 // here: the request becomes an entry that the worker completes after its next shot, or the clock
 // when the time is up.
 void Service::preview(const std::string& id, const Reply& reply) {
-  const auto state = store_->get(id);
+  ReadError why;
+  const auto state = store_->get(id, &why);
+  if (!why.error.empty()) return reply(store_failed(why));
   if (!state) return reply(error(404, "no job " + id));
   // Running on another node (a shared store): that node makes it after its next shot.
   const bool elsewhere = state->state == JobState::kRunning && !store_->runs_here(id);
@@ -1055,7 +1068,7 @@ void Service::events_async(const std::string& id, uint64_t after, std::chrono::m
                            std::function<void(EventBatch)> reply) {
   const auto until = std::chrono::steady_clock::now() + wait;
   auto work = [this, id, after, until, reply] { read_events(id, after, until, reply); };
-  if (!lookups_->post(std::move(work), [reply] { reply(EventBatch{503, {}, false}); })) reply(EventBatch{503, {}, false});
+  if (!lookups_->post(std::move(work), [reply] { reply(EventBatch{503, {}, false, {}}); })) reply(EventBatch{503, {}, false, {}});
 }
 
 // Reads the events after `after`; with none, and the job still going, waits for the next (the
@@ -1084,21 +1097,24 @@ void Service::read_events(const std::string& id, uint64_t after, std::chrono::st
     }
     EventBatch b;
     try {
-      b.events = store_->events_after(id, after, 100);
-      const auto rec = store_->get(id);
+      ReadError why;
+      b.events = store_->events_after(id, after, 100, &why);
+      const auto rec = why.error.empty() ? store_->get(id, &why) : std::nullopt;
       // Finished, and no event came between the read above and the record's: the stream ends.
-      if (!rec) b.status = 404;
+      // A store that cannot answer ends nothing: the stream asks again (503 before it began).
+      if (!why.error.empty()) b = EventBatch{503, {}, false, why.error};
+      else if (!rec) b.status = 404;
       else b.end = finished(rec->state) && b.events.empty() && store_->events_after(id, after, 1).empty() &&
                    final_event_written(*rec);
     } catch (const std::exception& e) {
       std::fprintf(stderr, "hemibake-server: reading the events of %s failed: %s\n", id.c_str(), e.what());
-      b = EventBatch{503, {}, false};
+      b = EventBatch{503, {}, false, {}};
     }
     if (b.status != 200 || !b.events.empty() || b.end || std::chrono::steady_clock::now() >= until) return reply(std::move(b));
     std::unique_lock lock(mutex_);
     if (!running_) {
       lock.unlock();
-      return reply(EventBatch{503, {}, false});
+      return reply(EventBatch{503, {}, false, {}});
     }
     // An event stored after the read above and before this lock would wake no one: read again.
     if (events_written_ != written) continue;
@@ -1134,7 +1150,7 @@ void Service::wake_streams(const std::string& id) {
     const auto& job = entry.first;
     const auto& w = entry.second;
     auto work = [this, job, w] { read_events(job, w.after, w.until, w.reply); };
-    if (!lookups_->post(std::move(work), [reply = w.reply] { reply(EventBatch{503, {}, false}); })) w.reply(EventBatch{503, {}, false});
+    if (!lookups_->post(std::move(work), [reply = w.reply] { reply(EventBatch{503, {}, false, {}}); })) w.reply(EventBatch{503, {}, false, {}});
   }
 }
 
@@ -1157,9 +1173,14 @@ Response Service::route(const Request& req, const std::string& path, const std::
       limit = static_cast<size_t>(v);
     }
     const std::string after = args.count("after") ? args.at("after") : "";
+    ReadError why;
     // An unknown cursor would read as an empty last page.
-    if (!after.empty() && !store_->get(after)) return error(400, "no job " + after + " to page after (it may have expired); list again without 'after'");
-    const auto jobs = store_->list(state, limit, after);
+    if (!after.empty() && !store_->get(after, &why)) {
+      if (!why.error.empty()) return store_failed(why);
+      return error(400, "no job " + after + " to page after (it may have expired); list again without 'after'");
+    }
+    const auto jobs = store_->list(state, limit, after, &why);
+    if (!why.error.empty()) return store_failed(why);
     json list = json::array();
     for (const auto& r : jobs) list.push_back(json::parse(job_json(r, 200).body));
     json body = {{"jobs", list}};
@@ -1175,7 +1196,9 @@ Response Service::route(const Request& req, const std::string& path, const std::
     const size_t slash = rest.find('/');
     const std::string id = rest.substr(0, slash);
     const std::string sub = slash == std::string::npos ? "" : rest.substr(slash + 1);
-    auto rec = store_->get(id);
+    ReadError why;
+    auto rec = store_->get(id, &why);
+    if (!why.error.empty()) return store_failed(why);
     if (!rec) return error(404, "no job " + id);
     if (sub.empty()) {
       if (req.method == "GET") return job_json(*rec, 200);
@@ -1186,13 +1209,10 @@ Response Service::route(const Request& req, const std::string& path, const std::
         if (finished(rec->state)) return over(rec->state);
         // One step in the store decides between this and the worker's end of the job.
         const Change c = store_->cancel(id);
-        if (!c.error.empty()) {
-          Response r = error(503, "the cancellation could not be stored; retry: " + c.error);
-          r.headers.emplace_back("Retry-After", "5");
-          return r;
-        }
+        if (!c.error.empty()) return unavailable("the cancellation could not be stored: " + c.error + "; retry in a moment", 5);
         if (!c.made) {
-          rec = store_->get(id);
+          rec = store_->get(id, &why);
+          if (!why.error.empty()) return store_failed(why);
           return rec ? over(rec->state) : error(404, "no job " + id);
         }
         {
@@ -1201,7 +1221,10 @@ Response Service::route(const Request& req, const std::string& path, const std::
         }
         // A running job's worker tells its stream, once the bake has stopped.
         if (c.from == JobState::kQueued) emit(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
-        return job_json(*store_->get(id), 200);
+        // The cancel is stored; if the job cannot be read back, the record read before it says so.
+        if (auto now = store_->get(id)) rec = std::move(now);
+        else rec->state = JobState::kCancelled;
+        return job_json(*rec, 200);
       }
       return not_allowed("GET, HEAD, DELETE");
     }
@@ -1221,7 +1244,10 @@ Response Service::route(const Request& req, const std::string& path, const std::
       }
       // Sent in parts read from the store as the connection takes them: a request holds one part,
       // never the whole result (64 event streams and downloads of a 36 MB job held it each).
-      if (!store_->result_part(id, 0, 0)) return error(404, "the result has expired");
+      if (!store_->result_part(id, 0, 0, &why)) {
+        if (!why.error.empty()) return store_failed(why);
+        return error(404, "the result has expired");
+      }
       Response r;
       r.parts_size = rec->result_bytes;
       r.parts = [store = store_.get(), id](uint64_t offset, size_t size) { return store->result_part(id, offset, size); };

@@ -45,9 +45,12 @@ class Stmt {
     sqlite3_bind_null(s_, i);
     return *this;
   }
-  bool row() { return sqlite3_step(s_) == SQLITE_ROW; }
+  bool row() { return (code_ = sqlite3_step(s_)) == SQLITE_ROW; }
   /// Runs a statement that returns no rows; true if it succeeded.
-  bool run() { return sqlite3_step(s_) == SQLITE_DONE; }
+  bool run() { return (code_ = sqlite3_step(s_)) == SQLITE_DONE; }
+  /// The last step failed (rather than found no row, or no more).
+  bool failed() const { return code_ != SQLITE_ROW && code_ != SQLITE_DONE; }
+  int code() const { return code_; }
   std::string col_text(int i) {
     const auto* p = sqlite3_column_text(s_, i);
     return p ? std::string(reinterpret_cast<const char*>(p), static_cast<size_t>(sqlite3_column_bytes(s_, i))) : std::string();
@@ -61,6 +64,7 @@ class Stmt {
 
  private:
   sqlite3_stmt* s_ = nullptr;
+  int code_ = SQLITE_OK;
 };
 
 std::string new_id() {
@@ -128,6 +132,20 @@ JobRecord read_record(Stmt& s) {
   r.finished = s.col_real(12);
   r.last_event = static_cast<uint64_t>(s.col_int(13));
   return r;
+}
+
+bool is_busy(int code) { return (code & 0xff) == SQLITE_BUSY || (code & 0xff) == SQLITE_LOCKED; }
+
+// Says in `why` (if given) why statement `s` on `db` could not be read, if it could not. True if
+// it could.
+bool read_ok(sqlite3* db, const Stmt& s, ReadError* why) {
+  if (!s.failed()) return true;
+  if (why) {
+    why->busy = is_busy(s.code());
+    why->error = why->busy ? std::string("the job store is busy (another program holds its lock: ") + sqlite3_errmsg(db) + ")"
+                           : std::string("the job store could not be read: ") + sqlite3_errmsg(db);
+  }
+  return false;
 }
 
 bool exec(sqlite3* db, const char* sql, std::string& error) {
@@ -199,15 +217,18 @@ class SqliteStore final : public Store {
     return std::nullopt;
   }
 
-  std::optional<JobRecord> get(const std::string& id) override {
+  std::optional<JobRecord> get(const std::string& id, ReadError* why) override {
     std::lock_guard lock(mutex_);
     Stmt s(db_, (std::string("SELECT ") + kColumns + " FROM jobs WHERE id = ?").c_str());
     s.text(1, id);
-    if (!s.row()) return std::nullopt;
+    if (!s.row()) {
+      read_ok(db_, s, why);
+      return std::nullopt;
+    }
     return read_record(s);
   }
 
-  std::vector<JobRecord> list(std::optional<JobState> state, size_t limit, const std::string& after) override {
+  std::vector<JobRecord> list(std::optional<JobState> state, size_t limit, const std::string& after, ReadError* why) override {
     std::lock_guard lock(mutex_);
     // Newest first; the cursor is the last id of the previous page (its creation time orders).
     std::string sql = std::string("SELECT ") + kColumns + " FROM jobs WHERE (?1 IS NULL OR state = ?1)"
@@ -222,6 +243,7 @@ class SqliteStore final : public Store {
     s.integer(3, static_cast<int64_t>(limit));
     std::vector<JobRecord> out;
     while (s.row()) out.push_back(read_record(s));
+    if (!read_ok(db_, s, why)) out.clear();
     return out;
   }
 
@@ -264,12 +286,13 @@ class SqliteStore final : public Store {
     return static_cast<uint64_t>(seq);
   }
 
-  std::vector<Event> events_after(const std::string& id, uint64_t after, size_t limit) override {
+  std::vector<Event> events_after(const std::string& id, uint64_t after, size_t limit, ReadError* why) override {
     std::lock_guard lock(mutex_);
     Stmt s(db_, "SELECT seq, type, data FROM events WHERE job = ? AND seq > ? ORDER BY seq LIMIT ?");
     s.text(1, id).integer(2, static_cast<int64_t>(after)).integer(3, static_cast<int64_t>(limit));
     std::vector<Event> out;
     while (s.row()) out.push_back({static_cast<uint64_t>(s.col_int(0)), s.col_text(1), s.col_text(2)});
+    if (!read_ok(db_, s, why)) out.clear();
     return out;
   }
 
@@ -307,7 +330,7 @@ class SqliteStore final : public Store {
     return c.made && !t.commit() ? unmade(t, c.from) : c;
   }
 
-  std::optional<std::string> result_part(const std::string& id, uint64_t offset, size_t size) override {
+  std::optional<std::string> result_part(const std::string& id, uint64_t offset, size_t size, ReadError* why) override {
     std::lock_guard lock(reader_mutex_);
     // The row and its length first (length() of a blob reads its header, not its pages); then
     // the part through incremental blob I/O, which reads only the pages that hold it. One short
@@ -317,7 +340,10 @@ class SqliteStore final : public Store {
       Stmt s(reader_, "SELECT r.rowid, length(r.data) FROM results r JOIN jobs j ON j.id = r.job"
                       " WHERE r.job = ? AND j.state = 'succeeded'");
       s.text(1, id);
-      if (!s.row()) return std::nullopt;
+      if (!s.row()) {
+        read_ok(reader_, s, why);
+        return std::nullopt;
+      }
       rowid = s.col_int(0);
       bytes = s.col_int(1);
     }
@@ -326,21 +352,25 @@ class SqliteStore final : public Store {
     std::string part(static_cast<size_t>(n), '\0');
     if (n == 0) return part;
     sqlite3_blob* blob = nullptr;
-    if (sqlite3_blob_open(reader_, "main", "results", "data", rowid, 0, &blob) != SQLITE_OK) {
-      sqlite3_blob_close(blob);
-      return std::nullopt;
+    int code = sqlite3_blob_open(reader_, "main", "results", "data", rowid, 0, &blob);
+    if (code == SQLITE_OK) code = sqlite3_blob_read(blob, part.data(), n, static_cast<int>(offset));
+    if (code != SQLITE_OK && why) {
+      why->busy = is_busy(code);
+      why->error = std::string("the job store could not read the result: ") + sqlite3_errmsg(reader_);
     }
-    const bool ok = sqlite3_blob_read(blob, part.data(), n, static_cast<int>(offset)) == SQLITE_OK;
     sqlite3_blob_close(blob);
-    if (!ok) return std::nullopt;
+    if (code != SQLITE_OK) return std::nullopt;
     return part;
   }
 
-  std::optional<std::string> result(const std::string& id) override {
+  std::optional<std::string> result(const std::string& id, ReadError* why) override {
     std::lock_guard lock(mutex_);
     Stmt s(db_, "SELECT r.data FROM results r JOIN jobs j ON j.id = r.job WHERE r.job = ? AND j.state = 'succeeded'");
     s.text(1, id);
-    if (!s.row()) return std::nullopt;
+    if (!s.row()) {
+      read_ok(db_, s, why);
+      return std::nullopt;
+    }
     return s.col_blob(0);
   }
 
@@ -393,6 +423,7 @@ class SqliteStore final : public Store {
     /// Why the last statement failed, for a message.
     std::string error() {
       note();
+      if (busy_) return "the job store is busy (another program holds its lock: " + error_ + ")";
       return error_.empty() ? "the job store could not write" : "the job store could not write: " + error_;
     }
     bool full() {
@@ -410,7 +441,7 @@ class SqliteStore final : public Store {
       if (code != SQLITE_OK && code != SQLITE_DONE && code != SQLITE_ROW) {
         error_ = sqlite3_errmsg(db_);
         full_ = full_ || code == SQLITE_FULL;
-        busy_ = code == SQLITE_BUSY || code == SQLITE_LOCKED;
+        busy_ = is_busy(code);
       }
     }
     sqlite3* db_;

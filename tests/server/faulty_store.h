@@ -17,6 +17,7 @@ using server::Created;
 using server::Event;
 using server::JobRecord;
 using server::JobState;
+using server::ReadError;
 
 class FaultyStore final : public server::Store {
  public:
@@ -39,13 +40,14 @@ class FaultyStore final : public server::Store {
     return inner_->find_idempotent(key);
   }
   std::optional<std::string> find_cached(const std::string& cache_key) override { return inner_->find_cached(cache_key); }
-  std::optional<JobRecord> get(const std::string& id) override {
+  std::optional<JobRecord> get(const std::string& id, ReadError* why = nullptr) override {
     ++reads;
-    return inner_->get(id);
+    return inner_->get(id, why);
   }
-  std::vector<JobRecord> list(std::optional<JobState> state, size_t limit, const std::string& after) override {
+  std::vector<JobRecord> list(std::optional<JobState> state, size_t limit, const std::string& after,
+                              ReadError* why = nullptr) override {
     ++reads;
-    return inner_->list(state, limit, after);
+    return inner_->list(state, limit, after, why);
   }
   bool claim(std::string& id, std::string& scene, std::string& params) override { return inner_->claim(id, scene, params); }
   bool set_progress(const std::string& id, const std::string& progress_json) override {
@@ -56,9 +58,9 @@ class FaultyStore final : public server::Store {
     if (!fault_("add_event", id).empty()) return 0;
     return inner_->add_event(id, type, data);
   }
-  std::vector<Event> events_after(const std::string& id, uint64_t after, size_t limit) override {
+  std::vector<Event> events_after(const std::string& id, uint64_t after, size_t limit, ReadError* why = nullptr) override {
     ++reads;
-    return inner_->events_after(id, after, limit);
+    return inner_->events_after(id, after, limit, why);
   }
   Change succeed(const std::string& id, const std::string& result, const std::string& etag) override {
     if (std::string e = fault_("succeed", id); !e.empty()) return Change{false, JobState::kRunning, e};
@@ -76,9 +78,9 @@ class FaultyStore final : public server::Store {
     if (std::string e = fault_("requeue", id); !e.empty()) return Change{false, JobState::kRunning, e};
     return inner_->requeue(id);
   }
-  std::optional<std::string> result(const std::string& id) override { return inner_->result(id); }
-  std::optional<std::string> result_part(const std::string& id, uint64_t offset, size_t size) override {
-    return inner_->result_part(id, offset, size);
+  std::optional<std::string> result(const std::string& id, ReadError* why = nullptr) override { return inner_->result(id, why); }
+  std::optional<std::string> result_part(const std::string& id, uint64_t offset, size_t size, ReadError* why = nullptr) override {
+    return inner_->result_part(id, offset, size, why);
   }
   int recover(int max_attempts) override { return inner_->recover(max_attempts); }
   int expire(double age_seconds) override { return inner_->expire(age_seconds); }

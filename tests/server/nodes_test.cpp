@@ -8,6 +8,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <memory>
 #include <mutex>
@@ -156,6 +157,44 @@ TEST_F(Nodes, DatabaseRestartMidRunLosesNoJob) {
   EXPECT_TRUE(ready);
 }
 
+// While the database is down, a node cannot tell a job from no job: a job that exists is answered
+// 503 with Retry-After and the cause (not 404 "no such job", not an empty list), on every route
+// that reads it; once the database is back the same requests are answered as before, and a job
+// that does not exist is 404 again.
+TEST_F(Nodes, JobReadsAnswer503WhileTheDatabaseIsDownNot404) {
+  auto a = node(30);
+  const Reply posted = request(a->port(), http::verb::post, small_job(300), cornell(), kGltf);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = posted.js()["id"];
+  ASSERT_EQ(wait_finished(a->port(), id, 60s)["state"], "succeeded");
+  const std::vector<std::string> reads = {"/v1/jobs/" + id, "/v1/jobs", "/v1/jobs/" + id + "/result",
+                                          "/v1/jobs/" + id + "/events", "/v1/jobs/" + id + "/preview"};
+  pg().stop();
+  struct Restart {  // the other tests need the database, whatever happens here
+    bool up = false;
+    ~Restart() {
+      if (!up) pg().start();
+    }
+  } restart;
+  for (const auto& target : reads) {
+    const Reply r = request(a->port(), http::verb::get, target);
+    EXPECT_EQ(r.status, 503) << target << ": " << r.body;
+    EXPECT_TRUE(r.headers.count("retry-after")) << target << " has no Retry-After";
+    const std::string why = r.js().value("error", "");
+    EXPECT_NE(why.find("the job store cannot be reached"), std::string::npos) << target << ": " << r.body;
+  }
+  ASSERT_TRUE(restart.up = pg().start());
+  Reply again;
+  for (int i = 0; i < 50 && again.status != 200; ++i) {
+    if (i) std::this_thread::sleep_for(100ms);
+    again = request(a->port(), http::verb::get, "/v1/jobs/" + id);
+  }
+  EXPECT_EQ(again.status, 200) << again.body;
+  EXPECT_EQ(again.js().value("state", ""), "succeeded");
+  EXPECT_EQ(request(a->port(), http::verb::get, "/v1/jobs/" + id + "/result").status, 200);
+  EXPECT_EQ(request(a->port(), http::verb::get, "/v1/jobs/0123456789abcdef0123456789abcdef").status, 404);
+}
+
 // Two nodes given the same Idempotency-Key at the same moment make one job.
 TEST_F(Nodes, SameIdempotencyKeyOnTwoNodesAtOnceMakesOneJob) {
   auto a = node(), b = node();
@@ -183,7 +222,7 @@ TEST_F(Nodes, SameIdempotencyKeyOnTwoNodesAtOnceMakesOneJob) {
 }
 
 // A preview asked of one node comes from the node that runs the job; a DELETE on one node stops the
-// bake on the node that runs it at once (the lease is long, so only the notification can do it);
+// bake on the node that runs it (how soon, in shots: DeleteOnAnotherNodeStopsTheBakeWithinOneShot);
 // a stream on the other node, resumed with Last-Event-ID, sees the owner's events up to "cancelled".
 TEST_F(Nodes, PreviewCancelAndEventStreamsWorkAcrossNodes) {
   auto a = node(30);
@@ -215,9 +254,7 @@ TEST_F(Nodes, PreviewCancelAndEventStreamsWorkAcrossNodes) {
     if (last.find("cancelled") != std::string::npos) break;
     std::this_thread::sleep_for(10ms);
   }
-  const double stopped = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  EXPECT_NE(last.find("cancelled"), std::string::npos);
-  EXPECT_LT(stopped, 3.0) << "the owning node took " << stopped << " s to stop";
+  EXPECT_NE(last.find("cancelled"), std::string::npos) << "the owning node did not stop within 5 s";
   for (int i = 0; i < 100 && !stream_done; ++i) std::this_thread::sleep_for(50ms);
   ASSERT_TRUE(stream_done) << "the stream on the other node did not end";
   reader.join();
@@ -225,6 +262,60 @@ TEST_F(Nodes, PreviewCancelAndEventStreamsWorkAcrossNodes) {
   EXPECT_EQ(std::get<0>(seen.front()), 2u);  // resumed after event 1
   EXPECT_NE(std::get<2>(seen.back()).find("cancelled"), std::string::npos);
   EXPECT_EQ(std::to_string(seen.size() + 1), sql("SELECT count(*) FROM events WHERE job = '" + id + "'"));
+}
+
+// The shots of a job's progress events as stored (phase "done" included), with the seconds since
+// the job started at which each was reported.
+std::vector<std::pair<int, double>> reported_shots(const std::string& events) {
+  std::vector<std::pair<int, double>> shots;
+  std::istringstream lines(events);
+  for (std::string line; std::getline(lines, line);) {
+    const json j = json::parse(line, nullptr, false);
+    if (j.is_object() && j.contains("shots")) shots.emplace_back(j["shots"].get<int>(), j["elapsed_seconds"].get<double>());
+  }
+  return shots;
+}
+
+// A DELETE on one node stops the bake on the node that runs it within one shot: the shot under way
+// when the DELETE is made may end, no other begins. The DELETE is sent as soon as the owner has
+// reported a shot (the 4th or later: past the first shots, which split elements and take long);
+// then at most one more shot may be reported (a cancelled bake reports its last count as phase
+// "done"; a shot that ends less than 0.5 s after the last report is counted by the next one).
+// Shots here take 0.3 to 3 s (a large hemicube, no replayed shots), far longer than the test takes
+// to see a report and send the DELETE, so no shot ends unseen between the two. The owner hears of
+// the cancel by its notification within milliseconds, else at its next lease renewal (every
+// second): with shots this long either may stop it in time, so this tests the stop, not which of
+// the two brought it.
+TEST_F(Nodes, DeleteOnAnotherNodeStopsTheBakeWithinOneShot) {
+  constexpr int kShotsBefore = 4;
+  auto a = node(30);
+  const Reply posted = request(a->port(), http::verb::post, "/v1/jobs?convergence=0.00001&shot_cache_mb=0&resolution=768",
+                               cornell(), kGltf);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = posted.js()["id"];
+  const std::string progress = "SELECT data FROM events WHERE job = '" + id + "' AND type = 'progress' ORDER BY seq";
+  std::vector<std::pair<int, double>> before;
+  for (int i = 0; i < 3000 && before.empty(); ++i, std::this_thread::sleep_for(10ms)) before = reported_shots(sql(progress));
+  ASSERT_FALSE(before.empty()) << "the bake reported no shot";
+  auto b = node(30);  // started after the claim: a owns the job
+  for (int i = 0; i < 6000 && before.back().first < kShotsBefore; ++i) before = reported_shots(sql(progress));
+  const int shots_before = before.back().first;
+  ASSERT_GE(shots_before, kShotsBefore) << "the bake did not get far enough: " << sql(progress);
+  const Reply del = request(b->port(), http::verb::delete_, "/v1/jobs/" + id);
+  ASSERT_EQ(del.status, 200) << del.body;
+  std::string last;
+  for (int i = 0; i < 1000 && last.find("cancelled") == std::string::npos; ++i, std::this_thread::sleep_for(20ms))
+    last = sql("SELECT data FROM events WHERE job = '" + id + "' ORDER BY seq DESC LIMIT 1");
+  ASSERT_NE(last.find("cancelled"), std::string::npos) << "the owning node did not stop and write that the job was cancelled";
+  const auto shots = reported_shots(sql(progress));
+  int most = 0;
+  for (const auto& [shot, elapsed] : shots) most = std::max(most, shot);
+  // When the DELETE changed the job, after the report it followed (database clock, which the node
+  // shares here).
+  const double late = std::stod(sql("SELECT finished - started FROM jobs WHERE id = '" + id + "'")) - before.back().second;
+  EXPECT_LE(most, shots_before + 1) << "the owning node went on for " << most - shots_before << " shots after a DELETE made "
+                                    << late << " s after its report of shot " << shots_before << ": " << sql(progress);
+  EXPECT_EQ(sql("SELECT state FROM jobs WHERE id = '" + id + "'"), "cancelled");
 }
 
 TEST(NodesStart, BadStoreUriAndUnreachableDatabaseAreReportedAtStart) {

@@ -194,9 +194,74 @@ TEST_P(StoreTest, ExpireDeletesOnlyOldFinishedJobs) {
   EXPECT_TRUE(store_->get(queued.id));
 }
 
+// Reads that find nothing (no such job, no events, no result yet) say nothing went wrong: only a
+// read the store could not answer sets ReadError. An id that is not UTF-8 (from a request's path)
+// names no job either.
+TEST_P(StoreTest, ReadsThatFindNothingAreNotFailures) {
+  const Created c = store_->create("s", "t", "{}", "k", "");
+  ReadError why;
+  EXPECT_FALSE(store_->get("nosuchjob", &why));
+  EXPECT_FALSE(store_->get("\xff\xfe", &why));
+  EXPECT_TRUE(store_->events_after("\xff\xfe", 0, 10, &why).empty());
+  EXPECT_TRUE(store_->events_after(c.id, 0, 10, &why).empty());
+  EXPECT_TRUE(store_->list(JobState::kFailed, 10, "", &why).empty());
+  EXPECT_FALSE(store_->result(c.id, &why));
+  EXPECT_FALSE(store_->result_part(c.id, 0, 10, &why));
+  EXPECT_TRUE(store_->get(c.id, &why));
+  EXPECT_EQ(why.error, "");
+  EXPECT_FALSE(why.busy);
+}
+
 // The shared store alone.
 class PgStoreTest : public StoreTest {};
 INSTANTIATE_TEST_SUITE_P(Shared, PgStoreTest, ::testing::Values("postgresql"), [](const auto& p) { return p.param; });
+
+// While the database is down, reads give nothing and say why (it cannot be reached; the same read
+// may be answered later), and writes fail the same way; once it is back, the same reads find the
+// job, its events and its result.
+TEST_P(PgStoreTest, ReadsAndWritesWhileTheDatabaseIsDownSayItCannotBeReached) {
+  const Created c = store_->create("s", "t", "{}", "k", "");
+  std::string id, scene, params;
+  ASSERT_TRUE(store_->claim(id, scene, params));
+  ASSERT_EQ(store_->add_event(id, "state", "{}"), 1u);
+  ASSERT_TRUE(store_->succeed(id, "result", "\"e\"").made);
+  pg().stop();
+  struct Restart {  // the other tests need the database, whatever happens here
+    bool up = false;
+    ~Restart() {
+      if (!up) pg().start();
+    }
+  } restart;
+  auto unreachable = [](const ReadError& why) {
+    return why.busy && why.error.find("the job store cannot be reached") != std::string::npos;
+  };
+  ReadError get, list, events, result, part;
+  EXPECT_FALSE(store_->get(id, &get));
+  EXPECT_TRUE(unreachable(get)) << get.error;
+  EXPECT_TRUE(store_->list(std::nullopt, 10, "", &list).empty());
+  EXPECT_TRUE(unreachable(list)) << list.error;
+  EXPECT_TRUE(store_->events_after(id, 0, 10, &events).empty());
+  EXPECT_TRUE(unreachable(events)) << events.error;
+  EXPECT_FALSE(store_->result(id, &result));
+  EXPECT_TRUE(unreachable(result)) << result.error;
+  EXPECT_FALSE(store_->result_part(id, 0, 3, &part));
+  EXPECT_TRUE(unreachable(part)) << part.error;
+  const Created refused = store_->create("s", "t", "{}", "k2", "");
+  EXPECT_TRUE(refused.id.empty());
+  EXPECT_TRUE(refused.busy) << refused.error;
+  const Change cancel = store_->cancel(c.id);
+  EXPECT_FALSE(cancel.made);
+  EXPECT_TRUE(cancel.busy) << cancel.error;
+  ASSERT_TRUE(restart.up = pg().start());
+  ReadError why;
+  const auto rec = store_->get(id, &why);
+  ASSERT_TRUE(rec) << why.error;
+  EXPECT_EQ(rec->state, JobState::kSucceeded);
+  EXPECT_EQ(store_->events_after(id, 0, 10, &why).size(), 1u);
+  EXPECT_EQ(store_->result_part(id, 0, 3, &why), std::string("res"));
+  EXPECT_EQ(store_->list(std::nullopt, 10, "", &why).size(), 1u);
+  EXPECT_EQ(why.error, "");
+}
 
 // Three nodes claim 60 jobs from six threads at once: each job is claimed exactly once.
 TEST_P(PgStoreTest, ClaimsOfSeveralNodesNeverOverlap) {

@@ -75,9 +75,11 @@ using Reply = std::function<void(Response)>;
 
 /// The next part of an event stream.
 struct EventBatch {
-  int status = 200;           ///< 404: no such job; 503: the server is busy or stopping (ask again)
+  int status = 200;           ///< 404: no such job; 503: the server is busy or stopping, or the store
+                              ///< could not be read (ask again)
   std::vector<Event> events;  ///< after the sequence number asked for, oldest first, at most 100
   bool end = false;           ///< the job has finished and no event follows these
+  std::string error;          ///< with 503, when the store could not be read: the cause
 };
 
 class Service {

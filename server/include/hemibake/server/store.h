@@ -49,7 +49,16 @@ struct Created {
   std::string cache_key;   ///< when `existed`: that job's cache key (scene and parameters)
   std::string error;       ///< the store could not write the job (disk full, ...)
   bool full = false;       ///< ... because the disk or the store's size limit is full
-  bool busy = false;       ///< ... because another connection held the store's lock too long
+  bool busy = false;       ///< ... because another connection held the store's lock too long, or the
+                           ///< store could not be reached: the same write may be made when tried again
+};
+
+/// Why a read gave nothing: set when the store could not answer it, as opposed to having nothing
+/// to give (no such job, no events yet). The reads take one where a caller must tell the two apart.
+struct ReadError {
+  std::string error;  ///< empty: the read was answered; else the cause, for a message
+  bool busy = false;  ///< another connection held the store's lock too long, or the store could not
+                      ///< be reached: the same read may be answered when tried again
 };
 
 /// What a state change did. Each change is one atomic step in the store that applies only from the
@@ -59,7 +68,8 @@ struct Change {
   JobState from = JobState::kQueued;  ///< when made: the state it was in before
   std::string error;                  ///< the store could not write the change (made is false)
   bool busy = false;                  ///< ... because another connection held the store's lock too
-                                      ///< long: the same change may be made when tried again
+                                      ///< long, or the store could not be reached: the same change
+                                      ///< may be made when tried again
 };
 
 /// What a shared store tells the service about changes made by other nodes. Called from the store's
@@ -119,16 +129,19 @@ class Store {
   virtual std::optional<std::pair<std::string, std::string>> find_idempotent(const std::string& idempotency_key) = 0;
   /// The newest succeeded job with this cache key, if any.
   virtual std::optional<std::string> find_cached(const std::string& cache_key) = 0;
-  virtual std::optional<JobRecord> get(const std::string& id) = 0;
+  /// Reads that give nothing (nullopt, an empty list) when the store cannot answer them say why in
+  /// `why` if it is given, and leave it as it is when they are answered.
+  virtual std::optional<JobRecord> get(const std::string& id, ReadError* why = nullptr) = 0;
   /// Jobs, newest first; `state` filters when set. `after` is a paging cursor (a job id) or empty.
-  virtual std::vector<JobRecord> list(std::optional<JobState> state, size_t limit, const std::string& after) = 0;
+  virtual std::vector<JobRecord> list(std::optional<JobState> state, size_t limit, const std::string& after,
+                                      ReadError* why = nullptr) = 0;
   /// Takes the oldest queued job and marks it running; returns its id, scene and params.
   virtual bool claim(std::string& id, std::string& scene, std::string& params) = 0;
   /// False if it could not be written.
   virtual bool set_progress(const std::string& id, const std::string& progress_json) = 0;
   /// The new event's sequence number; 0 if the job is unknown or the event could not be written.
   virtual uint64_t add_event(const std::string& id, const std::string& type, const std::string& data) = 0;
-  virtual std::vector<Event> events_after(const std::string& id, uint64_t after, size_t limit) = 0;
+  virtual std::vector<Event> events_after(const std::string& id, uint64_t after, size_t limit, ReadError* why = nullptr) = 0;
   /// running -> succeeded, storing the result.
   virtual Change succeed(const std::string& id, const std::string& result, const std::string& etag) = 0;
   /// running -> failed.
@@ -138,13 +151,14 @@ class Store {
   /// running -> queued (a worker stopped before finishing it).
   virtual Change requeue(const std::string& id) = 0;
   /// The result of a succeeded job.
-  virtual std::optional<std::string> result(const std::string& id) = 0;
+  virtual std::optional<std::string> result(const std::string& id, ReadError* why = nullptr) = 0;
   /// Up to `size` bytes of a succeeded job's result from byte `offset` (fewer only at its end): for
   /// answers sent in parts, so that no request holds a whole result. nullopt if the job has no
-  /// result (any more) or it cannot be read. This default reads the whole result each time; the
-  /// embedded store reads only the part asked for.
-  virtual std::optional<std::string> result_part(const std::string& id, uint64_t offset, size_t size) {
-    auto whole = result(id);
+  /// result (any more) or it cannot be read (then `why` says so). This default reads the whole
+  /// result each time; the embedded store reads only the part asked for.
+  virtual std::optional<std::string> result_part(const std::string& id, uint64_t offset, size_t size,
+                                                 ReadError* why = nullptr) {
+    auto whole = result(id, why);
     if (!whole || offset > whole->size()) return std::nullopt;
     return whole->substr(static_cast<size_t>(offset), size);
   }
