@@ -140,6 +140,17 @@ class Result {
   int64_t get_int(int row, int col) const { return std::strtoll(PQgetvalue(r_, row, col), nullptr, 10); }
   double get_real(int row, int col) const { return std::strtod(PQgetvalue(r_, row, col), nullptr); }
   std::string error() const { return r_ ? PQresultErrorMessage(r_) : "no result"; }
+  /// The statement failed for want of a connection rather than by the database's answer: no result
+  /// at all, an error libpq made itself (no SQLSTATE: the server closed the connection, a write to
+  /// it failed), a connection exception (class 08), or the server shutting down or starting (57P01
+  /// to 57P03). The same statement may succeed on a new connection.
+  bool lost_connection() const {
+    if (r_ == nullptr) return true;
+    if (ok()) return false;
+    const char* state = PQresultErrorField(r_, PG_DIAG_SQLSTATE);
+    if (state == nullptr) return true;
+    return std::strncmp(state, "08", 2) == 0 || std::strncmp(state, "57P0", 4) == 0;
+  }
   int affected() const { return std::atoi(PQcmdTuples(r_)); }
 
  private:
@@ -499,15 +510,18 @@ class PgStore final : public Store {
       }
     }
     Result r = run(c, sql, params, binary_result);
-    if (!r.ok() && PQstatus(c) != CONNECTION_OK) {
+    // libpq does not always mark a connection bad when the server closed it under a statement (a
+    // failed write of the statement is reported, the status can stay "ok"): the result says so too.
+    auto lost = [&] { return !r.ok() && (PQstatus(c) != CONNECTION_OK || r.lost_connection()); };
+    if (lost()) {
       // The server restarted or the connection dropped since this connection's last use: once
       // more on a new connection. Writes are safe to repeat: each is conditional on the state (and
       // fence) it changes from, or inserts a key that cannot be inserted twice.
       PQreset(c);
       if (PQstatus(c) == CONNECTION_OK) r = run(c, sql, params, binary_result);
-      if (!r.ok() && PQstatus(c) != CONNECTION_OK) {
+      if (lost()) {
         healthy_ = false;
-        r.set_unreachable(PQerrorMessage(c));
+        r.set_unreachable(PQstatus(c) != CONNECTION_OK ? PQerrorMessage(c) : r.error());
       }
     }
     give_back(c);
