@@ -27,9 +27,13 @@ void print_stats(const Console& c, const solver::Stats& st) {
                static_cast<unsigned long long>(st.shots), static_cast<unsigned long long>(st.replayed_shots),
                static_cast<unsigned long long>(st.replays_reshot), static_cast<unsigned long long>(st.hemicubes),
                static_cast<unsigned long long>(st.elements), st.unshot_fraction);
-  std::fprintf(c.out, "  splits: %llu (form factor %llu, visibility %llu, gradient %llu), projections %llu of %llu elements in all, reused children %llu\n",
+  if (st.passes > 1)
+    std::fprintf(c.out, "  first pass: %.3f s, %llu elements split where the light pools\n", st.seconds_first_pass,
+                 static_cast<unsigned long long>(st.splits_pools));
+  std::fprintf(c.out, "  splits: %llu (form factor %llu, visibility %llu, gradient %llu, light pools %llu), projections %llu of %llu elements in all, reused children %llu\n",
                static_cast<unsigned long long>(st.splits), static_cast<unsigned long long>(st.splits_form_factor),
                static_cast<unsigned long long>(st.splits_visibility), static_cast<unsigned long long>(st.splits_gradient),
+               static_cast<unsigned long long>(st.splits_pools),
                static_cast<unsigned long long>(st.projections), static_cast<unsigned long long>(st.elements_projected),
                static_cast<unsigned long long>(st.reused_children));
   if (st.gather_skipped)

@@ -1,5 +1,6 @@
 #include "hemibake/protocol/bake.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 
@@ -15,7 +16,8 @@ void tell(const BakeHooks& hooks, const JobProgress& p) {
 }
 
 // The shooting phase's progress. Unshot power falls roughly geometrically, so the fraction done is
-// log(u) / log(target), and the time left elapsed * log(u / target) / log(1 / u).
+// log(u) / log(target), and the time left elapsed * log(u / target) / log(1 / u). The quick first
+// pass of a solve that looks for light pools (solver::Params::pools) counts as its first tenth.
 JobProgress shooting_progress(const solver::Progress& p, double target) {
   JobProgress out;
   out.phase = "shooting";
@@ -23,9 +25,19 @@ JobProgress shooting_progress(const solver::Progress& p, double target) {
   out.unshot_fraction = p.unshot_fraction;
   out.elements = p.elements;
   out.elapsed_seconds = p.elapsed_seconds;
+  constexpr double kFirstPassShare = 0.1, kFirstPassTarget = 0.02;
+  const bool first = p.passes > 1 && p.pass == 1;
+  const double goal = first ? std::max(target, kFirstPassTarget) : target;
+  const double done = p.unshot_fraction >= 1.0 ? 0.0
+                      : p.unshot_fraction <= goal ? 1.0
+                                                  : std::log(p.unshot_fraction) / std::log(goal);
+  if (first) {
+    out.fraction = kFirstPassShare * done;
+    return out;  // no time left to tell yet
+  }
   if (p.unshot_fraction > target && p.unshot_fraction < 1.0)
     out.eta_seconds = p.elapsed_seconds * std::log(p.unshot_fraction / target) / std::log(1.0 / p.unshot_fraction);
-  out.fraction = p.unshot_fraction >= 1.0 ? 0.0 : p.unshot_fraction <= target ? 1.0 : std::log(p.unshot_fraction) / std::log(target);
+  out.fraction = p.passes > 1 ? kFirstPassShare + (1.0 - kFirstPassShare) * done : done;
   return out;
 }
 

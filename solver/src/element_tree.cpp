@@ -44,6 +44,12 @@ uint32_t Solver::Impl::add_element(uint32_t patch, uint32_t parent,
   e_stamp.push_back(0);
   e_ff.push_back(0.0);
   e_ff_open.push_back(0.0);
+  if (parent == kNone && patches[patch].corner_count == 4)
+    e_uv.push_back({glm::dvec2(0, 0), glm::dvec2(1, 0), glm::dvec2(1, 1), glm::dvec2(0, 1)});
+  else if (parent == kNone)
+    e_uv.push_back({glm::dvec2(0, 0), glm::dvec2(1, 0), glm::dvec2(0, 1), glm::dvec2(0, 0)});
+  else
+    e_uv.push_back({});  // set by split()
   e_mark.push_back(0);
   e_exact.push_back(0.0);
   e_exact_stamp.push_back(0);
@@ -75,9 +81,26 @@ void Solver::Impl::split(uint32_t e) {
     kids = {{{c[0], m01, m20, kNone}, {m01, c[1], m12, kNone}, {m20, m12, c[2], kNone},
              {m12, m20, m01, kNone}}};
   }
+  split_log.push_back(e);
   const uint32_t first = add_element(p, e, kids[0], b, u);
   for (int k = 1; k < 4; ++k) add_element(p, e, kids[k], b, u);
   e_child[e] = first;
+  // The children's corners in the patch's (u, v), split as their positions are.
+  const std::array<glm::dvec2, 4> t = e_uv[e];
+  if (patches[p].corner_count == 4) {
+    const glm::dvec2 m01 = 0.5 * (t[0] + t[1]), m12 = 0.5 * (t[1] + t[2]), m23 = 0.5 * (t[2] + t[3]),
+                     m30 = 0.5 * (t[3] + t[0]), ctr = 0.25 * (t[0] + t[1] + t[2] + t[3]);
+    e_uv[first] = {t[0], m01, ctr, m30};
+    e_uv[first + 1] = {m01, t[1], m12, ctr};
+    e_uv[first + 2] = {ctr, m12, t[2], m23};
+    e_uv[first + 3] = {m30, ctr, m23, t[3]};
+  } else {
+    const glm::dvec2 m01 = 0.5 * (t[0] + t[1]), m12 = 0.5 * (t[1] + t[2]), m20 = 0.5 * (t[2] + t[0]);
+    e_uv[first] = {t[0], m01, m20, {}};
+    e_uv[first + 1] = {m01, t[1], m12, {}};
+    e_uv[first + 2] = {m20, m12, t[2], {}};
+    e_uv[first + 3] = {m12, m20, m01, {}};
+  }
   HEMIBAKE_DCHECK(first + 3 < e_parent.size() && e_parent[first] == e && e_parent[first + 3] == e);
   ++stats.splits;
 }

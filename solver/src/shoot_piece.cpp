@@ -46,7 +46,11 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   if (!settled) record_broken = true;  // kMaxRounds still splitting: no headroom to record
   if (recording != nullptr) record_piece(piece, coarse, split_room, accepted);
   gap_share = covered_share(piece.src);
+  const ShooterShape shape = shape_of(piece);
+  shooter_shape = &shape;
+  ++grid_shooter;
   distribute(piece.dB, accepted);
+  shooter_shape = nullptr;
   gap_share = 0.0;
   return near;
 }

@@ -34,8 +34,13 @@ bool Solver::Impl::replay(uint32_t unit) {
   for (size_t i = 0; i < r.pieces.size(); ++i) {
     const ShotRecord::Piece& rp = r.pieces[i];
     gap_share = covered_share(std::span(r.src.data() + rp.src_begin, rp.src_end - rp.src_begin));
+    ShooterShape shape = rp.shape;
+    shape.src = std::span(r.src.data() + rp.src_begin, rp.src_end - rp.src_begin);
+    shooter_shape = &shape;
+    ++grid_shooter;
     for (uint32_t k = rp.recv_begin; k < rp.recv_end; ++k)
       if (!stale[k] && r.f[k] > 0.0f) receive(r.recv[k], dBs[i], r.f[k]);
+    shooter_shape = nullptr;
     gap_share = 0.0;
   }
   if (stale_count == 0) return true;
@@ -194,6 +199,7 @@ void Solver::Impl::record_piece(const Piece& piece, bool coarse, double split_ro
   rp.headroom = piece_headroom(piece, split_room, accepted);
   rp.coarse = coarse;
   rp.extra = false;
+  rp.shape = shape_of(piece);
   r.pieces.push_back(rp);
 }
 

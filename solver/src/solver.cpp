@@ -39,7 +39,7 @@
 
 namespace hemibake::solver {
 
-Solver::Impl::Impl(const Scene& scene, const Params& p)
+Solver::Impl::Impl(const Scene& scene, const Params& p, const Impl* first, const Params* solve_params)
     : params(p),
       patches(scene.patches),
       prep(detail::prepare(scene)),
@@ -68,6 +68,23 @@ Solver::Impl::Impl(const Scene& scene, const Params& p)
     leaves.push_back(p_root[i]);
   }
   build_clusters();
+  source = scene;
+  first_pass = solve_params != nullptr;
+  solve = first_pass ? *solve_params : params;
+  pool_tolerance = solve.beps * emitted_mean / prep.total_area;
+  if (first_pass) {
+    build_light_grids();
+    p_emitter_left.assign(patches.size(), 0);
+    for (uint32_t q = 0; q < patches.size(); ++q)
+      if (channel_sum(patches[q].emission) > 0.0) {
+        p_emitter_left[q] = 1;
+        ++emitters_left;
+      }
+  } else {
+    p_grid_n.assign(patches.size(), 0);
+    pools_looked = true;
+  }
+  if (!first_pass) grid_light.clear();
   p_mark.assign(patches.size(), 0);
   p_shooting.assign(patches.size(), 0);
   build_patch_bvh();
@@ -83,6 +100,35 @@ Solver::Impl::Impl(const Scene& scene, const Params& p)
   sky = scene.sky;
   prepare_lights();
   split_along_emitter_outlines();
+  if (first != nullptr) {
+    // The first pass's splits that lead to its light pools' elements, in its order; the
+    // constructor's own splits came first in both passes and alike. The rest of the first pass's
+    // refinement this pass makes for itself.
+    std::vector<uint8_t> wanted(first->e_patch.size(), 0);
+    for (uint32_t e : first->pool_splits)
+      for (uint32_t x = e; x != kNone && !wanted[x]; x = first->e_parent[x]) wanted[x] = 1;
+    std::vector<uint32_t> here(first->e_patch.size(), kNone);  // first pass's element -> this one's
+    for (uint32_t e = 0; e < e_patch.size(); ++e) here[e] = e;
+    for (size_t i = split_log.size(); i < first->split_log.size(); ++i) {
+      const uint32_t e = first->split_log[i];
+      if (!wanted[e] || here[e] == kNone || e_child[here[e]] != kNone) continue;
+      split(here[e]);
+      for (uint32_t k = 0; k < 4; ++k) here[first->e_child[e] + k] = e_child[here[e]] + k;
+    }
+    replace_split(leaves);
+    stats.elements = leaves.size();
+    grow_scratch();
+  }
+}
+
+std::unique_ptr<Solver::Impl> Solver::Impl::next_pass(Impl& first) {
+  auto next = std::make_unique<Impl>(first.source, first.solve, &first);
+  Stats& s = next->stats;
+  s.passes = first.stats.passes + 1;
+  s.seconds_first_pass = first.stats.seconds;
+  s.seconds = first.stats.seconds;  // this pass adds its own
+  s.splits_pools = first.stats.splits_pools;
+  return next;
 }
 
 // Element e takes rho dB F of a shot: radiosity and unshot radiosity alike, and the unshot power of
@@ -97,6 +143,9 @@ void Solver::Impl::receive(uint32_t e, const glm::dvec3& dB, double f) {
   e_b[e] += gain;
   e_unshot[e] += gain;
   e_gap[e] += gap_share * gain;
+  // (find_pools reads no point of a leaf too small to split)
+  if (shooter_shape != nullptr && p_grid_n[q] != 0 && e_area[e] >= min_split_area())
+    take_on_grid(e, mean(patches[q].reflectance * dB));
   p_unshot[q] += channel_sum(gain) * e_area[e];
   u_unshot[p_unit[q]] += channel_sum(gain) * e_area[e];
 }
@@ -108,6 +157,17 @@ bool Solver::Impl::step() {
   // Lights and the sky shoot first, each once (lights.cpp).
   if (stats.shots < params.max_shots && shoot_next_light()) return true;
   // Once the shots are done, the final gather (gather.cpp), in batches.
+  // The first pass, once every emitter has shot and most of the light is out: where it pools
+  // (pools.cpp); then the solve proper starts on those elements (Solver::step).
+  if (first_pass && ((emitters_left == 0 && stats.unshot_fraction < kPoolsPass) ||
+                     stats.unshot_fraction < params.convergence || stats.shots >= params.max_shots ||
+                     emitted_power <= 0.0)) {
+    const auto t0 = Clock::now();
+    find_pools();
+    stats.seconds += seconds_since(t0);
+    restart = true;
+    return true;
+  }
   if (stats.unshot_fraction < params.convergence || emitted_power <= 0.0) {
     if (gather_step()) return true;
     stats.converged = true;
@@ -166,26 +226,52 @@ void Solver::Impl::fresh_shot(uint32_t unit) {
 
 // The unit has shot all its unshot power.
 void Solver::Impl::clear_unshot(uint32_t unit) {
+  auto emitted = [&](uint32_t q) {
+    if (p_emitter_left.empty() || !p_emitter_left[q]) return;
+    p_emitter_left[q] = 0;
+    --emitters_left;
+  };
   if (unit_node[unit] != kNone) {
     const ClusterNode& c = c_nodes[unit_node[unit]];
     for (uint32_t i = c.begin; i < c.end; ++i) {
       const uint32_t q = cluster_patch[i];
+      emitted(q);
       for_leaves(p_root[q], [&](uint32_t e) { e_unshot[e] = glm::dvec3(0.0); });
       p_unshot[q] = 0.0;
     }
   } else {
     const uint32_t p = unit_patch[unit];
+    emitted(p);
     for_leaves(p_root[p], [&](uint32_t e) { e_unshot[e] = glm::dvec3(0.0); });
     p_unshot[p] = 0.0;
   }
   u_unshot[unit] = 0.0;
 }
 
+namespace {
+
+// The first pass's draft of a solve: enough to see where the light goes (pools.cpp).
+Params first_pass_params(const Params& p) {
+  Params d = p;
+  d.resolution = std::min(p.resolution, 50u);
+  d.feps = std::max(p.feps, 3e-3);
+  d.beps = std::max(p.beps, 0.1);
+  d.gather = false;
+  return d;
+}
+
+}  // namespace
+
 Solver::Solver(const Scene& scene, const Params& params)
-    : impl_(std::make_unique<Impl>(scene, params)) {}
+    : impl_(params.pools ? std::make_unique<Impl>(scene, first_pass_params(params), nullptr, &params)
+                         : std::make_unique<Impl>(scene, params)) {}
 Solver::~Solver() = default;
 
-bool Solver::step() { return impl_->step(); }
+bool Solver::step() {
+  const bool more = impl_->step();
+  if (impl_->restart) impl_ = Impl::next_pass(*impl_);
+  return more;
+}
 
 const Stats& Solver::stats() const { return impl_->stats; }
 
@@ -196,13 +282,15 @@ const Stats& Solver::run(const ProgressFn& progress, const CancelToken* cancel) 
       impl_->stats.cancelled = true;
       break;
     }
-    if (!impl_->step()) break;
+    if (!step()) break;
     if (progress) {
       Progress pr;
       pr.shots = impl_->stats.shots;
       pr.unshot_fraction = impl_->stats.unshot_fraction;
       pr.elements = impl_->stats.elements;
       pr.elapsed_seconds = seconds_since(t0);
+      pr.pass = impl_->first_pass ? 1 : impl_->stats.passes;
+      pr.passes = impl_->solve.pools ? 2 : 1;
       progress(pr);
     }
   }

@@ -12,6 +12,7 @@
 #include "shaft.h"
 #include "thread_pool.h"
 
+#include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
 
 #include <algorithm>
@@ -77,6 +78,14 @@ constexpr double kCoarseShare = 0.25;
 // Cluster pieces carrying at least this share of the emitted power take a finer hemicube
 // (finer_level, piece_headroom).
 constexpr double kFinePower = 1e-3;
+// pools.cpp: the first pass looks for light pools once every emitter has shot and the unshot power
+// is below this share of the emitted (or at convergence). An element splits there when the light
+// its points took differs by more than kPoolShare of their mean and by more than kPoolFloor times
+// the radiosity tolerance: a pool, not the few percent by which an evenly lit wall's points differ
+// before the last shots even them out.
+constexpr double kPoolsPass = 0.02;
+constexpr double kPoolShare = 0.3;
+constexpr double kPoolFloor = 0.05;
 // Pieces carrying at least this share of the emitted power refine for receivers whose plane cuts
 // through them, however far (is_close, piece_headroom).
 constexpr double kStraddlePower = 0.05;
@@ -123,6 +132,16 @@ inline void lower_headroom(double& room, double limit, double value) {
   if (value > 0.0) room = std::min(room, limit / value);
 }
 
+// A shooting piece as pools.cpp sees it: a polygon (a piece of one patch), or a cluster: the
+// polygons of the elements `src` near it, a disc of its area further off.
+struct ShooterShape {
+  glm::dvec3 centre{0.0}, normal{0.0};
+  double area = 0.0, diameter = 0.0;
+  std::array<glm::dvec3, 4> poly{};
+  uint32_t poly_n = 0;            // 0: a cluster
+  std::span<const uint32_t> src;  // a cluster's elements (set where it shoots; not kept)
+};
+
 struct Solver::Impl {
   // What one hemicube shoots from: a piece of a patch, or a cluster of patches of one surface.
   struct Piece {
@@ -159,6 +178,7 @@ struct Solver::Impl {
       double headroom;  // a replay may shoot up to this times dB (piece_headroom)
       bool coarse;    // shot from a hemicube coarser than its level (kCoarseShare)
       bool extra;     // shot for children of split receivers: its power counts once, elsewhere
+      ShooterShape shape;  // where its light comes from (pools.cpp)
     };
     size_t fresh_pieces = 0;  // pieces of the shot that made it (replays may add more)
     std::vector<Piece> pieces;
@@ -209,7 +229,13 @@ struct Solver::Impl {
   void light_receive(uint32_t e, const glm::dvec3& irradiance);
 
   // solver.cpp: set-up, and the Southwell step that picks the shooter.
-  Impl(const Scene& scene, const Params& p);
+  // `first`: a first pass over the same scene whose light pools this pass's elements start split
+  // for (find_pools); such a pass looks for no pools.
+  // `solve`: this is the first pass, a draft (p) of that solve, which looks for light pools.
+  Impl(const Scene& scene, const Params& p, const Impl* first = nullptr, const Params* solve = nullptr);
+  // The second pass of a solve whose first found light pools (pools.cpp): a new solve of the same
+  // scene on the first's elements, with the first's counts of work added to its statistics.
+  static std::unique_ptr<Impl> next_pass(Impl& first);
   bool step();
   uint32_t strongest_unit() const;
   void fresh_shot(uint32_t unit);
@@ -287,6 +313,19 @@ struct Solver::Impl {
   bool covered(uint32_t p, const glm::dvec3& x, double gap = 0.0, bool any_facing = false,
                bool emitters_only = false) const;
   void split_along_emitter_outlines();
+
+  // pools.cpp: where the light an element took varies across it. Each patch large enough to split
+  // holds a grid of points; every shot adds to the points of its receivers the light it gave them,
+  // spread as the shooter's unoccluded light varies across each one. Once the shots are done,
+  // leaves whose points differ by more than the radiosity tolerance split, their light shared out
+  // as the points say.
+  void build_light_grids();
+  ShooterShape shape_of(const Piece& piece) const;
+  double shooter_light(const ShooterShape& s, const glm::dvec3& x, const glm::dvec3& n) const;
+  void take_on_grid(uint32_t e, double radiosity);
+  template <typename Fn>
+  void for_grid_points(uint32_t e, Fn&& fn) const;
+  bool find_pools();
   bool gap_covered(uint32_t p, const glm::dvec3& x, double radius) const;
   // mesh_export.cpp: covered vertices show the light of their uncovered neighbours.
   void show_uncovered_light(const std::vector<uint32_t>& leaves, Mesh& m) const;
@@ -454,6 +493,27 @@ struct Solver::Impl {
 
   Stats stats;
   bool done = false;
+  // pools.cpp: the shooter whose light receive() is giving out (null: none to follow), a count of
+  // the shooters, per patch its grid's points a side (0: none) and first point, per point the
+  // light taken and the shooter that last gave it, per element its corners in its patch's (u, v).
+  const ShooterShape* shooter_shape = nullptr;
+  // Emitting patches that have not shot yet (the first pass looks for pools once all have).
+  std::vector<uint8_t> p_emitter_left;
+  uint32_t emitters_left = 0;
+  uint32_t grid_shooter = 0;
+  std::vector<uint32_t> p_grid_n, p_grid_begin;
+  std::vector<float> grid_light;
+  std::vector<uint32_t> grid_stamp;
+  std::vector<std::array<glm::dvec2, 4>> e_uv;
+  bool pools_looked = false;  // find_pools ran (or this pass does not look)
+  bool first_pass = false;    // a draft that looks for pools; `solve` is the solve proper
+  Params solve;
+  double pool_tolerance = 0.0;  // the solve proper's radiosity tolerance
+  bool restart = false;       // find_pools split: the solve starts again on the new elements
+  // The scene (for a second pass), and every split in order (element ids follow from it).
+  Scene source;
+  std::vector<uint32_t> split_log;
+  std::vector<uint32_t> pool_splits;  // the elements find_pools split
 };
 
 // A point the final gather gathers at, and what it is for.

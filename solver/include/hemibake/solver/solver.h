@@ -95,6 +95,9 @@ struct Params {
                                 ///< what it sees through a hemicube of the solve's method, and
                                 ///< elements split where the light gathered across them is not linear
                                 ///< (see README); false: vertices average their elements
+  bool pools = false;           ///< a quick first pass finds where the light pools on surfaces too
+                                ///< large for any one shot to split (a floor under small lamps), and
+                                ///< the solve proper starts with those elements split (see README)
   uint32_t shot_cache_mb = 256; ///< memory for the form factors of earlier shots, replayed when the
                                 ///< same shooter shoots again with no more power and an unchanged
                                 ///< mesh (see README); 0 = every shot projects anew
@@ -116,6 +119,7 @@ struct Progress {
   double unshot_fraction = 1.0;  ///< unshot power / emitted power
   uint64_t elements = 0;         ///< leaf elements
   double elapsed_seconds = 0.0;
+  uint32_t pass = 1, passes = 1; ///< with Params::pools: pass 1, the quick first, of 2
 };
 using ProgressFn = std::function<void(const Progress&)>;
 
@@ -145,6 +149,9 @@ struct Stats {
   uint64_t splits_form_factor = 0;  ///< ... of which for their form factor (FEPS)
   uint64_t splits_visibility = 0;   ///< ... for partial visibility
   uint64_t splits_gradient = 0;     ///< ... for a radiosity jump at a corner
+  uint64_t splits_pools = 0;     ///< elements split where the first pass's light pools (not counted in `splits`' kinds)
+  uint32_t passes = 1;           ///< 2: a first pass looked for light pools (Params::pools)
+  double seconds_first_pass = 0.0;  ///< ... and took this long (not in `seconds`)
   uint64_t gathers = 0;          ///< hemicubes placed at points of the mesh by the final gather
   uint64_t splits_gather = 0;    ///< elements split by the final gather (not counted in `splits`' kinds)
   double seconds_gathering = 0.0;  ///< in the final gather

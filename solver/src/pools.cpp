@@ -1,0 +1,218 @@
+// Where the light an element took varies across it (work in progress, see the commit message).
+// The hemicube gives each receiver one number per shot, its mean; a floor that is one element
+// under a small lamp, or under the facets of a glowing sphere, has four corners that agree and
+// stays one flat element however bright the pool under the lamp. A criterion that split wherever
+// one shot varies would split the walls of every evenly lit room, whose light is even only in sum.
+//
+// So every patch large enough to split keeps a grid of points in its (u, v), and every shot adds
+// to the points of its receivers rho dB times the unoccluded form factor from the point to the
+// shooting piece (Lambert's formula near it, a disc further off). Once every emitter has shot and
+// most of the light is out (kPoolsPass), find_pools splits the leaves whose points differ by more
+// than kPoolShare of their mean (and kPoolFloor times the radiosity tolerance), down to the
+// smallest element; if any split, the solve starts again (a second pass) with those splits made
+// before the first shot, so that the hemicube gives the light to the finer elements.
+#include "solver_impl.h"
+
+#include "hemibake/solver/hemicube.h"
+
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+
+namespace hemibake::solver {
+
+namespace {
+
+// Points a side of a patch's grid: 2^m + 1, spaced about half the side of the smallest element
+// that may split, 3 to 129.
+constexpr uint32_t kMinGridLevels = 1, kMaxGridLevels = 7;
+// How far in front of its surface a point looks from, times the scene's diagonal.
+constexpr double kGridLift = 1e-4;
+// ... and how far towards its patch's centre, as a share of the way.
+constexpr double kGridInset = 1e-3;
+
+// The form factor from a point (normal n) to the part of polygon `poly` in front of its plane.
+double clipped_form_factor(const glm::dvec3& x, const glm::dvec3& n, const std::array<glm::dvec3, 4>& poly,
+                           uint32_t count) {
+  std::array<glm::dvec3, 5> in;
+  uint32_t kept = 0;
+  constexpr double kAbove = 1e-9;
+  for (uint32_t i = 0; i < count; ++i) {
+    const glm::dvec3& a = poly[i];
+    const glm::dvec3& b = poly[(i + 1) % count];
+    const double da = glm::dot(n, a - x) - kAbove, db = glm::dot(n, b - x) - kAbove;
+    if (da >= 0.0 && kept < in.size()) in[kept++] = a;
+    if ((da >= 0.0) != (db >= 0.0) && kept < in.size()) in[kept++] = a + (b - a) * (da / (da - db));
+  }
+  if (kept < 3) return 0.0;
+  return point_polygon_form_factor(x, n, std::span<const glm::dvec3>(in.data(), kept));
+}
+
+}  // namespace
+
+void Solver::Impl::build_light_grids() {
+  p_grid_n.assign(patches.size(), 0);
+  p_grid_begin.assign(patches.size(), 0);
+  const double spacing = 0.5 * std::sqrt(min_split_area());
+  size_t points = 0;
+  for (uint32_t p = 0; p < patches.size(); ++p) {
+    if (!(prep.area[p] >= 4.0 * min_split_area())) continue;
+    const double extent = polygon_diameter(corners_of_copy(p_root[p]), corner_count(p_root[p]));
+    uint32_t levels = kMinGridLevels;
+    while (levels < kMaxGridLevels && extent / static_cast<double>(1u << levels) > spacing) ++levels;
+    p_grid_n[p] = (1u << levels) + 1;
+    p_grid_begin[p] = static_cast<uint32_t>(points);
+    points += static_cast<size_t>(p_grid_n[p]) * p_grid_n[p];
+  }
+  grid_light.assign(points, 0.0f);
+  grid_stamp.assign(points, 0);
+}
+
+// The shooter's unoccluded light at x (normal n), as a form factor: Lambert's formula for the
+// part of its polygons in front of x within two diameters of its centre, a disc of its area further.
+double Solver::Impl::shooter_light(const ShooterShape& s, const glm::dvec3& x, const glm::dvec3& n) const {
+  const glm::dvec3 d = s.centre - x;
+  const double r2 = glm::dot(d, d);
+  const bool near = r2 < s.diameter * s.diameter;
+  if (near && s.poly_n >= 3) {
+    if (glm::dot(s.normal, s.poly[0] - x) >= 0.0) return 0.0;  // x behind its plane
+    return clipped_form_factor(x, n, s.poly, s.poly_n);
+  }
+  if (near && !s.src.empty()) {
+    double f = 0.0;
+    std::array<glm::dvec3, 4> poly;
+    for (uint32_t e : s.src) {
+      Corners c;
+      corners_of(e, c);
+      const uint32_t count = corner_count(e);
+      std::copy(c.begin(), c.begin() + count, poly.begin());
+      if (glm::dot(prep.normal[e_patch[e]], poly[0] - x) >= 0.0) continue;
+      f += clipped_form_factor(x, n, poly, count);
+    }
+    return f;
+  }
+  if (glm::dot(s.normal, d) >= 0.0) return 0.0;
+  const double r = std::sqrt(r2);
+  const double cos_r = glm::dot(n, d) / r, cos_s = -glm::dot(s.normal, d) / r;
+  if (!(cos_r > 0.0 && cos_s > 0.0)) return 0.0;
+  return s.area * cos_r * cos_s / (std::numbers::pi * r2 + s.area);
+}
+
+ShooterShape Solver::Impl::shape_of(const Piece& piece) const {
+  ShooterShape s;
+  s.centre = piece.centre;
+  s.normal = piece.normal;
+  s.area = piece.area;
+  s.diameter = piece.diameter;
+  // A piece of one patch is its polygon; a cluster (more points, or reaching behind its centre) a disc.
+  if (piece.rear == 0.0 && piece.points.size() >= 3 && piece.points.size() <= 4) {
+    s.poly_n = static_cast<uint32_t>(piece.points.size());
+    std::copy(piece.points.begin(), piece.points.end(), s.poly.begin());
+  } else {
+    s.src = piece.src;
+  }
+  return s;
+}
+
+// Calls fn(index into grid_light, position) for the grid points of element e's patch that e
+// owns: every point of the patch belongs to exactly one leaf (a point on an outline to the one
+// it falls in when moved a hair towards the patch's middle and then in a direction along no
+// outline), so that no point takes a shooter's light twice from two receivers served by
+// different pieces of it.
+template <typename Fn>
+void Solver::Impl::for_grid_points(uint32_t e, Fn&& fn) const {
+  const uint32_t p = e_patch[e];
+  const uint32_t g = p_grid_n[p];
+  if (g == 0) return;
+  const std::array<glm::dvec2, 4>& t = e_uv[e];
+  const bool quad = corner_count(e) == 4;
+  const uint32_t n = quad ? 4 : 3;
+  glm::dvec2 lo(1.0), hi(0.0);
+  for (uint32_t i = 0; i < n; ++i) {
+    lo = glm::min(lo, t[i]);
+    hi = glm::max(hi, t[i]);
+  }
+  const glm::dvec2 middle = quad ? glm::dvec2(0.5) : glm::dvec2(1.0 / 3.0);
+  const double steps = static_cast<double>(g - 1);
+  constexpr double kEps = 1e-9;
+  const auto first = [&](double v) { return static_cast<uint32_t>(std::max(0.0, std::ceil(v * steps - kEps))); };
+  const auto last = [&](double v) { return static_cast<uint32_t>(std::min(steps, std::floor(v * steps + kEps))); };
+  Corners c;
+  corners_of(p_root[p], c);
+  for (uint32_t j = first(lo.y); j <= last(hi.y); ++j)
+    for (uint32_t i = first(lo.x); i <= last(hi.x); ++i) {
+      const glm::dvec2 uv(i / steps, j / steps);
+      const glm::dvec2 q = uv + 1e-7 * (middle - uv) + glm::dvec2(3.7e-11, 7.1e-11);
+      bool inside = true;
+      for (uint32_t k = 0; k < n && inside; ++k) {
+        const glm::dvec2 a = t[k], b = t[(k + 1) % n];
+        inside = (b.x - a.x) * (q.y - a.y) - (b.y - a.y) * (q.x - a.x) > 0.0;
+      }
+      if (!inside) continue;
+      const glm::dvec3 x = quad ? (1 - uv.x) * (1 - uv.y) * c[0] + uv.x * (1 - uv.y) * c[1] + uv.x * uv.y * c[2] +
+                                      (1 - uv.x) * uv.y * c[3]
+                                : c[0] + uv.x * (c[1] - c[0]) + uv.y * (c[2] - c[0]);
+      fn(p_grid_begin[p] + j * g + i, x);
+    }
+}
+
+// Element e's points take the current shooter's light: `radiosity` (rho dB, mean over channels,
+// times the share of the shooter the hemicube found visible from e) times the unoccluded form
+// factor from each point to the shooter. A point on the outline of two receivers takes it once.
+void Solver::Impl::take_on_grid(uint32_t e, double radiosity) {
+  const uint32_t p = e_patch[e];
+  const glm::dvec3 normal = prep.normal[p];
+  // Points on an outline shared with a surface at an angle (a room's corner) lie in its plane and
+  // would see it edge-on: they look from a little inside their patch and in front of it instead.
+  const glm::dvec3 centre = e_centre[p_root[p]];
+  const glm::dvec3 lift = normal * (kGridLift * prep.diagonal);
+  for_grid_points(e, [&](uint32_t i, const glm::dvec3& x) {
+    if (grid_stamp[i] == grid_shooter) return;
+    grid_stamp[i] = grid_shooter;
+    const glm::dvec3 at = x + kGridInset * (centre - x) + lift;
+    grid_light[i] += static_cast<float>(radiosity * shooter_light(*shooter_shape, at, normal));
+  });
+}
+
+// Splits the leaves whose grid points differ by more than the radiosity tolerance, and their
+// children likewise, down to the smallest element that may split. Returns whether any split.
+bool Solver::Impl::find_pools() {
+  pools_looked = true;
+  std::vector<uint32_t> todo = leaves;
+  bool any = false;
+  while (!todo.empty()) {
+    const uint32_t e = todo.back();
+    todo.pop_back();
+    if (p_grid_n[e_patch[e]] == 0 || e_area[e] < min_split_area()) continue;
+    double lo = std::numeric_limits<double>::max(), hi = std::numeric_limits<double>::lowest();
+    uint32_t count = 0;
+    double sum = 0.0;
+    for_grid_points(e, [&](uint32_t i, const glm::dvec3&) {
+      lo = std::min(lo, static_cast<double>(grid_light[i]));
+      hi = std::max(hi, static_cast<double>(grid_light[i]));
+      sum += grid_light[i];
+      ++count;
+    });
+    if (count < 4 || hi - lo <= kPoolFloor * pool_tolerance || hi - lo <= kPoolShare * sum / count) continue;
+    if (patches.size() + 3 * (stats.splits + 1) > params.max_elements) {
+      stats.element_limit = true;
+      break;
+    }
+    split(e);  // `leaves` holds it or an ancestor: replace_split below expands them
+    pool_splits.push_back(e);
+    ++stats.splits_pools;
+    any = true;
+    for (uint32_t k = 0; k < 4; ++k) todo.push_back(e_child[e] + k);
+  }
+  if (any) {
+    replace_split(leaves);
+    stats.elements = leaves.size();
+  }
+  return any;
+}
+
+}  // namespace hemibake::solver
