@@ -1,16 +1,18 @@
-// Where the light an element took varies across it (work in progress, see the commit message).
-// The hemicube gives each receiver one number per shot, its mean; a floor that is one element
-// under a small lamp, or under the facets of a glowing sphere, has four corners that agree and
-// stays one flat element however bright the pool under the lamp. A criterion that split wherever
-// one shot varies would split the walls of every evenly lit room, whose light is even only in sum.
+// Light pools (Params::pools): where the light an element takes varies across it. The hemicube
+// gives each receiver one number per shot, its mean; a floor that is one element under a small
+// lamp, or under the facets of a glowing sphere, has four corners that agree and stays one flat
+// element however bright the pool under the lamp. A criterion that split wherever one shot varies
+// would split the walls of every evenly lit room, whose light is even only in sum.
 //
-// So every patch large enough to split keeps a grid of points in its (u, v), and every shot adds
-// to the points of its receivers rho dB times the unoccluded form factor from the point to the
-// shooting piece (Lambert's formula near it, a disc further off). Once every emitter has shot and
-// most of the light is out (kPoolsPass), find_pools splits the leaves whose points differ by more
-// than kPoolShare of their mean (and kPoolFloor times the radiosity tolerance), down to the
-// smallest element; if any split, the solve starts again (a second pass) with those splits made
-// before the first shot, so that the hemicube gives the light to the finer elements.
+// So a first pass, a draft of the solve, keeps a grid of points in the (u, v) of every patch large
+// enough to split, and every shot adds to the points of the receivers it lights rho dB times the
+// unoccluded form factor from the point to the shooting piece (Lambert's formula within a
+// diameter of it, a disc further off): the sum of the shots, with visibility element by element.
+// Once every emitter has shot and most of the light is out (kPoolsPass), find_pools splits the
+// leaves whose points differ by more than kPoolShare of their mean (and kPoolFloor times the solve's
+// radiosity tolerance), and their children likewise, down to the smallest element that may split.
+// The solve proper then starts on the scene with those splits made (Impl::next_pass), so that the
+// hemicube gives every shot's light to the finer elements.
 #include "solver_impl.h"
 
 #include "hemibake/solver/hemicube.h"
