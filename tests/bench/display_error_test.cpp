@@ -3,6 +3,7 @@
 // under a ceiling ends at the lamp's outline, and the room's light stays the reference's.
 #include "display_error.h"
 
+#include "hemibake/protocol/gltf.h"
 #include "hemibake/solver/scenes.h"
 #include "hemibake/solver/solver.h"
 
@@ -150,6 +151,37 @@ TEST(EmitterNearSurface, LampTouchingAWall) {
               room.mean_ratio);
   EXPECT_NEAR(room.mean_ratio, 1.0, 0.03);
   EXPECT_LT(room.median, 0.05);
+}
+
+// Blender's export of two small glowing spheres over a 12 m floor that is one quad (double-sided
+// materials, as Blender writes them; scripts/make_blender_pools.py). Without light pools the floor
+// stays nearly one element and shows the wrong light almost everywhere; with them it shows the
+// path tracer's pools.
+TEST(LightPools, BlenderFloorUnderGlowingSpheresShowsThePathTracersPools) {
+  const protocol::LoadResult r = protocol::load_gltf_file(HEMIBAKE_SOURCE_DIR "/tests/data/blender/glowing-spheres.glb");
+  ASSERT_TRUE(r.document) << r.error;
+  const Scene& scene = protocol::scene_of(*r.document);
+  ReferenceOptions options;
+  options.points = 200;
+  const auto points = reference_points(scene, options);
+  ASSERT_EQ(points.size(), 200u);
+  auto bake = [&](bool pools) {
+    solver::Params params;
+    params.threads = 2;
+    params.pools = pools;
+    solver::Solver s(scene, params);
+    s.run();
+    EXPECT_TRUE(s.stats().converged);
+    return displayed_error(points, s.mesh());
+  };
+  const DisplayError without = bake(false), with = bake(true);
+  std::printf("glowing spheres: without pools median %.4f p90 %.4f, ratio %.3f; with %.4f %.4f, ratio %.3f\n",
+              without.median, without.p90, without.mean_ratio, with.median, with.p90, with.mean_ratio);
+  EXPECT_EQ(with.missed, 0u);
+  EXPECT_LT(with.median, 0.05);
+  EXPECT_LT(with.p90, 0.25);
+  EXPECT_NEAR(with.mean_ratio, 1.0, 0.05);
+  EXPECT_LT(with.p90, without.p90 / 4.0);
 }
 
 }  // namespace
