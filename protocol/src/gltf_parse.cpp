@@ -83,6 +83,22 @@ bool fs_read(std::vector<unsigned char>* out, std::string* err, const std::strin
   return true;
 }
 
+// Whether a PNG's chunks run to their end without an empty IDAT chunk. stb_image copies an empty
+// IDAT chunk's no bytes to a buffer it has not yet allocated (memcpy from a null pointer, undefined
+// behaviour that a fuzzed GLB found); a PNG whose chunks overrun the data is corrupt anyway.
+bool png_chunks_sound(const unsigned char* bytes, size_t size) {
+  size_t at = 8;  // the signature
+  while (at + 12 <= size) {
+    const uint32_t length = (uint32_t{bytes[at]} << 24) | (uint32_t{bytes[at + 1]} << 16) |
+                            (uint32_t{bytes[at + 2]} << 8) | uint32_t{bytes[at + 3]};
+    if (length == 0 && std::memcmp(bytes + at + 4, "IDAT", 4) == 0) return false;
+    if (std::memcmp(bytes + at + 4, "IEND", 4) == 0) return true;
+    if (length > size - at - 12) return false;
+    at += 12 + static_cast<size_t>(length);
+  }
+  return false;
+}
+
 // Keeps each image's encoded bytes (for the output) and decodes it to 8-bit RGBA after checking
 // its size. An image that cannot be decoded is a warning: its texture counts as white.
 bool load_image(tinygltf::Image* image, const int index, std::string*, std::string*, int, int,
@@ -100,7 +116,8 @@ bool load_image(tinygltf::Image* image, const int index, std::string*, std::stri
     doc.image_mime[index] = png ? "image/png" : jpeg ? "image/jpeg" : image->mimeType;
   }
   int w = 0, h = 0, comp = 0;
-  if (!stbi_info_from_memory(bytes, size, &w, &h, &comp)) {
+  const bool png = size >= 8 && std::memcmp(bytes, "\x89PNG\r\n\x1a\n", 8) == 0;
+  if ((png && !png_chunks_sound(bytes, static_cast<size_t>(size))) || !stbi_info_from_memory(bytes, size, &w, &h, &comp)) {
     ctx->warnings->push_back("image " + std::to_string(index) + " cannot be decoded; its texture counts as white");
     return true;
   }
