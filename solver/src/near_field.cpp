@@ -123,8 +123,10 @@ double Solver::Impl::exact_form_factor(const Piece& piece, uint32_t e, int side)
   return e_exact[e];
 }
 
-// Whether a patch whose back the piece's centre sees (one that absorbs: not back_hidden), in front
-// of the piece and within one of its diameters, takes at least kAbsorberShare of the centre's light.
+// Whether a patch in front of the piece and within one of its diameters takes at least
+// kAbsorberShare of the centre's light: one whose back the centre sees (one that absorbs: not
+// back_hidden), or one that faces the piece. Its share of the centre's view then differs from most
+// of the piece's (shoot_piece).
 bool Solver::Impl::absorber_close(const Piece& piece) const {
   const glm::dvec3& c = piece.centre;
   const double r = piece.diameter;
@@ -134,8 +136,13 @@ bool Solver::Impl::absorber_close(const Piece& piece) const {
     return glm::dot(gap, gap) <= r * r;
   };
   return find_patch(near, [&](uint32_t q) {
-    if (prep.back_hidden[q] || p_shooting[q] == shooting_stamp) return false;
-    if (glm::dot(prep.normal[q], c - patches[q].corners[0]) >= -eps) return false;  // not its back
+    if (p_shooting[q] == shooting_stamp) return false;
+    // Its back (a light panel's, hung under a ceiling piece), or its front if it faces the piece
+    // (a wall 30 cm from a sky plane, with a window in it: the centre looks through the window
+    // straight on, most of the piece sees the room at a slant or not at all). A front at an angle
+    // (the next wall at a room's corner) leaves the centre's view fair.
+    const bool front = glm::dot(prep.normal[q], c - patches[q].corners[0]) >= -eps;
+    if (front ? glm::dot(prep.normal[q], piece.normal) > -kFacingOccluderCos : prep.back_hidden[q]) return false;
     if (!near(p_lo[q], p_hi[q])) return false;
     // The form factor from the centre to the patch cut to the piece's front side: the share of
     // the centre's light it takes (a back seen edge-on takes little).

@@ -96,6 +96,8 @@ constexpr double kClusterCone = 0.9397;
 // A shooting piece with an absorbing back close in front of it that takes at least this share of
 // the light from its centre is refined (absorber_close).
 constexpr double kAbsorberShare = 0.1;
+// ... also a front facing the piece within this cosine of head-on (absorber_close).
+constexpr double kFacingOccluderCos = 0.7;
 // A piece of a patch whose children's unshot radiosities depart from its mean by more than this,
 // summed over them by area as a share of the mean, shoots from its children (uneven_piece).
 constexpr double kUnevenShare = 0.5;
