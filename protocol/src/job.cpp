@@ -14,21 +14,23 @@ namespace {
 using Kind = ParamInfo::Kind;
 
 // The presets (README, "Quality"), measured on the Cornell box against the path tracer: draft
-// 0.2 s, p90 70 %; default 1.0 s, p90 31 %; high (the final gather) 3.4 s, p90 7.8 %.
+// 0.2 s, p90 70 %; default (light pools) 1.5 s, p90 12 %; high (and the final gather) 2.8 s, p90 4.6 %.
 void apply_quality(JobSpec& s, Quality q) {
-  const solver::Params defaults;
+  const solver::Params defaults = default_solver_params();
   s.quality = q;
   s.params.resolution = defaults.resolution;
   s.params.feps = defaults.feps;
   s.params.beps = defaults.beps;
   s.params.convergence = defaults.convergence;
   s.params.gather = defaults.gather;
+  s.params.pools = defaults.pools;
   switch (q) {
     case Quality::kDraft:
       s.params.resolution = 50;
       s.params.feps = 3e-3;
       s.params.beps = 0.1;
       s.params.convergence = 0.01;
+      s.params.pools = false;
       break;
     case Quality::kDefault: break;
     case Quality::kHigh: s.params.gather = true; break;
@@ -44,7 +46,7 @@ const ParamInfo kParams[] = {
      [](const JobSpec& s) { return static_cast<double>(s.method); },
      [](JobSpec& s, double v) { s.method = static_cast<Method>(v); }},
     {"quality", "quality", Kind::kQuality, 0, 2,
-     "draft, default or high: a preset of resolution, feps, beps, convergence and gather, which those given with it override",
+     "draft, default or high: a preset of resolution, feps, beps, convergence, pools and gather, which those given with it override",
      [](const JobSpec& s) { return static_cast<double>(s.quality); },
      [](JobSpec& s, double v) { apply_quality(s, static_cast<Quality>(v)); }},
     {"resolution", "resolution", Kind::kWhole, 4, 4096, "hemicube top face in pixels (even)",
@@ -75,7 +77,7 @@ const ParamInfo kParams[] = {
      [](const JobSpec& s) { return s.params.gather ? 1.0 : 0.0; },
      [](JobSpec& s, double v) { s.params.gather = v != 0.0; }},
     {"pools", "pools", Kind::kFlag, 0, 1,
-     "aa, classical: a first pass finds where light pools on surfaces too large for one shot to split (a floor under small lamps), and the solve starts with them split (off: one pass; see README)",
+     "aa, classical: a first pass finds where light pools on surfaces too large for one shot to split (a floor under small lamps), and the solve starts with them split (off: one pass, as the draft preset; see README)",
      [](const JobSpec& s) { return s.params.pools ? 1.0 : 0.0; },
      [](JobSpec& s, double v) { s.params.pools = v != 0.0; }},
     {"cluster_size", "cluster-size", Kind::kNumber, 0, kNoLimit,

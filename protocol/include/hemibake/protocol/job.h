@@ -24,11 +24,20 @@ enum class Quality : uint8_t { kDraft, kDefault, kHigh };
 const char* to_string(Quality quality);
 std::optional<Quality> quality_from(std::string_view name);
 
+/// The solver's settings at the default preset: the library's defaults with light pools on
+/// (solver::Params::pools is off in the library, whose tests judge one pass at a time).
+inline solver::Params default_solver_params() {
+  solver::Params p;
+  p.pools = true;
+  return p;
+}
+
 struct JobSpec {
   Method method = Method::kAntiAliased;
   Quality quality = Quality::kDefault;  ///< the preset the settings started from
-  solver::Params params;   ///< the solver's settings; params.method is not read: `method` decides
-                           ///< (solver_params() gives the solver what it runs)
+  solver::Params params = default_solver_params();  ///< the solver's settings; params.method is not
+                                                    ///< read: `method` decides (solver_params()
+                                                    ///< gives the solver what it runs)
   WriteOptions write;      ///< the output file
   uint32_t rays = 4;       ///< hr: visibility rays per link
   uint32_t samples = 256;  ///< reference: paths per vertex
