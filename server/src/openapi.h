@@ -108,7 +108,7 @@ inline constexpr const char* kOpenApi = R"json({
     },
     "/healthz": {"get": {"summary": "Liveness", "security": [{}], "responses": {"200": {"description": "Alive"}}}},
     "/readyz": {"get": {"summary": "Readiness", "security": [{}], "responses": {"200": {"description": "Ready"}, "503": {"description": "Not ready"}}}},
-    "/metrics": {"get": {"summary": "Prometheus metrics", "responses": {"200": {"description": "Text exposition format", "content": {"text/plain": {}}}}}},
+    "/metrics": {"get": {"summary": "Prometheus metrics", "description": "hemibake_store_up is 0 while the job store cannot answer; the job counts (hemibake_jobs, hemibake_queue_depth) are then left out rather than given as 0, and the node's own metrics are still given", "responses": {"200": {"description": "Text exposition format", "content": {"text/plain": {}}}}}},
     "/openapi.json": {"get": {"summary": "This document", "responses": {"200": {"description": "OpenAPI 3.1"}}}}
   }
 })json";

@@ -822,11 +822,31 @@ Response Service::submit(const Request& req, const std::string& query) {
 
 Response Service::metrics() {
   std::ostringstream m;
-  m << "# HELP hemibake_jobs Jobs in the store by state.\n# TYPE hemibake_jobs gauge\n";
-  for (JobState s : {JobState::kQueued, JobState::kRunning, JobState::kSucceeded, JobState::kFailed, JobState::kCancelled})
-    m << "hemibake_jobs{state=\"" << to_string(s) << "\"} " << store_->count(s) << "\n";
-  m << "# HELP hemibake_queue_depth Jobs waiting for a worker.\n# TYPE hemibake_queue_depth gauge\n";
-  m << "hemibake_queue_depth " << store_->count(JobState::kQueued) << "\n";
+  // Job counts come from the store. While it cannot answer they are left out, not given as 0 (a
+  // dashboard would show an empty queue and no running jobs), and hemibake_store_up is 0, as the
+  // exporters of databases do (pg_up, mysql_up). The answer is still 200 with this node's own
+  // metrics: Prometheus's `up` keeps meaning that the node answers, and an alert on
+  // hemibake_store_up == 0 (or on absent(hemibake_jobs)) tells the store's outage apart.
+  ReadError why;
+  std::vector<std::pair<JobState, size_t>> counts;
+  for (JobState s : {JobState::kQueued, JobState::kRunning, JobState::kSucceeded, JobState::kFailed, JobState::kCancelled}) {
+    const size_t n = store_->count(s, &why);
+    if (!why.error.empty()) break;
+    counts.emplace_back(s, n);
+  }
+  const bool store_up = why.error.empty();
+  m << "# HELP hemibake_store_up Whether the job store answered this scrape (0: it is busy or cannot be reached, and the job "
+       "counts are left out).\n# TYPE hemibake_store_up gauge\n";
+  m << "hemibake_store_up " << (store_up ? 1 : 0) << "\n";
+  if (store_up) {
+    m << "# HELP hemibake_jobs Jobs in the store by state.\n# TYPE hemibake_jobs gauge\n";
+    for (const auto& [state, n] : counts) m << "hemibake_jobs{state=\"" << to_string(state) << "\"} " << n << "\n";
+    m << "# HELP hemibake_queue_depth Jobs waiting for a worker.\n# TYPE hemibake_queue_depth gauge\n";
+    m << "hemibake_queue_depth " << counts.front().second << "\n";
+  }
+  m << "# HELP hemibake_job_ends_unwritten Jobs whose end (result or failure) the store could not write yet; tried again "
+       "in the background.\n# TYPE hemibake_job_ends_unwritten gauge\n";
+  m << "hemibake_job_ends_unwritten " << unwritten() << "\n";
   m << "# HELP hemibake_checks_waiting Submitted scenes waiting for a check thread.\n# TYPE hemibake_checks_waiting gauge\n";
   m << "hemibake_checks_waiting " << checks_->waiting() << "\n";
   {

@@ -198,6 +198,58 @@ TEST_F(Nodes, JobReadsAnswer503WhileTheDatabaseIsDownNot404) {
   EXPECT_EQ(request(a->port(), http::verb::get, "/v1/jobs/0123456789abcdef0123456789abcdef").status, 404);
 }
 
+// The value of the sample `name` (with its labels, as in the text) in Prometheus text, if present.
+std::optional<double> sample(const std::string& text, const std::string& name) {
+  std::istringstream lines(text);
+  for (std::string line; std::getline(lines, line);)
+    if (line.rfind(name + " ", 0) == 0) return std::strtod(line.c_str() + name.size() + 1, nullptr);
+  return std::nullopt;
+}
+
+// While the database is down, /metrics still answers (the node's own metrics stay scrapable) but
+// says the store is down (hemibake_store_up 0) and gives no job counts rather than zeros, which a
+// dashboard would show as an empty queue. Before and after, the counts are the database's.
+TEST_F(Nodes, MetricsSayTheStoreIsDownInsteadOfCountingNoJobs) {
+  auto a = node(30);
+  const Reply posted = request(a->port(), http::verb::post, small_job(400), cornell(), kGltf);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  ASSERT_EQ(wait_finished(a->port(), posted.js()["id"], 60s)["state"], "succeeded");
+  auto counts_match = [&](const std::string& m) {
+    for (const char* state : {"queued", "running", "succeeded", "failed", "cancelled"}) {
+      const auto v = sample(m, std::string("hemibake_jobs{state=\"") + state + "\"}");
+      EXPECT_TRUE(v) << state << " is not counted:\n" << m;
+      if (v) {
+        EXPECT_EQ(*v, sql_int(std::string("SELECT count(*) FROM jobs WHERE state = '") + state + "'")) << state;
+      }
+    }
+  };
+  Reply up = request(a->port(), http::verb::get, "/metrics");
+  ASSERT_EQ(up.status, 200);
+  EXPECT_EQ(sample(up.body, "hemibake_store_up"), 1.0) << up.body;
+  counts_match(up.body);
+  pg().stop();
+  struct Restart {  // the other tests need the database, whatever happens here
+    bool up = false;
+    ~Restart() {
+      if (!up) pg().start();
+    }
+  } restart;
+  const Reply down = request(a->port(), http::verb::get, "/metrics");
+  EXPECT_EQ(down.status, 200) << down.body;
+  EXPECT_EQ(sample(down.body, "hemibake_store_up"), 0.0) << down.body;
+  EXPECT_EQ(down.body.find("hemibake_jobs{"), std::string::npos) << "job counts while the store cannot be read:\n" << down.body;
+  EXPECT_FALSE(sample(down.body, "hemibake_queue_depth")) << down.body;
+  EXPECT_TRUE(sample(down.body, "hemibake_bake_seconds_count")) << "the node's own metrics are gone:\n" << down.body;
+  ASSERT_TRUE(restart.up = pg().start());
+  for (int i = 0; i < 100; ++i) {
+    up = request(a->port(), http::verb::get, "/metrics");
+    if (sample(up.body, "hemibake_store_up") == 1.0) break;
+    std::this_thread::sleep_for(100ms);
+  }
+  EXPECT_EQ(sample(up.body, "hemibake_store_up"), 1.0) << up.body;
+  counts_match(up.body);
+}
+
 // The command line against a node whose database is down: status, fetch and a whole bake (submit,
 // watch, fetch) started during the outage wait as Retry-After says, say on stderr what they wait
 // for, and finish once the database is back, with one job made by the bake. With the database
