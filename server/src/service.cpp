@@ -500,6 +500,7 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
   }
   bool over_budget = false;
   double last_report = -1.0;
+  protocol::JobProgress last;  // the newest progress, stored or not: where a stopped bake stopped
   protocol::BakeHooks hooks;
   hooks.cancel = &token;
   // Stores a progress record (at most every 0.5 s, and the last one) and checks the time budget.
@@ -509,11 +510,13 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
       over_budget = true;
       token.cancel();
     }
+    // The bake reports "done" when it stops, also when it was stopped: that end is written below.
+    if (p.phase == "done" && token.cancelled()) return;
+    last = p;
+    last.elapsed_seconds = elapsed;  // since the job started, loading included
     if (p.phase != "done" && elapsed - last_report < 0.5) return;
     last_report = elapsed;
-    protocol::JobProgress timed = p;
-    timed.elapsed_seconds = elapsed;  // since the job started, loading included
-    const std::string text = protocol::progress_json(timed);
+    const std::string text = protocol::progress_json(last);
     store_->set_progress(id, text);
     emit(id, "progress", text);
   };
@@ -523,6 +526,18 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
   auto baked = protocol::bake(*loaded.document, spec, hooks);
   const solver::Stats& st = baked.solution.stats;
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  // Stopped by a DELETE (here or on another node: the store says cancelled already, as a DELETE
+  // stores the cancel before it stops the bake; a job this node lost to an expired lease is fenced
+  // off and nothing is written): the progress says so, with the fraction, shots and elements where
+  // the bake stopped, before the stream is told.
+  if (token.cancelled() && !over_budget && running_) {
+    last.phase = "cancelled";
+    last.eta_seconds = -1.0;
+    last.elapsed_seconds = seconds;
+    const std::string text = protocol::progress_json(last);
+    store_->set_progress(id, text);
+    emit(id, "progress", text);
+  }
   if (st.cancelled) {
     if (over_budget) {
       end_job(id, nullptr, "the bake exceeded its time budget of " + std::to_string(options_.job_seconds) + " s");

@@ -136,6 +136,46 @@ TEST(Server, CancelStopsARunningJob) {
   EXPECT_EQ(wait_finished(server.port(), next.js()["id"])["state"], "succeeded");
 }
 
+// A cancelled bake says so in its status and in its stream, with the progress where it stopped
+// (it used to report the phase "done" with the whole phase done).
+TEST(Server, CancelledJobReportsWhereItStopped) {
+  ServerProcess server(temp_dir("cancel-progress"), {"--workers", "1"});
+  const Reply posted = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.000001&aeps=0.00002", cornell(), kGltf);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = posted.js()["id"];
+  json before;
+  for (int i = 0; i < 600; ++i) {
+    before = request(server.port(), http::verb::get, "/v1/jobs/" + id).js();
+    if (before.contains("progress") && before["progress"].value("shots", 0) > 0) break;
+    std::this_thread::sleep_for(50ms);
+  }
+  ASSERT_TRUE(before.contains("progress")) << before.dump();
+  ASSERT_EQ(before["state"], "running") << before.dump();
+  ASSERT_EQ(request(server.port(), http::verb::delete_, "/v1/jobs/" + id).status, 200);
+  // The stream ends after the worker's last word: no progress event claims the bake was done; the
+  // last one says where it stopped, before the final state.
+  const auto all = events(server.port(), id);
+  ASSERT_FALSE(all.empty());
+  std::string last_progress = "{}";
+  for (const auto& [eid, type, data] : all) {
+    if (type != "progress") continue;
+    EXPECT_NE(json::parse(data).value("phase", ""), "done") << "a cancelled bake reported: " << data;
+    last_progress = data;
+  }
+  EXPECT_EQ(json::parse(last_progress).value("phase", ""), "cancelled") << last_progress;
+  // The status says the same.
+  const json after = request(server.port(), http::verb::get, "/v1/jobs/" + id).js();
+  ASSERT_EQ(after["state"], "cancelled") << after.dump();
+  ASSERT_TRUE(after.contains("progress")) << after.dump();
+  const json& p = after["progress"];
+  EXPECT_EQ(p.value("phase", ""), "cancelled") << after.dump();
+  EXPECT_LT(p.value("fraction", 1.0), 1.0) << after.dump();
+  EXPECT_GE(p.value("shots", 0), before["progress"].value("shots", 0)) << after.dump();
+  EXPECT_GT(p.value("unshot_fraction", 0.0), 0.000001) << "the bake was stopped short of its convergence: " << after.dump();
+  EXPECT_EQ(std::get<1>(all.back()), "state");
+  EXPECT_EQ(json::parse(std::get<2>(all.back())).value("state", ""), "cancelled");
+}
+
 TEST(Server, QueueLimitAnswers429WithRetryAfter) {
   ServerProcess server(temp_dir("queue"), {"--workers", "1", "--max-queue", "1"});
   std::vector<std::string> ids;
