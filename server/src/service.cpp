@@ -335,6 +335,7 @@ std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::uniq
   s->lookups_ = std::make_unique<Pool>("lookup", kLookupThreads, kMaxLookups);
   s->running_ = true;
   s->clock_ = std::thread([p = s.get()] { p->clock_loop(); });
+  s->end_writer_ = std::thread([p = s.get()] { p->end_writer_loop(); });
   const unsigned n = options.workers != 0 ? options.workers : std::max(1u, std::thread::hardware_concurrency());
   for (unsigned i = 0; i < n; ++i) s->workers_.emplace_back([p = s.get()] { p->worker_loop(); });
   return s;
@@ -370,6 +371,11 @@ void Service::stop() {
   wake_.notify_all();
   clock_wake_.notify_all();
   if (clock_.joinable()) clock_.join();
+  {
+    std::lock_guard lock(unwritten_mutex_);  // the end writer is waiting, or sees running_ false
+  }
+  ends_wake_.notify_all();
+  if (end_writer_.joinable()) end_writer_.join();
   // Requests not begun are answered 503; those being answered finish (a preview asked for now is
   // refused, as running_ is false).
   checks_->stop();
@@ -445,7 +451,6 @@ void Service::count_response(int status) {
 void Service::worker_loop() {
   lower_thread_priority(kBackgroundNice);  // a bake never delays a request's answer
   while (running_) {
-    write_unwritten();
     std::string id, scene, params;
     if (!store_->claim(id, scene, params)) {
       // Idle: now and then, delete finished jobs past their time.
@@ -571,9 +576,10 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
 // stream is then told "cancelled" (the DELETE of a running job leaves that to the worker), and the
 // result is dropped. A result the store cannot write (a full disk) fails the job with the reason.
 // A store that is busy (another program holds its lock) is tried again for a few seconds. If the
-// end still cannot be written, the worker leaves it with write_unwritten(), which tries again
-// before each claim, and takes the next job: no worker waits on a broken store, and the job ends
-// (its stream too) once the store writes again. Returns true if the job succeeded.
+// end still cannot be written, the worker leaves it to the end writer (end_writer_loop), which tries
+// again in the background, and takes the next job: no worker waits on a broken store, and the job
+// ends (its stream too) within seconds of the store writing again, whatever the workers are doing.
+// Returns true if the job succeeded.
 bool Service::end_job(const std::string& id, const std::string* result, std::string failure) {
   Unwritten end{result ? std::optional<std::string>(*result) : std::nullopt, std::move(failure)};
   for (int attempt = 0;; ++attempt) {
@@ -587,8 +593,11 @@ bool Service::end_job(const std::string& id, const std::string* result, std::str
   }
   std::fprintf(stderr, "hemibake-server: the end of job %s could not be stored (%s); it is stored when the store writes again\n",
                id.c_str(), end.failure.c_str());
-  std::lock_guard lock(unwritten_mutex_);
-  unwritten_[id] = std::move(end);
+  {
+    std::lock_guard lock(unwritten_mutex_);
+    unwritten_[id] = std::move(end);
+  }
+  ends_wake_.notify_one();
   return false;
 }
 
@@ -652,6 +661,29 @@ void Service::write_unwritten() {
   std::lock_guard lock(unwritten_mutex_);
   ends.merge(unwritten_);
   unwritten_.swap(ends);
+}
+
+// The ends the store refused, tried again in the background: 0.25 s after one is left here, then
+// twice as long after each round the store refuses, up to every 5 s, for as long as the store
+// refuses (a job's end is never dropped while the service runs; a restart queues the job again).
+// The ends used to be tried only before a worker's next claim, so a job whose end was refused
+// showed "running" for as long as every worker was busy with a long bake.
+void Service::end_writer_loop() {
+  constexpr auto kFirst = std::chrono::milliseconds(250), kLongest = std::chrono::milliseconds(5000);
+  auto pause = kFirst;
+  std::unique_lock lock(unwritten_mutex_);
+  while (running_) {
+    if (unwritten_.empty()) {
+      pause = kFirst;
+      ends_wake_.wait(lock, [&] { return !running_ || !unwritten_.empty(); });
+      continue;
+    }
+    if (ends_wake_.wait_for(lock, pause, [&] { return !running_; })) break;
+    lock.unlock();
+    write_unwritten();
+    lock.lock();
+    pause = std::min(pause * 2, kLongest);
+  }
 }
 
 size_t Service::unwritten() {
