@@ -76,6 +76,9 @@ bool own_option(const std::string& opt, const std::string& val, CommandLine& o, 
   } else if (opt == "--max-triangles") {
     if (whole_in(val, 1, 1ull << 40, n)) o.limits.max_triangles = n;
     else err = "--max-triangles must be a whole number from 1 (got '" + val + "')";
+  } else if (opt == "--retry-seconds") {
+    if (whole_in(val, 0, 86400, n)) o.retry_seconds = static_cast<double>(n);
+    else err = "--retry-seconds must be a whole number from 0 to 86400 (got '" + val + "')";
   } else if (opt == "--patches") {
     if (whole_in(val, 100, 1'000'000, n)) o.patches = static_cast<uint32_t>(n);
     else err = "--patches must be a whole number from 100 to 1000000 (got '" + val + "')";
@@ -110,7 +113,9 @@ std::string usage() {
          "  --max-triangles N       bake: refuse larger scenes (default 2000000)\n"
          "  --render FILE.png       bake, cornell, room: also render the result (Gouraud) to a PNG\n"
          "  --wireframe FILE.png    bake, cornell, room: also render the mesh (flat, element edges) to a PNG\n"
-         "  --camera X,Y,Z:TX,TY,TZ the renders' camera and the point it looks at\n";
+         "  --camera X,Y,Z:TX,TY,TZ the renders' camera and the point it looks at\n"
+         "  --retry-seconds S       server commands: keep trying for up to S s while the server answers 503\n"
+         "                          (its job store busy or unreachable), waiting as it asks (default 60; 0: no)\n";
 }
 
 std::string parse_command_line(std::span<const std::string> args, CommandLine& o) {
@@ -189,6 +194,7 @@ int run(const CommandLine& o, const Console& console) {
     return 2;
   }
   remote.token = o.token;
+  remote.retry_seconds = o.retry_seconds;
   if (o.command != "list" && o.input.empty()) {
     std::fprintf(console.err, "hemibake: %s needs %s\n", o.command.c_str(),
                  o.command == "submit" || o.command == "bake" ? "an input file" : "a job id");

@@ -122,7 +122,7 @@ protocol::Solution solve_builtin(const solver::Scene& scene, const CommandLine& 
 }  // namespace
 
 void ProgressPrinter::update(const protocol::JobProgress& p) {
-  if (p.phase == "done") return finish();
+  if (p.phase == "done" || p.phase == "cancelled") return finish();
   const bool shooting = p.phase == "shooting";
   // The first shots say little about the time left.
   const double eta = p.elapsed_seconds >= 1.0 ? p.eta_seconds : -1.0;

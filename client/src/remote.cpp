@@ -13,6 +13,8 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <random>
+#include <thread>
 #include <sstream>
 
 namespace hemibake::client {
@@ -24,15 +26,33 @@ namespace net = boost::asio;
 using tcp = net::ip::tcp;
 using nlohmann::json;
 
+using Clock = std::chrono::steady_clock;
+
+// "5 s", "0.5 s".
+std::string seconds_text(double seconds) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%g s", std::round(seconds * 10.0) / 10.0);
+  return text;
+}
+
 struct Reply {
   int status = 0;
   std::string body;
   std::map<std::string, std::string> headers;
-  std::string error;  ///< a transport failure
+  std::string error;           ///< a transport failure
+  double retry_after = -1.0;   ///< seconds, from Retry-After (delay-seconds); -1: none
+  double gave_up_after = -1.0; ///< a 503 still answered after this many seconds of retries
 };
 
+// Retry-After as delay-seconds (RFC 9110, section 10.2.3); -1 if absent or an HTTP-date, which
+// hemibake-server never sends.
+double parse_retry_after(const std::string& value) {
+  if (value.empty() || !std::all_of(value.begin(), value.end(), [](unsigned char ch) { return std::isdigit(ch) != 0; })) return -1.0;
+  return std::min(std::strtod(value.c_str(), nullptr), 3600.0);
+}
+
 Reply call(const Remote& r, http::verb verb, const std::string& target, const std::string& body = {},
-           const std::string& content_type = {}) {
+           const std::string& content_type = {}, const std::map<std::string, std::string>& headers = {}) {
   Reply out;
   try {
     net::io_context io;
@@ -45,6 +65,7 @@ Reply call(const Remote& r, http::verb verb, const std::string& target, const st
     req.set(http::field::user_agent, "hemibake");
     if (!r.token.empty()) req.set(http::field::authorization, "Bearer " + r.token);
     if (!content_type.empty()) req.set(http::field::content_type, content_type);
+    for (const auto& [name, value] : headers) req.set(name, value);
     req.body() = body;
     req.prepare_payload();
     http::write(stream, req);
@@ -55,6 +76,7 @@ Reply call(const Remote& r, http::verb verb, const std::string& target, const st
     out.status = static_cast<int>(parser.get().result_int());
     out.body = parser.get().body();
     for (const auto& f : parser.get()) out.headers[std::string(f.name_string())] = std::string(f.value());
+    out.retry_after = parse_retry_after(std::string(parser.get()[http::field::retry_after]));
   } catch (const boost::system::system_error& e) {
     out.error = "cannot reach the server at " + r.host + ":" + r.port + ": " + e.code().message();
   } catch (const std::exception& e) {
@@ -63,22 +85,96 @@ Reply call(const Remote& r, http::verb verb, const std::string& target, const st
   return out;
 }
 
+// The server's own error message in `reply`, or empty if it sent none (a proxy's page, say).
+std::string server_error(const Reply& reply) {
+  const json j = json::parse(reply.body, nullptr, false);
+  return j.is_object() && j.contains("error") && j["error"].is_string() ? j["error"].get<std::string>() : std::string();
+}
+
 // Prints the server's error for a failed call; returns the exit status 1.
 int report(const Remote& r, const Reply& reply, const Console& c) {
   if (!reply.error.empty()) {
     std::fprintf(c.err, "hemibake: %s\n", reply.error.c_str());
     return 1;
   }
-  const json j = json::parse(reply.body, nullptr, false);
-  if (!j.is_object() || !j.contains("error") || !j["error"].is_string()) {
+  const std::string gave_up =
+      reply.gave_up_after > 0 ? " (still so after " + seconds_text(reply.gave_up_after) + "; --retry-seconds waits longer)" : "";
+  const std::string message = server_error(reply);
+  if (message.empty()) {
+    if (reply.status == 503) {  // a proxy or load balancer in front of the server says it has none to send to
+      std::fprintf(c.err, "hemibake: the server at %s:%s is unavailable (503)%s\n", r.host.c_str(), r.port.c_str(), gave_up.c_str());
+      return 1;
+    }
     // Not one of ours (a proxy, another web server): its page would only bury the point.
     std::fprintf(c.err, "hemibake: the server at %s:%s answered %d without a hemibake error; is it a hemibake-server?\n",
                  r.host.c_str(), r.port.c_str(), reply.status);
     return 1;
   }
-  std::fprintf(c.err, "hemibake: the server answered %d: %s%s\n", reply.status, j["error"].get<std::string>().c_str(),
-               reply.status == 401 ? " (set HEMIBAKE_TOKEN)" : "");
+  std::fprintf(c.err, "hemibake: the server answered %d: %s%s%s\n", reply.status, message.c_str(),
+               reply.status == 401 ? " (set HEMIBAKE_TOKEN)" : "", gave_up.c_str());
   return 1;
+}
+
+// Waits between tries of a request that the server answered 503 (its job store is busy or cannot
+// be reached, it has too much waiting, it is stopping; a proxy with no server to send to): as long
+// as Retry-After asks (5 s without one), for up to Remote::retry_seconds from the first 503, saying
+// on stderr what it waits for.
+class Retrier {
+ public:
+  Retrier(const Remote& r, const Console& c, std::string what) : r_(r), c_(c), what_(std::move(what)) {}
+  /// After a 503 (`why`: the server's reason): waits and returns true, or returns false once the
+  /// time is up.
+  bool wait(double retry_after, const std::string& why) {
+    const auto now = Clock::now();
+    if (!waiting_) start_ = now;
+    waiting_ = true;
+    const double left = r_.retry_seconds - std::chrono::duration<double>(now - start_).count();
+    if (left <= 0.0) return false;
+    const double pause = std::min(retry_after >= 0.0 ? std::max(retry_after, 0.1) : 5.0, left);
+    std::fprintf(c_.err, "hemibake: %s: %s; trying again in %s\n", what_.c_str(), why.c_str(), seconds_text(pause).c_str());
+    std::fflush(c_.err);
+    std::this_thread::sleep_for(std::chrono::duration<double>(pause));
+    return true;
+  }
+  /// The request was answered: a later outage has the whole time again.
+  void reset() { waiting_ = false; }
+
+ private:
+  const Remote& r_;
+  const Console& c_;
+  std::string what_;
+  bool waiting_ = false;
+  Clock::time_point start_;
+};
+
+std::string unavailable_reason(const Reply& reply) {
+  const std::string message = server_error(reply);
+  return "the server is unavailable (503" + (message.empty() ? std::string() : ": " + message) + ")";
+}
+
+// `call`, tried again while the server answers 503 (see Retrier). The last answer is returned; if
+// it is still 503, gave_up_after says for how long it was tried.
+Reply call_retrying(const Remote& r, const Console& c, const std::string& what, http::verb verb, const std::string& target,
+                    const std::string& body = {}, const std::string& content_type = {},
+                    const std::map<std::string, std::string>& headers = {}) {
+  Retrier retry(r, c, what);
+  for (;;) {
+    Reply reply = call(r, verb, target, body, content_type, headers);
+    if (reply.status != 503) return reply;
+    if (!retry.wait(reply.retry_after, unavailable_reason(reply))) {
+      reply.gave_up_after = r.retry_seconds;
+      return reply;
+    }
+  }
+}
+
+// A fresh Idempotency-Key: a submission tried again after a lost answer names the job it made.
+std::string new_idempotency_key() {
+  std::random_device random;
+  static const char* hex = "0123456789abcdef";
+  std::string key;
+  for (int i = 0; i < 32; ++i) key += hex[random() & 15];
+  return key;
 }
 
 // A 200 answer's JSON object, or null after saying that the server is not a hemibake-server.
@@ -143,7 +239,10 @@ int remote_submit(const Remote& r, const std::string& path, const protocol::JobS
   data << in.rdbuf();
   const std::string bytes = data.str();
   const bool glb = bytes.size() >= 4 && bytes.compare(0, 4, "glTF") == 0;
-  const Reply reply = call(r, http::verb::post, "/v1/jobs" + query_of(spec), bytes, glb ? "model/gltf-binary" : "model/gltf+json");
+  // One key for every try: a try whose answer was lost made the job, and the next one is answered
+  // with that job instead of making a second.
+  const Reply reply = call_retrying(r, c, "submitting " + path, http::verb::post, "/v1/jobs" + query_of(spec), bytes,
+                                    glb ? "model/gltf-binary" : "model/gltf+json", {{"Idempotency-Key", new_idempotency_key()}});
   if (reply.status != 202 && reply.status != 200) return report(r, reply, c);
   const json j = answer_json(r, reply, c);
   if (j.is_null()) return 1;
@@ -155,7 +254,7 @@ int remote_submit(const Remote& r, const std::string& path, const protocol::JobS
 }
 
 int remote_status(const Remote& r, const std::string& id, const Console& c) {
-  const Reply reply = call(r, http::verb::get, job_path(id));
+  const Reply reply = call_retrying(r, c, "reading the status of job " + id, http::verb::get, job_path(id));
   if (reply.status != 200) return report(r, reply, c);
   const json j = answer_json(r, reply, c);
   if (j.is_null()) return 1;
@@ -163,84 +262,153 @@ int remote_status(const Remote& r, const std::string& id, const Console& c) {
   return 0;
 }
 
+namespace {
+
+// One connection to job `id`'s event stream, from after event `last_event`, read until the server
+// closes it. Progress goes to `printer`; `last_event` follows the events read; `ended` is set once a
+// state event names a final state. Returns the server's answer if it did not open the stream (its
+// status is 0 if it did).
+Reply follow_events(const Remote& r, const std::string& id, uint64_t& last_event, ProgressPrinter& printer, const Console& c,
+                    bool& ended) {
+  net::io_context io;
+  tcp::resolver resolver(io);
+  beast::tcp_stream stream(io);
+  stream.connect(resolver.resolve(r.host, r.port));
+  std::string req = "GET " + job_path(id) + "/events HTTP/1.1\r\nHost: " + r.host + "\r\nAccept: text/event-stream\r\n";
+  if (!r.token.empty()) req += "Authorization: Bearer " + r.token + "\r\n";
+  if (last_event > 0) req += "Last-Event-ID: " + std::to_string(last_event) + "\r\n";
+  req += "\r\n";
+  net::write(stream, net::buffer(req));
+  std::string pending;
+  bool header_done = false;
+  char buf[4096];
+  for (;;) {
+    stream.expires_after(std::chrono::seconds(60));  // the server sends a heartbeat every 15 s
+    beast::error_code ec;
+    const size_t n = stream.read_some(net::buffer(buf), ec);
+    pending.append(buf, n);
+    if (!header_done) {
+      const size_t end = pending.find("\r\n\r\n");
+      if (end != std::string::npos) {
+        if (pending.compare(0, 12, "HTTP/1.1 200") != 0) {
+          Reply refused;
+          refused.status = std::atoi(pending.c_str() + 9);
+          std::string head = pending.substr(0, end);
+          std::transform(head.begin(), head.end(), head.begin(), [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
+          // The error's body may come after the head: read it to its Content-Length.
+          if (const size_t at = head.find("\r\ncontent-length:"); at != std::string::npos) {
+            const size_t length = std::strtoull(head.c_str() + at + 17, nullptr, 10);
+            while (!ec && length <= (64u << 10) && pending.size() < end + 4 + length) {
+              const size_t more = stream.read_some(net::buffer(buf), ec);
+              pending.append(buf, more);
+            }
+          }
+          refused.body = pending.substr(end + 4);
+          if (const size_t at = head.find("\r\nretry-after:"); at != std::string::npos) {
+            std::string value = head.substr(at + 14, head.find('\r', at + 14) - (at + 14));
+            value.erase(0, value.find_first_not_of(' '));
+            value.erase(value.find_last_not_of(' ') + 1);
+            refused.retry_after = parse_retry_after(value);
+          }
+          return refused;
+        }
+        pending = pending.substr(end + 4);
+        header_done = true;
+      }
+    }
+    size_t blank;
+    while (header_done && (blank = pending.find("\n\n")) != std::string::npos) {
+      std::istringstream lines(pending.substr(0, blank));
+      pending = pending.substr(blank + 2);
+      std::string type, data;
+      for (std::string line; std::getline(lines, line);) {
+        if (line.rfind("event: ", 0) == 0) type = line.substr(7);
+        else if (line.rfind("data: ", 0) == 0) data = line.substr(6);
+        else if (line.rfind("id: ", 0) == 0) last_event = std::strtoull(line.c_str() + 4, nullptr, 10);
+      }
+      const json j = json::parse(data, nullptr, false);
+      if (type == "progress") {
+        if (const auto p = protocol::parse_progress_json(data)) printer.update(*p);
+      }
+      if (type == "state" && j.is_object()) {
+        const std::string state = j.value("state", "");
+        ended = ended || state == "succeeded" || state == "failed" || state == "cancelled";
+        if (state == "failed") {
+          printer.finish();
+          std::fprintf(c.err, "hemibake: the bake failed: %s\n", j.value("error", "").c_str());
+        }
+      }
+    }
+    if (ec) break;
+  }
+  return {};
+}
+
+}  // namespace
+
 int remote_watch(const Remote& r, const std::string& id, const Console& c) {
   ProgressPrinter printer(c);
-  std::string state;
-  try {
-    net::io_context io;
-    tcp::resolver resolver(io);
-    beast::tcp_stream stream(io);
-    stream.connect(resolver.resolve(r.host, r.port));
-    std::string req = "GET " + job_path(id) + "/events HTTP/1.1\r\nHost: " + r.host + "\r\nAccept: text/event-stream\r\n";
-    if (!r.token.empty()) req += "Authorization: Bearer " + r.token + "\r\n";
-    req += "\r\n";
-    net::write(stream, net::buffer(req));
-    std::string pending;
-    bool header_done = false;
-    char buf[4096];
-    for (;;) {
-      stream.expires_after(std::chrono::seconds(60));  // the server sends a heartbeat every 15 s
-      beast::error_code ec;
-      const size_t n = stream.read_some(net::buffer(buf), ec);
-      pending.append(buf, n);
-      if (!header_done) {
-        const size_t end = pending.find("\r\n\r\n");
-        if (end != std::string::npos) {
-          if (pending.compare(0, 12, "HTTP/1.1 200") != 0) {
-            const size_t body = end + 4;
-            Reply reply;
-            reply.status = std::atoi(pending.c_str() + 9);
-            reply.body = pending.substr(body);
-            return report(r, reply, c);
-          }
-          pending = pending.substr(end + 4);
-          header_done = true;
-        }
-      }
-      size_t blank;
-      while (header_done && (blank = pending.find("\n\n")) != std::string::npos) {
-        std::istringstream lines(pending.substr(0, blank));
-        pending = pending.substr(blank + 2);
-        std::string type, data;
-        for (std::string line; std::getline(lines, line);) {
-          if (line.rfind("event: ", 0) == 0) type = line.substr(7);
-          else if (line.rfind("data: ", 0) == 0) data = line.substr(6);
-        }
-        const json j = json::parse(data, nullptr, false);
-        if (type == "progress") {
-          if (const auto p = protocol::parse_progress_json(data)) printer.update(*p);
-        }
-        if (type == "state" && j.is_object()) {
-          state = j.value("state", "");
-          if (state == "failed") {
-            printer.finish();
-            std::fprintf(c.err, "hemibake: the bake failed: %s\n", j.value("error", "").c_str());
-          }
-        }
-      }
-      if (ec) break;
+  Retrier retry(r, c, "following job " + id);
+  uint64_t last_event = 0;
+  for (bool ended = false; !ended;) {
+    Reply refused;
+    const uint64_t before = last_event;
+    try {
+      refused = follow_events(r, id, last_event, printer, c, ended);
+    } catch (const boost::system::system_error& e) {
+      printer.finish();
+      std::fprintf(c.err, "hemibake: cannot reach the server at %s:%s: %s\n", r.host.c_str(), r.port.c_str(),
+                   e.code().message().c_str());
+      return 1;
+    } catch (const std::exception& e) {
+      printer.finish();
+      std::fprintf(c.err, "hemibake: cannot follow job %s: %s\n", id.c_str(), e.what());
+      return 1;
     }
-  } catch (const boost::system::system_error& e) {
-    std::fprintf(c.err, "hemibake: cannot reach the server at %s:%s: %s\n", r.host.c_str(), r.port.c_str(),
-                 e.code().message().c_str());
-    return 1;
-  } catch (const std::exception& e) {
-    std::fprintf(c.err, "hemibake: cannot follow job %s: %s\n", id.c_str(), e.what());
-    return 1;
+    if (ended) break;
+    if (refused.status == 503) {
+      printer.finish();
+      if (!retry.wait(refused.retry_after, unavailable_reason(refused))) {
+        refused.gave_up_after = r.retry_seconds;
+        return report(r, refused, c);
+      }
+      continue;
+    }
+    if (refused.status != 0) {
+      printer.finish();
+      return report(r, refused, c);
+    }
+    // The stream closed before a final state: the job may have ended without one (a restart that
+    // failed it after its last attempt), or the connection was cut (a server restarting, a proxy's
+    // timeout). Its state says which; if it still runs, the stream is followed again from the last
+    // event read.
+    if (last_event > before) retry.reset();  // it had got going: a new cut has the whole time again
+    printer.finish();
+    const Reply reply = call_retrying(r, c, "reading the status of job " + id, http::verb::get, job_path(id));
+    if (reply.status != 200) return report(r, reply, c);
+    const json j = answer_json(r, reply, c);
+    if (j.is_null()) return 1;
+    const std::string state = j.value("state", "");
+    if (state != "queued" && state != "running") break;
+    if (!retry.wait(1.0, "the event stream ended before the job did")) {
+      std::fprintf(c.err, "hemibake: the event stream of job %s kept ending before the job did; gave up after %s\n", id.c_str(),
+                   seconds_text(r.retry_seconds).c_str());
+      return 1;
+    }
   }
   printer.finish();
   // The stream ends after the final state; read it back to be sure of it.
-  const Reply reply = call(r, http::verb::get, job_path(id));
+  const Reply reply = call_retrying(r, c, "reading the status of job " + id, http::verb::get, job_path(id));
   if (reply.status != 200) return report(r, reply, c);
   const json j = answer_json(r, reply, c);
   if (j.is_null()) return 1;
-  state = j.value("state", "");
+  const std::string state = j.value("state", "");
   std::fprintf(c.err, "hemibake: job %s %s\n", id.c_str(), state.c_str());
   return state == "succeeded" ? 0 : 1;
 }
 
 int remote_fetch(const Remote& r, const std::string& id, const std::string& out_path, const Console& c) {
-  const Reply reply = call(r, http::verb::get, job_path(id) + "/result");
+  const Reply reply = call_retrying(r, c, "fetching the result of job " + id, http::verb::get, job_path(id) + "/result");
   if (reply.status != 200) return report(r, reply, c);
   if (reply.body.compare(0, 4, "glTF") != 0) {
     std::fprintf(c.err, "hemibake: the server at %s:%s did not answer with a GLB; is it a hemibake-server?\n", r.host.c_str(),
@@ -257,7 +425,7 @@ int remote_fetch(const Remote& r, const std::string& id, const std::string& out_
 }
 
 int remote_cancel(const Remote& r, const std::string& id, const Console& c) {
-  const Reply reply = call(r, http::verb::delete_, job_path(id));
+  const Reply reply = call_retrying(r, c, "cancelling job " + id, http::verb::delete_, job_path(id));
   if (reply.status != 200) return report(r, reply, c);
   if (answer_json(r, reply, c).is_null()) return 1;
   std::fprintf(c.out, "job %s cancelled\n", id.c_str());
@@ -266,7 +434,7 @@ int remote_cancel(const Remote& r, const std::string& id, const Console& c) {
 
 int remote_list(const Remote& r, const std::string& state, const Console& c) {
   std::string target = "/v1/jobs?limit=100" + (state.empty() ? std::string() : "&state=" + state);
-  const Reply reply = call(r, http::verb::get, target);
+  const Reply reply = call_retrying(r, c, "listing jobs", http::verb::get, target);
   if (reply.status != 200) return report(r, reply, c);
   const json j = answer_json(r, reply, c);
   if (j.is_null()) return 1;

@@ -13,7 +13,7 @@ inline constexpr const char* kOpenApi = R"json({
     "schemas": {
       "Error": {"type": "object", "properties": {"error": {"type": "string"}}, "required": ["error"]},
       "Progress": {"type": "object", "properties": {
-        "phase": {"enum": ["shooting", "linking", "gathering", "tracing", "done"], "description": "shooting: aa or classical progressive refinement (also a reference job's first phase); linking and gathering: hr; tracing: a reference job's path tracing"},
+        "phase": {"enum": ["shooting", "linking", "gathering", "tracing", "done", "cancelled"], "description": "shooting: aa or classical progressive refinement (also a reference job's first phase); linking and gathering: hr; tracing: a reference job's path tracing; cancelled: the bake was stopped by a DELETE, and the fraction, shots, unshot fraction and elements are where it stopped"},
         "fraction": {"type": "number", "description": "0..1 through the phase (shooting: log of the unshot fraction against the target)"},
         "links": {"type": "integer", "description": "hr only"}, "iterations": {"type": "integer", "description": "hr only"},
         "shots": {"type": "integer"}, "unshot_fraction": {"type": "number"}, "elements": {"type": "integer"},
@@ -108,7 +108,7 @@ inline constexpr const char* kOpenApi = R"json({
     },
     "/healthz": {"get": {"summary": "Liveness", "security": [{}], "responses": {"200": {"description": "Alive"}}}},
     "/readyz": {"get": {"summary": "Readiness", "security": [{}], "responses": {"200": {"description": "Ready"}, "503": {"description": "Not ready"}}}},
-    "/metrics": {"get": {"summary": "Prometheus metrics", "responses": {"200": {"description": "Text exposition format", "content": {"text/plain": {}}}}}},
+    "/metrics": {"get": {"summary": "Prometheus metrics", "description": "hemibake_store_up is 0 while the job store cannot answer; the job counts (hemibake_jobs, hemibake_queue_depth) are then left out rather than given as 0, and the node's own metrics are still given", "responses": {"200": {"description": "Text exposition format", "content": {"text/plain": {}}}}}},
     "/openapi.json": {"get": {"summary": "This document", "responses": {"200": {"description": "OpenAPI 3.1"}}}}
   }
 })json";

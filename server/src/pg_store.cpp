@@ -455,8 +455,9 @@ class PgStore final : public Store {
     return r.rows() == 1 ? static_cast<int>(r.get_int(0, 0)) : 0;
   }
 
-  size_t count(JobState state) override {
+  size_t count(JobState state, ReadError* why) override {
     Result r = exec("SELECT count(*) FROM jobs WHERE state = $1", {text(to_string(state))});
+    if (!r.answered(why)) return 0;
     return r.rows() == 1 ? static_cast<size_t>(r.get_int(0, 0)) : 0;
   }
 

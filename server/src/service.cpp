@@ -335,6 +335,7 @@ std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::uniq
   s->lookups_ = std::make_unique<Pool>("lookup", kLookupThreads, kMaxLookups);
   s->running_ = true;
   s->clock_ = std::thread([p = s.get()] { p->clock_loop(); });
+  s->end_writer_ = std::thread([p = s.get()] { p->end_writer_loop(); });
   const unsigned n = options.workers != 0 ? options.workers : std::max(1u, std::thread::hardware_concurrency());
   for (unsigned i = 0; i < n; ++i) s->workers_.emplace_back([p = s.get()] { p->worker_loop(); });
   return s;
@@ -370,6 +371,11 @@ void Service::stop() {
   wake_.notify_all();
   clock_wake_.notify_all();
   if (clock_.joinable()) clock_.join();
+  {
+    std::lock_guard lock(unwritten_mutex_);  // the end writer is waiting, or sees running_ false
+  }
+  ends_wake_.notify_all();
+  if (end_writer_.joinable()) end_writer_.join();
   // Requests not begun are answered 503; those being answered finish (a preview asked for now is
   // refused, as running_ is false).
   checks_->stop();
@@ -445,7 +451,6 @@ void Service::count_response(int status) {
 void Service::worker_loop() {
   lower_thread_priority(kBackgroundNice);  // a bake never delays a request's answer
   while (running_) {
-    write_unwritten();
     std::string id, scene, params;
     if (!store_->claim(id, scene, params)) {
       // Idle: now and then, delete finished jobs past their time.
@@ -500,6 +505,7 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
   }
   bool over_budget = false;
   double last_report = -1.0;
+  protocol::JobProgress last;  // the newest progress, stored or not: where a stopped bake stopped
   protocol::BakeHooks hooks;
   hooks.cancel = &token;
   // Stores a progress record (at most every 0.5 s, and the last one) and checks the time budget.
@@ -509,11 +515,13 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
       over_budget = true;
       token.cancel();
     }
+    // The bake reports "done" when it stops, also when it was stopped: that end is written below.
+    if (p.phase == "done" && token.cancelled()) return;
+    last = p;
+    last.elapsed_seconds = elapsed;  // since the job started, loading included
     if (p.phase != "done" && elapsed - last_report < 0.5) return;
     last_report = elapsed;
-    protocol::JobProgress timed = p;
-    timed.elapsed_seconds = elapsed;  // since the job started, loading included
-    const std::string text = protocol::progress_json(timed);
+    const std::string text = protocol::progress_json(last);
     store_->set_progress(id, text);
     emit(id, "progress", text);
   };
@@ -523,6 +531,18 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
   auto baked = protocol::bake(*loaded.document, spec, hooks);
   const solver::Stats& st = baked.solution.stats;
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  // Stopped by a DELETE (here or on another node: the store says cancelled already, as a DELETE
+  // stores the cancel before it stops the bake; a job this node lost to an expired lease is fenced
+  // off and nothing is written): the progress says so, with the fraction, shots and elements where
+  // the bake stopped, before the stream is told.
+  if (token.cancelled() && !over_budget && running_) {
+    last.phase = "cancelled";
+    last.eta_seconds = -1.0;
+    last.elapsed_seconds = seconds;
+    const std::string text = protocol::progress_json(last);
+    store_->set_progress(id, text);
+    emit(id, "progress", text);
+  }
   if (st.cancelled) {
     if (over_budget) {
       end_job(id, nullptr, "the bake exceeded its time budget of " + std::to_string(options_.job_seconds) + " s");
@@ -556,9 +576,10 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
 // stream is then told "cancelled" (the DELETE of a running job leaves that to the worker), and the
 // result is dropped. A result the store cannot write (a full disk) fails the job with the reason.
 // A store that is busy (another program holds its lock) is tried again for a few seconds. If the
-// end still cannot be written, the worker leaves it with write_unwritten(), which tries again
-// before each claim, and takes the next job: no worker waits on a broken store, and the job ends
-// (its stream too) once the store writes again. Returns true if the job succeeded.
+// end still cannot be written, the worker leaves it to the end writer (end_writer_loop), which tries
+// again in the background, and takes the next job: no worker waits on a broken store, and the job
+// ends (its stream too) within seconds of the store writing again, whatever the workers are doing.
+// Returns true if the job succeeded.
 bool Service::end_job(const std::string& id, const std::string* result, std::string failure) {
   Unwritten end{result ? std::optional<std::string>(*result) : std::nullopt, std::move(failure)};
   for (int attempt = 0;; ++attempt) {
@@ -572,8 +593,11 @@ bool Service::end_job(const std::string& id, const std::string* result, std::str
   }
   std::fprintf(stderr, "hemibake-server: the end of job %s could not be stored (%s); it is stored when the store writes again\n",
                id.c_str(), end.failure.c_str());
-  std::lock_guard lock(unwritten_mutex_);
-  unwritten_[id] = std::move(end);
+  {
+    std::lock_guard lock(unwritten_mutex_);
+    unwritten_[id] = std::move(end);
+  }
+  ends_wake_.notify_one();
   return false;
 }
 
@@ -637,6 +661,29 @@ void Service::write_unwritten() {
   std::lock_guard lock(unwritten_mutex_);
   ends.merge(unwritten_);
   unwritten_.swap(ends);
+}
+
+// The ends the store refused, tried again in the background: 0.25 s after one is left here, then
+// twice as long after each round the store refuses, up to every 5 s, for as long as the store
+// refuses (a job's end is never dropped while the service runs; a restart queues the job again).
+// The ends used to be tried only before a worker's next claim, so a job whose end was refused
+// showed "running" for as long as every worker was busy with a long bake.
+void Service::end_writer_loop() {
+  constexpr auto kFirst = std::chrono::milliseconds(250), kLongest = std::chrono::milliseconds(5000);
+  auto pause = kFirst;
+  std::unique_lock lock(unwritten_mutex_);
+  while (running_) {
+    if (unwritten_.empty()) {
+      pause = kFirst;
+      ends_wake_.wait(lock, [&] { return !running_ || !unwritten_.empty(); });
+      continue;
+    }
+    if (ends_wake_.wait_for(lock, pause, [&] { return !running_; })) break;
+    lock.unlock();
+    write_unwritten();
+    lock.lock();
+    pause = std::min(pause * 2, kLongest);
+  }
 }
 
 size_t Service::unwritten() {
@@ -822,11 +869,31 @@ Response Service::submit(const Request& req, const std::string& query) {
 
 Response Service::metrics() {
   std::ostringstream m;
-  m << "# HELP hemibake_jobs Jobs in the store by state.\n# TYPE hemibake_jobs gauge\n";
-  for (JobState s : {JobState::kQueued, JobState::kRunning, JobState::kSucceeded, JobState::kFailed, JobState::kCancelled})
-    m << "hemibake_jobs{state=\"" << to_string(s) << "\"} " << store_->count(s) << "\n";
-  m << "# HELP hemibake_queue_depth Jobs waiting for a worker.\n# TYPE hemibake_queue_depth gauge\n";
-  m << "hemibake_queue_depth " << store_->count(JobState::kQueued) << "\n";
+  // Job counts come from the store. While it cannot answer they are left out, not given as 0 (a
+  // dashboard would show an empty queue and no running jobs), and hemibake_store_up is 0, as the
+  // exporters of databases do (pg_up, mysql_up). The answer is still 200 with this node's own
+  // metrics: Prometheus's `up` keeps meaning that the node answers, and an alert on
+  // hemibake_store_up == 0 (or on absent(hemibake_jobs)) tells the store's outage apart.
+  ReadError why;
+  std::vector<std::pair<JobState, size_t>> counts;
+  for (JobState s : {JobState::kQueued, JobState::kRunning, JobState::kSucceeded, JobState::kFailed, JobState::kCancelled}) {
+    const size_t n = store_->count(s, &why);
+    if (!why.error.empty()) break;
+    counts.emplace_back(s, n);
+  }
+  const bool store_up = why.error.empty();
+  m << "# HELP hemibake_store_up Whether the job store answered this scrape (0: it is busy or cannot be reached, and the job "
+       "counts are left out).\n# TYPE hemibake_store_up gauge\n";
+  m << "hemibake_store_up " << (store_up ? 1 : 0) << "\n";
+  if (store_up) {
+    m << "# HELP hemibake_jobs Jobs in the store by state.\n# TYPE hemibake_jobs gauge\n";
+    for (const auto& [state, n] : counts) m << "hemibake_jobs{state=\"" << to_string(state) << "\"} " << n << "\n";
+    m << "# HELP hemibake_queue_depth Jobs waiting for a worker.\n# TYPE hemibake_queue_depth gauge\n";
+    m << "hemibake_queue_depth " << counts.front().second << "\n";
+  }
+  m << "# HELP hemibake_job_ends_unwritten Jobs whose end (result or failure) the store could not write yet; tried again "
+       "in the background.\n# TYPE hemibake_job_ends_unwritten gauge\n";
+  m << "hemibake_job_ends_unwritten " << unwritten() << "\n";
   m << "# HELP hemibake_checks_waiting Submitted scenes waiting for a check thread.\n# TYPE hemibake_checks_waiting gauge\n";
   m << "hemibake_checks_waiting " << checks_->waiting() << "\n";
   {

@@ -399,11 +399,13 @@ class SqliteStore final : public Store {
     return t.commit() ? n : 0;
   }
 
-  size_t count(JobState state) override {
+  size_t count(JobState state, ReadError* why) override {
     std::lock_guard lock(mutex_);
     Stmt s(db_, "SELECT count(*) FROM jobs WHERE state = ?");
     s.text(1, to_string(state));
-    return s.row() ? static_cast<size_t>(s.col_int(0)) : 0;
+    if (s.row()) return static_cast<size_t>(s.col_int(0));
+    read_ok(db_, s, why);
+    return 0;
   }
 
  private:

@@ -84,7 +84,7 @@ class FaultyStore final : public server::Store {
   }
   int recover(int max_attempts) override { return inner_->recover(max_attempts); }
   int expire(double age_seconds) override { return inner_->expire(age_seconds); }
-  size_t count(JobState state) override { return inner_->count(state); }
+  size_t count(JobState state, ReadError* why = nullptr) override { return inner_->count(state, why); }
 
  private:
   std::unique_ptr<server::Store> inner_;

@@ -569,6 +569,56 @@ TEST(Handler, EndThatCannotBeWrittenIsWrittenWhenTheStoreIsBack) {
   EXPECT_NE(job.value("error", "").find("result could not be stored: disk I/O error"), std::string::npos) << job.dump();
 }
 
+// An end the store refused for a while is written within seconds of the store writing again, also
+// while the only worker is busy with a long bake: it is tried again in the background with backoff,
+// not only when a worker is about to claim a job (the job stayed "running", its stream open, until
+// the long bake ended).
+TEST(Handler, EndThatCannotBeWrittenIsWrittenWhileTheWorkersAreBusy) {
+  std::atomic<bool> broken{true};
+  std::mutex m;
+  std::string first;  // the first job to reach its end
+  Fixture f({}, [&](const std::string& write, const std::string& id) {
+    if (write != "succeed" && write != "fail") return std::string();
+    std::lock_guard lock(m);
+    if (first.empty()) first = id;
+    return broken && id == first ? std::string("disk I/O error") : std::string();
+  });
+  const std::map<std::string, std::string> gltf = {{"content-type", "model/gltf+json"}};
+  const Response a = f.call("POST", "/v1/jobs?convergence=0.2", cornell(), gltf);
+  ASSERT_EQ(a.status, 202) << a.body;
+  const std::string id = json::parse(a.body)["id"];
+  // Minutes of path tracing, stopped within 16 vertices by a DELETE.
+  const Response b = f.call("POST", "/v1/jobs?method=reference&samples=65536&convergence=0.2", cornell(), gltf);
+  ASSERT_EQ(b.status, 202) << b.body;
+  const std::string slow = json::parse(b.body)["id"];
+  // The only worker left the first job's end unwritten and took the long one.
+  std::string slow_state;
+  for (int i = 0; i < 1200 && slow_state != "running"; ++i) {
+    if (i) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    slow_state = json::parse(f.call("GET", "/v1/jobs/" + slow).body)["state"];
+  }
+  ASSERT_EQ(slow_state, "running");
+  {
+    std::lock_guard lock(m);
+    ASSERT_EQ(first, id);
+  }
+  EXPECT_EQ(json::parse(f.call("GET", "/v1/jobs/" + id).body)["state"], "running");
+  std::this_thread::sleep_for(std::chrono::seconds(2));  // refused for a while: tried again meanwhile
+  broken = false;
+  const auto t0 = std::chrono::steady_clock::now();
+  bool ended = false;
+  const auto events = read_stream(*f.service, id, std::chrono::seconds(20), &ended);
+  const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_TRUE(ended) << "the stream did not end within 20 s of the store's return";
+  EXPECT_EQ(last_state(events), "failed");
+  EXPECT_LT(waited, 10.0);
+  const json job = json::parse(f.call("GET", "/v1/jobs/" + id).body);
+  EXPECT_EQ(job["state"], "failed");
+  EXPECT_NE(job.value("error", "").find("result could not be stored: disk I/O error"), std::string::npos) << job.dump();
+  EXPECT_EQ(json::parse(f.call("GET", "/v1/jobs/" + slow).body)["state"], "running") << "the long bake ended first";
+  EXPECT_EQ(f.call("DELETE", "/v1/jobs/" + slow).status, 200);
+}
+
 // Another program holding the store's write lock (an operator's sqlite3 shell, a backup) past the
 // store's busy timeout: a submission gets 503 with Retry-After, and a bake that ends meanwhile is
 // written once the lock is gone, succeeded, not failed and not lost.

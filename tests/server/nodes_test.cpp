@@ -10,6 +10,9 @@
 
 #include <algorithm>
 #include <atomic>
+#include <future>
+#include <optional>
+#include <sstream>
 #include <memory>
 #include <mutex>
 #include <set>
@@ -193,6 +196,111 @@ TEST_F(Nodes, JobReadsAnswer503WhileTheDatabaseIsDownNot404) {
   EXPECT_EQ(again.js().value("state", ""), "succeeded");
   EXPECT_EQ(request(a->port(), http::verb::get, "/v1/jobs/" + id + "/result").status, 200);
   EXPECT_EQ(request(a->port(), http::verb::get, "/v1/jobs/0123456789abcdef0123456789abcdef").status, 404);
+}
+
+// The value of the sample `name` (with its labels, as in the text) in Prometheus text, if present.
+std::optional<double> sample(const std::string& text, const std::string& name) {
+  std::istringstream lines(text);
+  for (std::string line; std::getline(lines, line);)
+    if (line.rfind(name + " ", 0) == 0) return std::strtod(line.c_str() + name.size() + 1, nullptr);
+  return std::nullopt;
+}
+
+// While the database is down, /metrics still answers (the node's own metrics stay scrapable) but
+// says the store is down (hemibake_store_up 0) and gives no job counts rather than zeros, which a
+// dashboard would show as an empty queue. Before and after, the counts are the database's.
+TEST_F(Nodes, MetricsSayTheStoreIsDownInsteadOfCountingNoJobs) {
+  auto a = node(30);
+  const Reply posted = request(a->port(), http::verb::post, small_job(400), cornell(), kGltf);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  ASSERT_EQ(wait_finished(a->port(), posted.js()["id"], 60s)["state"], "succeeded");
+  auto counts_match = [&](const std::string& m) {
+    for (const char* state : {"queued", "running", "succeeded", "failed", "cancelled"}) {
+      const auto v = sample(m, std::string("hemibake_jobs{state=\"") + state + "\"}");
+      EXPECT_TRUE(v) << state << " is not counted:\n" << m;
+      if (v) {
+        EXPECT_EQ(*v, sql_int(std::string("SELECT count(*) FROM jobs WHERE state = '") + state + "'")) << state;
+      }
+    }
+  };
+  Reply up = request(a->port(), http::verb::get, "/metrics");
+  ASSERT_EQ(up.status, 200);
+  EXPECT_EQ(sample(up.body, "hemibake_store_up"), 1.0) << up.body;
+  counts_match(up.body);
+  pg().stop();
+  struct Restart {  // the other tests need the database, whatever happens here
+    bool up = false;
+    ~Restart() {
+      if (!up) pg().start();
+    }
+  } restart;
+  const Reply down = request(a->port(), http::verb::get, "/metrics");
+  EXPECT_EQ(down.status, 200) << down.body;
+  EXPECT_EQ(sample(down.body, "hemibake_store_up"), 0.0) << down.body;
+  EXPECT_EQ(down.body.find("hemibake_jobs{"), std::string::npos) << "job counts while the store cannot be read:\n" << down.body;
+  EXPECT_FALSE(sample(down.body, "hemibake_queue_depth")) << down.body;
+  EXPECT_TRUE(sample(down.body, "hemibake_bake_seconds_count")) << "the node's own metrics are gone:\n" << down.body;
+  ASSERT_TRUE(restart.up = pg().start());
+  for (int i = 0; i < 100; ++i) {
+    up = request(a->port(), http::verb::get, "/metrics");
+    if (sample(up.body, "hemibake_store_up") == 1.0) break;
+    std::this_thread::sleep_for(100ms);
+  }
+  EXPECT_EQ(sample(up.body, "hemibake_store_up"), 1.0) << up.body;
+  counts_match(up.body);
+}
+
+// The command line against a node whose database is down: status, fetch and a whole bake (submit,
+// watch, fetch) started during the outage wait as Retry-After says, say on stderr what they wait
+// for, and finish once the database is back, with one job made by the bake. With the database
+// kept down, --retry-seconds bounds the wait and the command fails naming the cause.
+TEST_F(Nodes, ClientWaitsForTheDatabaseAndGivesUpClearly) {
+  auto a = node(30);
+  const std::string url = "http://127.0.0.1:" + std::to_string(a->port());
+  const Reply posted = request(a->port(), http::verb::post, small_job(500), cornell(), kGltf);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = posted.js()["id"];
+  ASSERT_EQ(wait_finished(a->port(), id, 60s)["state"], "succeeded");
+  const std::string fetched = temp_dir(db_ + "-fetched") + ".glb", baked = temp_dir(db_ + "-baked") + ".glb";
+  const std::string client = std::string(HEMIBAKE_CLIENT) + " ";
+  pg().stop();
+  struct Restart {
+    bool up = false;
+    ~Restart() {
+      if (!up) pg().start();
+    }
+  } restart;
+  auto status = std::async(std::launch::async, [&] { return run(client + "status " + id + " --server " + url); });
+  auto fetch = std::async(std::launch::async, [&] { return run(client + "fetch " + id + " -o " + fetched + " --server " + url); });
+  auto bake = std::async(std::launch::async, [&] {
+    return run(client + "bake --server " + url + " " HEMIBAKE_SOURCE_DIR "/data/cornell-box.gltf -o " + baked +
+               " --max-shots 20 --resolution 16 --max-elements 200 --convergence 0.0777");
+  });
+  std::this_thread::sleep_for(4s);
+  ASSERT_TRUE(restart.up = pg().start());
+  for (auto* f : {&status, &fetch, &bake}) {
+    const auto [code, out] = f->get();
+    EXPECT_EQ(code, 0) << out;
+    EXPECT_NE(out.find("the job store cannot be reached"), std::string::npos) << "the wait is not explained: " << out;
+  }
+  EXPECT_EQ(read_file(fetched).substr(0, 4), "glTF");
+  EXPECT_EQ(read_file(baked).substr(0, 4), "glTF");
+  EXPECT_EQ(sql_int("SELECT count(*) FROM jobs"), 2) << "the bake's retries made more than one job";
+  EXPECT_EQ(sql_int("SELECT count(*) FROM jobs WHERE state = 'succeeded'"), 2);
+  std::filesystem::remove(fetched);
+  std::filesystem::remove(baked);
+  // Down for longer than the client waits.
+  pg().stop();
+  restart.up = false;
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto [code, out] = run(client + "status " + id + " --retry-seconds 2 --server " + url);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(code, 1) << out;
+  EXPECT_NE(out.find("the job store cannot be reached"), std::string::npos) << out;
+  EXPECT_NE(out.find("2 s"), std::string::npos) << "the message does not say how long it waited: " << out;
+  EXPECT_GE(seconds, 1.5) << out;
+  EXPECT_LT(seconds, 10.0) << out;
+  ASSERT_TRUE(restart.up = pg().start());
 }
 
 // Two nodes given the same Idempotency-Key at the same moment make one job.

@@ -18,6 +18,7 @@
 #include <map>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <thread>
 #include <tuple>
 #include <vector>
@@ -176,6 +177,17 @@ inline std::vector<std::tuple<uint64_t, std::string, std::string>> events(unsign
     }
   }
   return out;
+}
+
+// Runs a command; returns its exit status (-1 if it did not exit normally, as on an abort) and
+// what it wrote to stdout and stderr.
+inline std::pair<int, std::string> run(const std::string& command) {
+  FILE* p = popen((command + " 2>&1").c_str(), "r");
+  std::string out;
+  char buf[512];
+  while (size_t n = fread(buf, 1, sizeof buf, p)) out.append(buf, n);
+  const int status = pclose(p);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
 }
 
 inline std::string temp_dir(const std::string& name) {

@@ -136,6 +136,46 @@ TEST(Server, CancelStopsARunningJob) {
   EXPECT_EQ(wait_finished(server.port(), next.js()["id"])["state"], "succeeded");
 }
 
+// A cancelled bake says so in its status and in its stream, with the progress where it stopped
+// (it used to report the phase "done" with the whole phase done).
+TEST(Server, CancelledJobReportsWhereItStopped) {
+  ServerProcess server(temp_dir("cancel-progress"), {"--workers", "1"});
+  const Reply posted = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.000001&aeps=0.00002", cornell(), kGltf);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = posted.js()["id"];
+  json before;
+  for (int i = 0; i < 600; ++i) {
+    before = request(server.port(), http::verb::get, "/v1/jobs/" + id).js();
+    if (before.contains("progress") && before["progress"].value("shots", 0) > 0) break;
+    std::this_thread::sleep_for(50ms);
+  }
+  ASSERT_TRUE(before.contains("progress")) << before.dump();
+  ASSERT_EQ(before["state"], "running") << before.dump();
+  ASSERT_EQ(request(server.port(), http::verb::delete_, "/v1/jobs/" + id).status, 200);
+  // The stream ends after the worker's last word: no progress event claims the bake was done; the
+  // last one says where it stopped, before the final state.
+  const auto all = events(server.port(), id);
+  ASSERT_FALSE(all.empty());
+  std::string last_progress = "{}";
+  for (const auto& [eid, type, data] : all) {
+    if (type != "progress") continue;
+    EXPECT_NE(json::parse(data).value("phase", ""), "done") << "a cancelled bake reported: " << data;
+    last_progress = data;
+  }
+  EXPECT_EQ(json::parse(last_progress).value("phase", ""), "cancelled") << last_progress;
+  // The status says the same.
+  const json after = request(server.port(), http::verb::get, "/v1/jobs/" + id).js();
+  ASSERT_EQ(after["state"], "cancelled") << after.dump();
+  ASSERT_TRUE(after.contains("progress")) << after.dump();
+  const json& p = after["progress"];
+  EXPECT_EQ(p.value("phase", ""), "cancelled") << after.dump();
+  EXPECT_LT(p.value("fraction", 1.0), 1.0) << after.dump();
+  EXPECT_GE(p.value("shots", 0), before["progress"].value("shots", 0)) << after.dump();
+  EXPECT_GT(p.value("unshot_fraction", 0.0), 0.000001) << "the bake was stopped short of its convergence: " << after.dump();
+  EXPECT_EQ(std::get<1>(all.back()), "state");
+  EXPECT_EQ(json::parse(std::get<2>(all.back())).value("state", ""), "cancelled");
+}
+
 TEST(Server, QueueLimitAnswers429WithRetryAfter) {
   ServerProcess server(temp_dir("queue"), {"--workers", "1", "--max-queue", "1"});
   std::vector<std::string> ids;
@@ -513,17 +553,6 @@ class NotHemibake {
   std::thread thread_;
 };
 
-// Runs a command; returns its exit status (-1 if it did not exit normally, as on an abort) and
-// what it wrote to stdout and stderr.
-std::pair<int, std::string> run(const std::string& command) {
-  FILE* p = popen((command + " 2>&1").c_str(), "r");
-  std::string out;
-  char buf[512];
-  while (size_t n = fread(buf, 1, sizeof buf, p)) out.append(buf, n);
-  const int status = pclose(p);
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
-}
-
 // --server pointing at some other web server: a clear message and exit status 1, not a crash.
 TEST(Client, ServerThatIsNotHemibakeIsReportedClearly) {
   NotHemibake other;
@@ -540,6 +569,120 @@ TEST(Client, ServerThatIsNotHemibakeIsReportedClearly) {
   const auto [status, out] = run(std::string(HEMIBAKE_CLIENT) + " status 'a b' --server http://127.0.0.1:" + std::to_string(server.port()));
   EXPECT_EQ(status, 1);
   EXPECT_NE(out.find("404: no job"), std::string::npos) << out;
+}
+
+// A proxy in front of a server that loses the server's answers to submissions, as a load balancer
+// whose upstream timed out after the server had acted: each request is forwarded, and the answers
+// to the first `lose` POSTs are replaced by 503 with Retry-After: 1. It records the
+// Idempotency-Key each POST carried.
+class LossyProxy {
+ public:
+  LossyProxy(unsigned short upstream, int lose)
+      : upstream_(upstream), lose_(lose), acceptor_(io_, tcp::endpoint(net::ip::make_address("127.0.0.1"), 0)) {
+    thread_ = std::thread([this] { serve(); });
+  }
+  ~LossyProxy() {
+    stop_ = true;
+    beast::error_code ec;
+    tcp::socket wake(io_);
+    wake.connect(acceptor_.local_endpoint(), ec);  // ends the blocking accept
+    thread_.join();
+  }
+  std::string url() const { return "http://127.0.0.1:" + std::to_string(acceptor_.local_endpoint().port()); }
+  std::vector<std::string> keys() {
+    std::lock_guard lock(mutex_);
+    return keys_;
+  }
+
+ private:
+  void serve() {
+    while (!stop_) {
+      beast::error_code ec;
+      tcp::socket socket(io_);
+      acceptor_.accept(socket, ec);
+      if (ec || stop_) continue;
+      beast::tcp_stream stream(std::move(socket));
+      stream.expires_after(60s);
+      beast::flat_buffer buffer;
+      http::request<http::string_body> req;
+      http::read(stream, buffer, req, ec);
+      if (ec) continue;
+      std::map<std::string, std::string> headers;
+      for (const auto& f : req) headers[std::string(f.name_string())] = std::string(f.value());
+      const Reply up = request(upstream_, req.method(), std::string(req.target()), req.body(), headers);
+      http::response<http::string_body> res;
+      res.version(11);
+      res.keep_alive(false);
+      bool lost = false;
+      if (req.method() == http::verb::post) {
+        std::lock_guard lock(mutex_);
+        keys_.push_back(std::string(req["Idempotency-Key"]));
+        lost = static_cast<int>(keys_.size()) <= lose_;
+      }
+      if (lost) {
+        res.result(503);
+        res.set(http::field::retry_after, "1");
+        res.set(http::field::content_type, "application/json");
+        res.body() = R"({"error":"the upstream did not answer in time"})";
+      } else {
+        res.result(up.status);
+        for (const auto& [k, v] : up.headers)
+          if (k != "content-length" && k != "connection") res.set(k, v);
+        res.body() = up.body;
+      }
+      res.prepare_payload();
+      http::write(stream, res, ec);
+      stream.socket().shutdown(tcp::socket::shutdown_both, ec);
+    }
+  }
+  unsigned short upstream_;
+  int lose_;
+  net::io_context io_;
+  tcp::acceptor acceptor_;
+  std::atomic<bool> stop_{false};
+  std::mutex mutex_;
+  std::vector<std::string> keys_;
+  std::thread thread_;
+};
+
+// The server made the job but its answer was lost (503 from a proxy): the client waits as
+// Retry-After says, says so, and submits again with the same Idempotency-Key, so the server has
+// one job, and the id printed is that job's. (The bake is long, so that no retry is answered from
+// the cache of succeeded jobs instead.)
+TEST(Client, SubmitWhoseAnswerWasLostIsRetriedIntoOneJob) {
+  ServerProcess server(temp_dir("client-lost"), {"--workers", "1"});
+  LossyProxy proxy(server.port(), 1);
+  const auto [status, out] = run(std::string(HEMIBAKE_CLIENT) + " submit " HEMIBAKE_SOURCE_DIR
+                                 "/data/cornell-box.gltf --convergence 0.000001 --aeps 0.00002 --server " + proxy.url());
+  EXPECT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("503"), std::string::npos) << "the wait is not explained: " << out;
+  const auto keys = proxy.keys();
+  ASSERT_EQ(keys.size(), 2u) << out;
+  EXPECT_FALSE(keys[0].empty()) << "the submission carried no Idempotency-Key";
+  EXPECT_EQ(keys[0], keys[1]) << "the retry carried another key";
+  const json jobs = request(server.port(), http::verb::get, "/v1/jobs").js()["jobs"];
+  ASSERT_EQ(jobs.size(), 1u) << jobs.dump();
+  EXPECT_NE(out.find(jobs[0]["id"].get<std::string>()), std::string::npos) << out;
+}
+
+// A server that stays unavailable: the client gives up after --retry-seconds with exit status 1 and
+// the server's reason; its attempts still made one job.
+TEST(Client, GivesUpOnAServerThatStaysUnavailable) {
+  ServerProcess server(temp_dir("client-gives-up"), {"--workers", "1"});
+  LossyProxy proxy(server.port(), 1000);
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto [status, out] = run(std::string(HEMIBAKE_CLIENT) + " submit " HEMIBAKE_SOURCE_DIR
+                                 "/data/cornell-box.gltf --convergence 0.000001 --aeps 0.00002 --retry-seconds 3 --server " +
+                                 proxy.url());
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(status, 1) << out;
+  EXPECT_NE(out.find("the upstream did not answer in time"), std::string::npos) << out;
+  EXPECT_NE(out.find("3 s"), std::string::npos) << "the message does not say how long it waited: " << out;
+  EXPECT_GE(seconds, 2.5) << out;
+  EXPECT_LT(seconds, 15.0) << out;
+  EXPECT_GE(proxy.keys().size(), 3u) << out;
+  const json jobs = request(server.port(), http::verb::get, "/v1/jobs").js()["jobs"];
+  EXPECT_EQ(jobs.size(), 1u) << jobs.dump();
 }
 
 // Bad options: exit status 2 and one line naming the problem, before anything starts.

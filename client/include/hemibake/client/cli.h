@@ -30,6 +30,7 @@ struct CommandLine {
   std::string server;               ///< --server URL (else HEMIBAKE_SERVER, filled by run_main)
   std::string token;                ///< bearer token (HEMIBAKE_TOKEN, filled by run_main)
   std::string state;                ///< list: --state
+  double retry_seconds = 60.0;      ///< --retry-seconds: how long to keep trying a server that answers 503
   uint32_t patches = 6300;          ///< room: about this many patches
   std::optional<Camera> camera;     ///< --camera X,Y,Z:TX,TY,TZ
 };

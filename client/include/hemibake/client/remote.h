@@ -13,12 +13,17 @@ struct Remote {
   std::string host;
   std::string port;
   std::string token;  ///< bearer token, or empty
+  /// How long a command keeps trying a request the server answers 503 (its job store busy or
+  /// unreachable, too much waiting, stopping), waiting as Retry-After says; 0: not at all.
+  double retry_seconds = 60.0;
 };
 
 /// Parses http://HOST[:PORT][/] into `out`; returns an error message or an empty string.
 std::string parse_server(const std::string& url, Remote& out);
 
-// Each command returns its exit status: 0 done, 1 failed (the reason is on console.err).
+// Each command returns its exit status: 0 done, 1 failed (the reason is on console.err). A 503 is
+// tried again for up to Remote::retry_seconds (see there), saying so on console.err; a submission
+// carries an Idempotency-Key, so that a try whose answer was lost does not make a second job.
 
 /// hemibake submit: prints the job id (or stores it in *id_out instead).
 int remote_submit(const Remote& r, const std::string& path, const protocol::JobSpec& spec, const Console& console,

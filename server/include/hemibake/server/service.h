@@ -114,7 +114,7 @@ class Service {
 
   Store& store() { return *store_; }
   /// Jobs whose end (result or failure) the store could not write yet; they show "running" until
-  /// a worker writes it, or a restart queues them again.
+  /// the end writer, which tries again in the background, writes it (or a restart queues them again).
   size_t unwritten();
   /// Stops the workers; jobs they were running go back to the queue. Previews asked for and
   /// requests not yet begun are answered 503; requests being answered finish first.
@@ -139,8 +139,10 @@ class Service {
   };
   Change write_end(const std::string& id, Unwritten& end);
   void note_cancelled(const std::string& id);
-  /// Tries the ends not written yet again (a worker, before it claims a job).
+  /// Tries the ends not written yet again (the end writer).
   void write_unwritten();
+  /// The end writer's thread: write_unwritten() with backoff while any end is unwritten.
+  void end_writer_loop();
   /// Stores an event of job `id` and wakes the streams that wait for one.
   void emit(const std::string& id, const std::string& type, const std::string& data);
   bool final_event_written(const JobRecord& r);
@@ -203,6 +205,8 @@ class Service {
   std::unique_ptr<Pool> checks_;        // loads and checks submitted scenes
   std::mutex unwritten_mutex_;
   std::map<std::string, Unwritten> unwritten_;
+  std::condition_variable ends_wake_;  // an end left unwritten, or the stop (with unwritten_mutex_)
+  std::thread end_writer_;
   std::unique_ptr<Pool> lookups_;       // requests that read or write the store
   std::atomic<double> last_expiry_{0.0};
   // Metrics.

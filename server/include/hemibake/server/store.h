@@ -167,7 +167,8 @@ class Store {
   virtual int recover(int max_attempts) = 0;
   /// Deletes finished jobs older than `age_seconds`; returns how many.
   virtual int expire(double age_seconds) = 0;
-  virtual size_t count(JobState state) = 0;
+  /// Jobs in `state`; 0 and `why` set if the store cannot answer.
+  virtual size_t count(JobState state, ReadError* why = nullptr) = 0;
 };
 
 double unix_now();
