@@ -24,13 +24,9 @@ enum class Quality : uint8_t { kDraft, kDefault, kHigh };
 const char* to_string(Quality quality);
 std::optional<Quality> quality_from(std::string_view name);
 
-/// The solver's settings at the default preset: the library's defaults with light pools on
-/// (solver::Params::pools is off in the library, whose tests judge one pass at a time).
-inline solver::Params default_solver_params() {
-  solver::Params p;
-  p.pools = true;
-  return p;
-}
+/// The solver's settings at the default preset: the library's defaults (light pools off; the
+/// high preset turns them on).
+inline solver::Params default_solver_params() { return solver::Params{}; }
 
 struct JobSpec {
   Method method = Method::kAntiAliased;
