@@ -20,11 +20,12 @@ using glm::dvec3;
 using solver::Patch;
 using solver::Scene;
 
-solver::Mesh solve(const Scene& scene, bool gather = false) {
+solver::Mesh solve(const Scene& scene, bool gather = false, bool pools = false) {
   EXPECT_EQ(solver::validate(scene), "");
   solver::Params params;
   params.threads = 2;
   params.gather = gather;
+  params.pools = pools;
   solver::Solver s(scene, params);
   s.run();
   EXPECT_TRUE(s.stats().converged);
@@ -165,16 +166,8 @@ TEST(LightPools, BlenderFloorUnderGlowingSpheresShowsThePathTracersPools) {
   options.points = 200;
   const auto points = reference_points(scene, options);
   ASSERT_EQ(points.size(), 200u);
-  auto bake = [&](bool pools) {
-    solver::Params params;
-    params.threads = 2;
-    params.pools = pools;
-    solver::Solver s(scene, params);
-    s.run();
-    EXPECT_TRUE(s.stats().converged);
-    return displayed_error(points, s.mesh());
-  };
-  const DisplayError without = bake(false), with = bake(true);
+  const DisplayError without = displayed_error(points, solve(scene, false, false));
+  const DisplayError with = displayed_error(points, solve(scene, false, true));
   std::printf("glowing spheres: without pools median %.4f p90 %.4f, ratio %.3f; with %.4f %.4f, ratio %.3f\n",
               without.median, without.p90, without.mean_ratio, with.median, with.p90, with.mean_ratio);
   EXPECT_EQ(with.missed, 0u);
