@@ -27,6 +27,7 @@
 #include <condition_variable>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <random>
@@ -64,12 +65,19 @@ constexpr const char* kSchema1 =
     "CREATE INDEX jobs_created ON jobs(created, id);"
     "CREATE TABLE scenes (job TEXT PRIMARY KEY, data BYTEA NOT NULL);"
     "CREATE TABLE results (job TEXT PRIMARY KEY, data BYTEA NOT NULL);"
+    "ALTER TABLE results ALTER COLUMN data SET STORAGE EXTERNAL;"
     "CREATE TABLE events (job TEXT NOT NULL, seq BIGINT NOT NULL, type TEXT NOT NULL, data TEXT NOT NULL,"
     "  PRIMARY KEY (job, seq));"
     "CREATE TABLE previews (job TEXT PRIMARY KEY, data BYTEA NOT NULL);"
     "CREATE TABLE hemibake_maintenance (one BOOLEAN PRIMARY KEY DEFAULT true CHECK (one),"
     "  last_expiry TIMESTAMPTZ NOT NULL DEFAULT '-infinity');"
     "INSERT INTO hemibake_maintenance DEFAULT VALUES;";
+
+// Results (GLB, their meshes already Draco-compressed) are kept uncompressed out of line, so that a
+// part of one is read without the rest (result_part). Stores set up before this have the column's
+// default (compressed); set_up changes it there, which applies to results written from then on.
+constexpr const char* kResultStorage =
+    "SELECT attstorage FROM pg_attribute WHERE attrelid = 'results'::regclass AND attname = 'data'";
 
 constexpr const char* kNow = "extract(epoch from clock_timestamp())";
 constexpr const char* kColumns =
@@ -421,6 +429,22 @@ class PgStore final : public Store {
     return r.get(0, 0);
   }
 
+  // Only the part asked for: results are stored uncompressed out of line (kResultStorage), so
+  // substring() reads only the TOAST chunks that hold the part, and a download of a large result in
+  // parts reads it once, not once per part.
+  std::optional<std::string> result_part(const std::string& id, uint64_t offset, size_t size, ReadError* why) override {
+    if (offset >= static_cast<uint64_t>(std::numeric_limits<int32_t>::max()))
+      return std::nullopt;  // beyond any bytea (at most 1 GB)
+    const auto n = static_cast<int64_t>(std::min<uint64_t>(size, static_cast<uint64_t>(std::numeric_limits<int32_t>::max())));
+    Result r = exec("SELECT substring(r.data FROM $2::integer FOR $3::integer), length(r.data) >= $2::integer - 1"
+                    " FROM results r JOIN jobs j ON j.id = r.job WHERE r.job = $1 AND j.state = 'succeeded'",
+                    {text(id), integer(static_cast<int64_t>(offset) + 1), integer(n)}, true);
+    if (!r.answered(why) || r.rows() == 0) return std::nullopt;
+    const std::string within = r.get(0, 1);  // binary boolean: one byte
+    if (within.size() != 1 || within[0] == 0) return std::nullopt;  // the offset lies past the end
+    return r.get(0, 0);
+  }
+
   // Shared by all nodes: only jobs whose lease has expired are taken back (a node that starts must
   // not take the jobs other nodes are running).
   int recover(int max_attempts) override {
@@ -731,6 +755,14 @@ std::unique_ptr<Store> Store::open_postgres(const std::string& uri, const PgOpti
     if (!m.ok()) {
       Result(PQexec(c, "ROLLBACK"));
       return fail("cannot set up the job store at " + uri + ": " + m.error());
+    }
+  }
+  Result storage(PQexec(c, kResultStorage));
+  if (storage.ok() && storage.rows() == 1 && storage.get(0, 0) != "e") {
+    Result a(PQexec(c, "ALTER TABLE results ALTER COLUMN data SET STORAGE EXTERNAL"));
+    if (!a.ok()) {
+      Result(PQexec(c, "ROLLBACK"));
+      return fail("cannot set up the job store at " + uri + ": " + a.error());
     }
   }
   Result s(PQexec(c, ("DELETE FROM hemibake_schema; INSERT INTO hemibake_schema VALUES (" + std::to_string(kSchemaVersion) +

@@ -155,7 +155,7 @@ class Store {
   /// Up to `size` bytes of a succeeded job's result from byte `offset` (fewer only at its end): for
   /// answers sent in parts, so that no request holds a whole result. nullopt if the job has no
   /// result (any more) or it cannot be read (then `why` says so). This default reads the whole
-  /// result each time; the embedded store reads only the part asked for.
+  /// result each time; both stores read only the part asked for.
   virtual std::optional<std::string> result_part(const std::string& id, uint64_t offset, size_t size,
                                                  ReadError* why = nullptr) {
     auto whole = result(id, why);
