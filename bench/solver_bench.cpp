@@ -263,8 +263,8 @@ int main(int argc, char** argv) {
   const std::string mode = argc > 1 ? argv[1] : "";
   const bool quick = mode == "--quick";
   if (!mode.empty() && !quick && mode != "--sweep" && mode != "--sweep-room" && mode != "--chamber" && mode != "--scaling" && mode != "--lights" &&
-      mode != "--cluttered") {
-    std::fprintf(stderr, "usage: hemibake-bench [--quick | --sweep | --sweep-room | --chamber | --scaling | --lights | --cluttered]\n");
+      mode != "--cluttered" && mode != "--big") {
+    std::fprintf(stderr, "usage: hemibake-bench [--quick | --sweep | --sweep-room | --chamber | --scaling | --lights | --cluttered | --big]\n");
     return 2;
   }
   const Scene cornell = make_cornell_box();
@@ -407,6 +407,58 @@ int main(int argc, char** argv) {
       print_run(run_method(room, "hr", 0, 0, {}, 1, &points));
       std::printf("\n");
     }
+    return 0;
+  }
+  if (mode == "--big") {
+    // Big inputs at default settings, each given the three minutes: how far they get, the
+    // memory they take, and the longest single shot (progress is reported between shots).
+    struct Big {
+      const char* name;
+      Scene scene;
+    };
+    std::vector<Big> bigs;
+    bigs.push_back({"atrium (sky and sun)", make_atrium()});
+    bigs.push_back({"sphere room (ceiling panel)", make_sphere_room()});
+    const double budget = argc > 2 ? std::atof(argv[2]) : 180.0;
+    std::printf("## Big inputs (default settings, all threads, at most %.0f s each)\n\n", budget);
+    std::printf("| scene | triangles | patches | time (s) | converged | unshot | shots | replayed | hemicubes | elements | longest shot (s) | peak memory (MB) |\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    struct Out {
+      Stats st;
+      double longest;
+    };
+    const std::string only = argc > 3 ? argv[3] : "";  // a scene whose name holds this, alone
+    for (const Big& b : bigs) {
+      if (std::string(b.name).find(only) == std::string::npos) continue;
+      uint64_t triangles = 0;
+      for (const Patch& p : b.scene.patches) triangles += p.corner_count == 4 ? 2 : 1;
+      long peak = 0;
+      const Out o = isolated_value<Out>(
+          [&] {
+            Solver solver(b.scene, hemibake::protocol::default_solver_params());
+            double longest = 0.0, last = 0.0;
+            uint64_t hemicubes = 0, elements = 0, rounds = 0;
+            while (solver.stats().seconds < budget && solver.step()) {
+              const Stats& st = solver.stats();
+              if (st.seconds - last > 5.0)
+                std::fprintf(stderr, "%s: shot %llu took %.1f s (%llu hemicubes, %llu rounds, %llu -> %llu elements)\n", b.name,
+                             static_cast<unsigned long long>(st.shots), st.seconds - last,
+                             static_cast<unsigned long long>(st.hemicubes - hemicubes), static_cast<unsigned long long>(st.rounds - rounds),
+                             static_cast<unsigned long long>(elements), static_cast<unsigned long long>(st.elements));
+              longest = std::max(longest, st.seconds - last);
+              last = st.seconds;
+              hemicubes = st.hemicubes, elements = st.elements, rounds = st.rounds;
+            }
+            return Out{solver.stats(), longest};
+          },
+          &peak);
+      std::printf("| %s | %llu | %zu | %.1f | %s | %.4f | %llu | %llu | %llu | %llu | %.2f | %.0f |\n", b.name,
+                  static_cast<unsigned long long>(triangles), b.scene.patches.size(), o.st.seconds, o.st.converged ? "yes" : "no",
+                  o.st.unshot_fraction, static_cast<unsigned long long>(o.st.shots), static_cast<unsigned long long>(o.st.replayed_shots),
+                  static_cast<unsigned long long>(o.st.hemicubes), static_cast<unsigned long long>(o.st.elements), o.longest, peak / 1024.0);
+      std::fflush(stdout);
+    }
+    std::printf("\n");
     return 0;
   }
   if (mode == "--scaling") {

@@ -16,7 +16,7 @@
 namespace hemibake::client {
 namespace {
 
-bool is_local_builtin(const std::string& command) { return command == "cornell" || command == "room" || command == "clutter" || command == "lava"; }
+bool is_local_builtin(const std::string& command) { return command == "cornell" || command == "room" || command == "clutter" || command == "lava" || command == "atrium"; }
 
 bool is_remote(const std::string& command) {
   return command == "submit" || command == "status" || command == "watch" || command == "fetch" || command == "cancel" ||
@@ -97,6 +97,7 @@ std::string usage() {
          "  hemibake room [--patches N] [options]               bake the benchmarks' furnished room\n"
          "  hemibake clutter [options]                          bake the benchmarks' cluttered room\n"
          "  hemibake lava [options]                             bake a floor lit by six emissive spheres\n"
+         "  hemibake atrium [options]                           bake a Sponza-like atrium (150k triangles) under a sky and a sun\n"
          "  hemibake bake --server URL IN -o OUT.glb [options]  bake on a hemibake-server\n"
          "  hemibake submit IN [options]                        submit to the server; prints the job id\n"
          "  hemibake status ID | watch ID | cancel ID           a job's state, live progress, cancel it\n"
@@ -181,6 +182,7 @@ int run(const CommandLine& o, const Console& console) {
   if (o.command == "room") return run_room(o, console);
   if (o.command == "clutter") return run_clutter(o, console);
   if (o.command == "lava") return run_lava(o, console);
+  if (o.command == "atrium") return run_atrium(o, console);
   if (o.command == "render") return run_render(o, console);
   if (o.command == "bake" && o.server.empty()) return run_bake(o, console);
   // The commands that talk to a server.

@@ -216,6 +216,11 @@ int run_lava(const CommandLine& o, const Console& c) {
   return run_builtin("lava field", solver::make_lava_field(), camera_at({12.0, 8.0, 12.0}, {0.0, 0.0, 0.0}), o, c);
 }
 
+// A big input: a Sponza-like atrium under the sky and a sun.
+int run_atrium(const CommandLine& o, const Console& c) {
+  return run_builtin("atrium", solver::make_atrium(), camera_at({-10.0, 6.5, -3.5}, {6.0, 3.0, 3.0}), o, c);
+}
+
 int run_render(const CommandLine& o, const Console& c) {
   if (o.input.empty() || o.output.empty()) {
     std::fputs("hemibake: render needs IN.glb -o OUT.png\n", c.err);

@@ -109,15 +109,29 @@ void GroupAdjacency::finish() {
     links_[out++] = links_[i];
   }
   links_.resize(out);
+  // Where each a's links start (links are sorted by a): a pixel's resolve looks its surfaces'
+  // neighbours up by index instead of searching all links. Sparse ids (a caller's own, from 2^31
+  // on) keep the search.
+  first_.clear();
+  const size_t ids = links_.empty() ? 0 : static_cast<size_t>(links_.back().key >> 32) + 1;
+  if (ids > 16 * links_.size() + 65536) return;
+  first_.assign(ids + 1, 0);
+  for (const Link& l : links_) ++first_[static_cast<size_t>(l.key >> 32) + 1];
+  for (size_t a = 1; a < first_.size(); ++a) first_[a] += first_[a - 1];
 }
 
 const GroupAdjacency::Link* GroupAdjacency::find(uint32_t a, uint32_t b) const {
+  const std::span<const Link> of_a = neighbours(a);
   const uint64_t key = (static_cast<uint64_t>(a) << 32) | b;
-  const auto it = std::lower_bound(links_.begin(), links_.end(), key, [](const Link& l, uint64_t k) { return l.key < k; });
-  return it != links_.end() && it->key == key ? &*it : nullptr;
+  const auto it = std::lower_bound(of_a.begin(), of_a.end(), key, [](const Link& l, uint64_t k) { return l.key < k; });
+  return it != of_a.end() && it->key == key ? &*it : nullptr;
 }
 
 std::span<const GroupAdjacency::Link> GroupAdjacency::neighbours(uint32_t a) const {
+  if (!first_.empty()) {
+    if (static_cast<size_t>(a) + 1 >= first_.size()) return {};
+    return {links_.data() + first_[a], static_cast<size_t>(first_[a + 1] - first_[a])};
+  }
   const uint64_t lo = static_cast<uint64_t>(a) << 32;
   auto below = [](const Link& l, uint64_t k) { return l.key < k; };
   const auto b = std::lower_bound(links_.begin(), links_.end(), lo, below);

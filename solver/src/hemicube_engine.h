@@ -64,6 +64,7 @@ class GroupAdjacency {
 
  private:
   std::vector<Link> links_;
+  std::vector<uint32_t> first_;  ///< per a (and one past the last): its first link in links_
 };
 
 /// A polygon being clipped: at most 4 corners plus one per clip plane.

@@ -43,6 +43,8 @@ constexpr int kSkyRounds = 8;
 // kSkyRefineStep-th decides the sky's splits.
 constexpr uint32_t kSkyEstimateStep = 8;
 constexpr uint32_t kSkyRefineStep = 4;
+// The sky's shot projects directions for about this long per step (shoot_sky_part).
+constexpr double kSkyPartSeconds = 1.0;
 // A receiver that sees less than this share of its open sky sees none: the silhouette pixels of a
 // closed room's walls, seen from outside, let through a few parts in ten thousand, which would
 // light a closed room (and split its elements for partial visibility).
@@ -357,17 +359,20 @@ void Solver::Impl::shoot_light(const Light& light) {
 
 // Per element of `elements` (indexed by element): the sky's irradiance per unit radiance, visible
 // (x) and with nothing hidden (y), from every `step`-th of the sky's directions.
-std::vector<glm::dvec3> Solver::Impl::sky_factors(uint32_t step, std::span<const uint32_t> elements) {
-  std::vector<glm::dvec3> sums(e_patch.size(), glm::dvec3(0.0));
+// Adds to `sums` (per element: visible and open) the sky's parallel projections along directions
+// first, first + step, ... before `end` (each of weight 4 pi step / kSkyDirections).
+void Solver::Impl::add_sky_directions(uint32_t step, uint32_t first, uint32_t end, std::span<const uint32_t> elements,
+                                      std::vector<glm::dvec3>& sums) {
+  sums.resize(e_patch.size(), glm::dvec3(0.0));
   const double omega = 4.0 * kPi * step / kSkyDirections;
   LightView v;
-  for (uint32_t k = 0; k < kSkyDirections; k += step) {
+  for (uint32_t k = first; k < end; k += step) {
     const glm::dvec3 towards_sky = fibonacci_direction(k, kSkyDirections);
     v = parallel_view(-towards_sky, sky_cube->resolution());
     v.cube = sky_cube.get();
     project_light_view(v, elements);
-    pool.parallel_for(elements.size(), [&](size_t begin, size_t end, size_t) {
-      for (size_t i = begin; i < end; ++i) {
+    pool.parallel_for(elements.size(), [&](size_t begin, size_t end_i, size_t) {
+      for (size_t i = begin; i < end_i; ++i) {
         const uint32_t e = elements[i];
         for (uint32_t j = v.begin[e]; j < v.end[e]; ++j) {
           const Fragment& f = v.frags[j];
@@ -378,6 +383,11 @@ std::vector<glm::dvec3> Solver::Impl::sky_factors(uint32_t step, std::span<const
       }
     });
   }
+}
+
+// The sums over every step-th direction as F(element -> sky) per element: x visible, y open.
+void Solver::Impl::finish_sky_factors(uint32_t step, std::span<const uint32_t> elements, std::vector<glm::dvec3>& sums) const {
+  const double omega = 4.0 * kPi * step / kSkyDirections;
   // The same quadrature over an open hemisphere, from the normal alone: pi / it corrects the
   // directions' discreteness, so that nothing hidden gives exactly pi.
   std::vector<double> open_sum(patches.size(), -1.0);
@@ -393,42 +403,72 @@ std::vector<glm::dvec3> Solver::Impl::sky_factors(uint32_t step, std::span<const
     const double visible = sums[e].x < kSkyLeak * sums[e].y ? 0.0 : sums[e].x;
     sums[e] = glm::dvec3(visible * norm, sums[e].y * norm, 0.0);
   }
+}
+
+std::vector<glm::dvec3> Solver::Impl::sky_factors(uint32_t step, std::span<const uint32_t> elements) {
+  std::vector<glm::dvec3> sums;
+  add_sky_directions(step, 0, kSkyDirections, elements, sums);
+  finish_sky_factors(step, elements, sums);
   return sums;
 }
 
 // The sky's shot: every leaf's view of the sky, refined by the criteria of refine.cpp (every
 // direction projected again after each round of splits, at most kSkyRounds rounds). The rounds
 // that decide splits look along every kSkyRefineStep-th direction only; the light is then
-// distributed from all of them.
-void Solver::Impl::shoot_sky() {
-  std::vector<uint32_t> accepted = leaves;
+// distributed from all of them. A large scene's sky takes a minute (1024 projections of 130 000
+// elements), so the shot goes on over several steps, each projecting directions for about
+// kSkyPartSeconds, and the progress is reported between them; the sums, and so the result, do not
+// depend on where a part ends. Returns whether the shot is complete.
+bool Solver::Impl::shoot_sky_part() {
+  SkyShot& sh = sky_shot;
   const glm::dvec3 dB = sky;
-  const double weight = channel_sum(dB) / emitted_power;
-  std::vector<glm::dvec3> f;
-  for (int round = 0; round < kSkyRounds; ++round) {
-    grow_scratch();
-    f = sky_factors(kSkyRefineStep, accepted);
-    ++stamp;
-    for (uint32_t e : accepted) {
-      f_recv[e] = f[e].x;
-      f_open[e] = std::max(f[e].y, f[e].x);
-      e_ff[e] = f[e].x * e_area[e];
-      e_ff_open[e] = f_open[e] * e_area[e];
-      e_stamp[e] = stamp;
-    }
-    spread_shot(dB, accepted);
-    std::vector<uint32_t> to_split = too_coarse(dB, weight, accepted);
-    reset_spread(accepted);
-    if (to_split.empty() || !trim_to_element_limit(to_split)) break;
-    ++stats.rounds;
-    for (uint32_t e : to_split) split(e);
-    replace_split(leaves);
-    replace_split(accepted);
+  if (!sh.started) {
+    sh = SkyShot{};
+    sh.started = true;
+    sh.accepted = leaves;
   }
+  const uint32_t step = sh.final_pass ? 1 : kSkyRefineStep;
   grow_scratch();
-  f = sky_factors(1, accepted);
-  for (uint32_t e : accepted)
-    if (f[e].x > 0.0) light_receive(e, dB * f[e].x);
+  const auto t0 = Clock::now();
+  while (sh.next < kSkyDirections && seconds_since(t0) < kSkyPartSeconds) {
+    const uint32_t end = std::min(kSkyDirections, sh.next + step);
+    add_sky_directions(step, sh.next, end, sh.accepted, sh.sums);
+    sh.next = end;
+  }
+  if (sh.next < kSkyDirections) return false;
+  std::vector<glm::dvec3> f = std::move(sh.sums);
+  sh.sums.clear();
+  sh.next = 0;
+  finish_sky_factors(step, sh.accepted, f);
+  if (sh.final_pass) {
+    for (uint32_t e : sh.accepted)
+      if (f[e].x > 0.0) light_receive(e, dB * f[e].x);
+    sh = SkyShot{};
+    return true;
+  }
+  std::vector<uint32_t>& accepted = sh.accepted;
+  const double weight = channel_sum(dB) / emitted_power;
+  ++stamp;
+  for (uint32_t e : accepted) {
+    f_recv[e] = f[e].x;
+    f_open[e] = std::max(f[e].y, f[e].x);
+    e_ff[e] = f[e].x * e_area[e];
+    e_ff_open[e] = f_open[e] * e_area[e];
+    e_stamp[e] = stamp;
+  }
+  spread_shot(dB, accepted);
+  std::vector<uint32_t> to_split = too_coarse(dB, weight, accepted);
+  reset_spread(accepted);
+  if (to_split.empty() || !trim_to_element_limit(to_split)) {
+    sh.final_pass = true;
+    return false;
+  }
+  ++stats.rounds;
+  for (uint32_t e : to_split) split(e);
+  replace_split(leaves);
+  replace_split(accepted);
+  if (++sh.round >= kSkyRounds) sh.final_pass = true;
+  return false;
 }
 
 // Before the solve: the power the lights and the sky bring to the surfaces (from unrefined views)
@@ -472,14 +512,16 @@ bool Solver::Impl::shoot_next_light() {
     return false;
   }
   const auto t0 = Clock::now();
+  bool shot = true;
   if (light_turn < lights.size()) shoot_light(lights[light_turn]);
-  else shoot_sky();
+  else shot = shoot_sky_part();
+  stats.seconds += seconds_since(t0);
+  stats.seconds_lights += seconds_since(t0);
+  if (!shot) return true;  // the sky's shot goes on at the next step
   ++light_turn;
   ++stats.shots;
   ++stats.light_shots;
   update_unshot_total();
-  stats.seconds += seconds_since(t0);
-  stats.seconds_lights += seconds_since(t0);
   return true;
 }
 

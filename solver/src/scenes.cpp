@@ -393,4 +393,224 @@ Scene make_lava_field() {
   return s;
 }
 
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// A surface of revolution around the vertical through `base`: `profile` lists (radius, height)
+// from the bottom up, each ring cut into `segments` planar quads facing outward (a ring of radius 0
+// closes the top or bottom).
+void add_lathe(Scene& s, const glm::dvec3& base, const std::vector<std::array<double, 2>>& profile, int segments,
+               const glm::dvec3& rho, uint32_t material) {
+  auto at = [&](size_t i, int j) {
+    const double a = 2.0 * kPi * j / segments;
+    return base + glm::dvec3(profile[i][0] * std::cos(a), profile[i][1], -profile[i][0] * std::sin(a));
+  };
+  for (size_t i = 0; i + 1 < profile.size(); ++i)
+    for (int j = 0; j < segments; ++j) {
+      const glm::dvec3 a = at(i, j), b = at(i, j + 1), c = at(i + 1, j + 1), d = at(i + 1, j);
+      Patch p;
+      p.reflectance = rho;
+      p.material = material;
+      if (profile[i][0] == 0.0 || profile[i + 1][0] == 0.0) {  // a cone's tip: one triangle
+        p.corner_count = 3;
+        p.corners = profile[i][0] == 0.0 ? std::array<glm::dvec3, 4>{a, c, d, glm::dvec3(0.0)}
+                                         : std::array<glm::dvec3, 4>{a, b, c, glm::dvec3(0.0)};
+        s.patches.push_back(p);
+      } else {
+        add_quad(s, a, b, c, d, rho, glm::dvec3(0.0), material);
+      }
+    }
+}
+
+}  // namespace
+
+Scene make_atrium() {
+  using V = glm::dvec3;
+  Scene s;
+  const glm::dvec3 stone(0.62, 0.58, 0.5), paving(0.45, 0.42, 0.38), plaster(0.7, 0.66, 0.58), wood(0.42, 0.3, 0.2),
+      terracotta(0.6, 0.32, 0.2), leaves(0.15, 0.35, 0.1), none(0.0);
+  const std::array<glm::dvec3, 3> cloth{glm::dvec3(0.6, 0.12, 0.1), glm::dvec3(0.12, 0.3, 0.55), glm::dvec3(0.2, 0.45, 0.2)};
+  uint32_t material = 0;
+  // A rectangle from `o` spanned by `u` and `v` (counter-clockwise seen from the front) in cells no
+  // wider than `cell`.
+  auto rect = [&](V o, V u, V v, const glm::dvec3& rho, double cell) {
+    const int nu = std::max(1, static_cast<int>(std::ceil(glm::length(u) / cell - 1e-9)));
+    const int nv = std::max(1, static_cast<int>(std::ceil(glm::length(v) / cell - 1e-9)));
+    for (int i = 0; i < nu; ++i)
+      for (int j = 0; j < nv; ++j) {
+        const V a = o + u * (double(i) / nu) + v * (double(j) / nv);
+        add_quad(s, a, a + u / double(nu), a + u / double(nu) + v / double(nv), a + v / double(nv), rho, none, material);
+      }
+  };
+  // An axis-aligned box, faces outward (no bottom).
+  auto box = [&](V lo, V hi, const glm::dvec3& rho, double cell) {
+    const V d = hi - lo;
+    rect(V(lo.x, hi.y, lo.z), V(0, 0, d.z), V(d.x, 0, 0), rho, cell);
+    rect(lo, V(0, d.y, 0), V(d.x, 0, 0), rho, cell);
+    rect(V(lo.x, lo.y, hi.z), V(d.x, 0, 0), V(0, d.y, 0), rho, cell);
+    rect(lo, V(0, 0, d.z), V(0, d.y, 0), rho, cell);
+    rect(V(hi.x, lo.y, lo.z), V(0, d.y, 0), V(0, 0, d.z), rho, cell);
+  };
+  // The court is x in [-12, 12], z in [-5, 5], open to the sky; galleries of two storeys (floors at
+  // 0 and 5 m, roofs at 10 m) run along both long sides to back walls at z = +-8; end walls at
+  // x = +-12 and the back walls rise to 12 m.
+  const double X = 12.0, court = 5.0, back = 8.0, top = 12.0, wall = 0.5;
+  rect(V(-X, 0, -back), V(0, 0, 2 * back), V(2 * X, 0, 0), paving, 1.0);
+  ++material;
+  rect(V(-X, 0, -back), V(2 * X, 0, 0), V(0, top, 0), plaster, 1.0);          // back wall z = -8
+  rect(V(-X, 0, back), V(0, top, 0), V(2 * X, 0, 0), plaster, 1.0);           // back wall z = +8
+  rect(V(-X, 0, -back), V(0, top, 0), V(0, 0, 2 * back), plaster, 1.0);       // end wall x = -12
+  rect(V(X, 0, -back), V(0, 0, 2 * back), V(0, top, 0), plaster, 1.0);        // end wall x = +12
+  ++material;
+  // Per side (sz = -1, +1): for each storey an arcade of ten columns and nine arches on the court's
+  // edge, the gallery's ceiling slab over it, and the parapet above the roof.
+  const int bays = 10;
+  const double bay = 2 * X / bays, column_r = 0.22;
+  for (double sz : {-1.0, 1.0}) {
+    const double zf = sz * court, zb = sz * (court + wall);  // the arcade wall's court and gallery faces
+    for (int storey = 0; storey < 2; ++storey) {
+      const double y0 = 5.0 * storey, spring = y0 + 3.0, y1 = y0 + 4.7, slab = y0 + 5.0;
+      // Columns: base, a shaft with entasis (10 rings, 24 sides), a capital.
+      for (int k = 1; k < bays; ++k) {
+        const double x = -X + bay * k;
+        const V c(x, y0, sz * (court + 0.5 * wall));
+        box(c + V(-0.32, 0.0, -0.32), c + V(0.32, 0.25, 0.32), stone, 1.0);
+        std::vector<std::array<double, 2>> shaft;
+        for (int i = 0; i <= 10; ++i) shaft.push_back({column_r * (1.0 + 0.12 * std::sin(kPi * i / 10.0) - 0.06 * i / 10.0), 0.25 + 2.5 * i / 10.0});
+        add_lathe(s, c, shaft, 24, stone, material);
+        box(c + V(-0.3, 2.75, -0.3), c + V(0.3, 3.0, 0.3), stone, 1.0);
+      }
+      ++material;
+      // The arcade wall over the arches, from the springing to the slab: per bay a semicircular
+      // opening between the capitals, its soffit, and the spandrels on both faces.
+      for (int k = 0; k < bays; ++k) {
+        const double x0 = -X + bay * k, xc = x0 + 0.5 * bay, r = 0.5 * bay - 0.3;
+        const int n = 12;
+        auto arc = [&](int i, double z) { const double a = kPi * (1.0 - double(i) / n); return V(xc + r * std::cos(a), spring + r * std::sin(a), z); };
+        for (int i = 0; i < n; ++i) {
+          // Spandrel strips from the arc up to the top of the wall, on both faces.
+          const V a = arc(i, zf), b = arc(i + 1, zf);
+          const V ta(a.x, y1, zf), tb(b.x, y1, zf);
+          const V a2 = arc(i, zb), b2 = arc(i + 1, zb);
+          const V ta2(a2.x, y1, zb), tb2(b2.x, y1, zb);
+          if (sz > 0) {
+            add_quad(s, b, a, ta, tb, stone, none, material);      // court face looks to -z
+            add_quad(s, a2, b2, tb2, ta2, stone, none, material);  // gallery face looks to +z
+            add_quad(s, a, b, b2, a2, stone, none, material);      // soffit looks into the opening
+          } else {
+            add_quad(s, a, b, tb, ta, stone, none, material);
+            add_quad(s, b2, a2, ta2, tb2, stone, none, material);
+            add_quad(s, a2, b2, b, a, stone, none, material);
+          }
+        }
+        // The piers' parts beside the arch (x0 .. xc - r and xc + r .. x0 + bay), both faces.
+        for (double px : {x0, xc + r}) {
+          const double w = 0.3;
+          if (sz < 0) {
+            add_quad(s, V(px, spring, zf), V(px + w, spring, zf), V(px + w, y1, zf), V(px, y1, zf), stone, none, material);
+            add_quad(s, V(px + w, spring, zb), V(px, spring, zb), V(px, y1, zb), V(px + w, y1, zb), stone, none, material);
+          } else {
+            add_quad(s, V(px + w, spring, zf), V(px, spring, zf), V(px, y1, zf), V(px + w, y1, zf), stone, none, material);
+            add_quad(s, V(px, spring, zb), V(px + w, spring, zb), V(px + w, y1, zb), V(px, y1, zb), stone, none, material);
+          }
+        }
+      }
+      ++material;
+      // The slab over the gallery: its underside, its edge on the court and its top (the next
+      // storey's floor or the roof), 1 m tiles.
+      const double z0 = sz > 0 ? court : -back, z1 = sz > 0 ? back : -court;
+      rect(V(-X, y1, z0), V(2 * X, 0, 0), V(0, 0, z1 - z0), plaster, 1.0);
+      rect(V(-X, slab, z0), V(0, 0, z1 - z0), V(2 * X, 0, 0), paving, 1.0);
+      if (sz < 0) rect(V(-X, y1, zf), V(2 * X, 0, 0), V(0, slab - y1, 0), stone, 1.0);
+      else rect(V(-X, y1, zf), V(0, slab - y1, 0), V(2 * X, 0, 0), stone, 1.0);
+      ++material;
+      // A balustrade along the slab's edge above (the upper gallery's and the roof's): rails and
+      // vase-shaped balusters (8 sides, 8 rings) every 0.2 m.
+      const double by = slab, bz = sz * (court + 0.25);
+      for (int k = 0; k < bays; ++k) {
+        const double xa = -X + bay * k + 0.4, xb = -X + bay * (k + 1) - 0.4;
+        box(V(xa, by + 0.85, bz - 0.12), V(xb, by + 0.95, bz + 0.12), stone, 1.0);
+        for (double x = xa + 0.1; x < xb - 0.05; x += 0.2)
+          add_lathe(s, V(x, by, bz), {{0.06, 0.0}, {0.06, 0.1}, {0.035, 0.18}, {0.07, 0.4}, {0.07, 0.5},
+                                        {0.035, 0.68}, {0.05, 0.78}, {0.05, 0.85}, {0.0, 0.85}},
+                    8, stone, material);
+      }
+      ++material;
+    }
+    // Curtains hung behind the upper arches (every other bay): wavy sheets, both sides, 1.9 x 2.6 m
+    // in 40 x 30 cells.
+    for (int k = 0; k < bays; k += 2) {
+      const double x0 = -X + bay * k + 0.35, w = bay - 0.7, y0 = 5.3, h = 2.5, zc = sz * (court + wall + 0.3);
+      const int nu = 40, nv = 30;
+      auto at = [&](int i, int j) {
+        const double x = x0 + w * i / nu, y = y0 + h * j / nv;
+        return V(x, y, zc + 0.07 * std::sin(2.0 * kPi * 6.0 * i / nu) * (0.4 + 0.6 * (1.0 - double(j) / nv)));
+      };
+      const glm::dvec3 rho = cloth[static_cast<size_t>(k / 2) % cloth.size()];
+      for (int i = 0; i < nu; ++i)
+        for (int j = 0; j < nv; ++j) {
+          const V a = at(i, j), b = at(i + 1, j), c = at(i + 1, j + 1), d = at(i, j + 1);
+          add_quad(s, a, b, c, d, rho, none, material);  // the side towards -z
+          add_quad(s, a, d, c, b, rho, none, material);  // the side towards +z
+        }
+      ++material;
+    }
+    // Benches along the lower gallery's back wall.
+    for (int k = 0; k < bays; ++k) {
+      const double xc = -X + bay * (k + 0.5), zc = sz * (back - 0.45);
+      box(V(xc - 0.8, 0.42, zc - 0.2), V(xc + 0.8, 0.47, zc + 0.2), wood, 1.0);
+      for (double lx : {-0.75, 0.7})
+        for (double lz : {-0.18, 0.14}) box(V(xc + lx, 0.0, zc + lz), V(xc + lx + 0.05, 0.42, zc + lz + 0.04), wood, 1.0);
+    }
+    ++material;
+  }
+  // The court: a fountain (a basin and a column of tiers) and 24 planters with round shrubs.
+  add_lathe(s, V(0, 0, 0), {{1.6, 0.0}, {1.6, 0.5}, {1.4, 0.5}, {1.4, 0.25}, {0.3, 0.25}, {0.25, 1.2}, {0.8, 1.3},
+                            {0.8, 1.4}, {0.2, 1.45}, {0.15, 2.1}, {0.45, 2.2}, {0.45, 2.3}, {0.0, 2.35}},
+            48, stone, material++);
+  Lcg rng{11};
+  for (int i = 0; i < 12; ++i)
+    for (double sz : {-1.0, 1.0}) {
+      const double x = -X + 1.0 + i * (2 * X - 2.0) / 11.0, z = sz * (court - 1.2);
+      if (std::abs(x) < 2.5) continue;
+      add_lathe(s, V(x, 0, z), {{0.25, 0.0}, {0.32, 0.1}, {0.38, 0.45}, {0.42, 0.55}, {0.36, 0.55}, {0.36, 0.5}, {0.0, 0.5}},
+                20, terracotta, material);
+      add_uv_sphere(s, V(x, 0.5 + 0.35, z), rng.in(0.3, 0.42), 12, 18, leaves, none, material + 1);
+    }
+  material += 2;
+  // Lit by the sky through the open roof and a low sun.
+  s.sky = glm::dvec3(0.55, 0.65, 0.9);
+  Light sun;
+  sun.type = Light::Type::kDirectional;
+  sun.direction = glm::normalize(glm::dvec3(0.35, -0.8, 0.45));
+  sun.intensity = glm::dvec3(9.0, 8.4, 7.2);
+  s.lights.push_back(sun);
+  return s;
+}
+
+Scene make_sphere_room(int rings, int segments) {
+  using V = glm::dvec3;
+  Scene s;
+  const glm::dvec3 wall(0.7), floor(0.5, 0.45, 0.4), none(0.0);
+  // A 4 x 3 x 5 m room seen from inside, 0.5 m tiles, with a 1 x 1 m ceiling panel.
+  auto rect = [&](V o, V u, V v, const glm::dvec3& rho, uint32_t material) {
+    const int nu = static_cast<int>(std::ceil(glm::length(u) / 0.5 - 1e-9)), nv = static_cast<int>(std::ceil(glm::length(v) / 0.5 - 1e-9));
+    for (int i = 0; i < nu; ++i)
+      for (int j = 0; j < nv; ++j) {
+        const V a = o + u * (double(i) / nu) + v * (double(j) / nv);
+        add_quad(s, a, a + u / double(nu), a + u / double(nu) + v / double(nv), a + v / double(nv), rho, none, material);
+      }
+  };
+  rect(V(0, 0, 0), V(0, 0, 5), V(4, 0, 0), floor, 0);
+  rect(V(0, 3, 0), V(4, 0, 0), V(0, 0, 5), wall, 1);
+  rect(V(0, 0, 0), V(4, 0, 0), V(0, 3, 0), wall, 1);
+  rect(V(0, 0, 5), V(0, 3, 0), V(4, 0, 0), wall, 1);
+  rect(V(0, 0, 0), V(0, 3, 0), V(0, 0, 5), wall, 1);
+  rect(V(4, 0, 0), V(0, 0, 5), V(0, 3, 0), wall, 1);
+  add_quad(s, V(1.5, 2.99, 2.0), V(2.5, 2.99, 2.0), V(2.5, 2.99, 3.0), V(1.5, 2.99, 3.0), glm::dvec3(0.8), glm::dvec3(10.0), 2);
+  add_uv_sphere(s, V(2.0, 0.8, 2.5), 0.8, rings, segments, glm::dvec3(0.6, 0.4, 0.3), none, 3);
+  return s;
+}
+
 }  // namespace hemibake::solver

@@ -181,6 +181,16 @@ bool Solver::Impl::ShotRecord::consistent() const {
 // headroom (piece_headroom).
 void Solver::Impl::record_piece(const Piece& piece, bool coarse, double split_room, const std::vector<uint32_t>& accepted) {
   ShotRecord& r = *recording;
+  // A record that could not be kept is not built further, and one that outgrows the cache is
+  // dropped as it grows: a shot of thousands of pieces (each listing its receivers) would otherwise
+  // hold gigabytes until its end, only for keep_record to refuse it.
+  if (record_broken) return;
+  const size_t budget = static_cast<size_t>(params.shot_cache_mb) << 20;
+  if (r.bytes() + accepted.size() * (sizeof(uint32_t) + sizeof(float)) + piece.src.size() * sizeof(uint32_t) > budget) {
+    record_broken = true;
+    r = ShotRecord{};
+    return;
+  }
   ShotRecord::Piece rp;
   rp.src_begin = static_cast<uint32_t>(r.src.size());
   r.src.insert(r.src.end(), piece.src.begin(), piece.src.end());
@@ -217,6 +227,9 @@ double Solver::Impl::piece_headroom(const Piece& piece, double split_room, const
   // hemicube because its point view errs by under a quarter of the radiosity tolerance stays so
   // until half of it.
   if (patch_piece && !piece.may_refine && piece.depth < kMaxShooterDepth)
+    lower_headroom(headroom, kSavingRuleSlack * params.feps * emitted_power, power);
+  // A weak cluster piece did not look for absorbers close in front of it (shoot_piece).
+  if (!patch_piece && piece.may_refine && power < params.feps * emitted_power)
     lower_headroom(headroom, kSavingRuleSlack * params.feps * emitted_power, power);
   if (patch_piece && power < kStraddlePower * emitted_power) lower_headroom(headroom, kStraddlePower * emitted_power, power);
   if (params.method == Method::kAntiAliased) {

@@ -227,7 +227,10 @@ struct Solver::Impl {
   void light_factors(const Light* light, const std::vector<LightView>& views, std::span<const uint32_t> elements);
   void shoot_light(const Light& light);
   std::vector<glm::dvec3> sky_factors(uint32_t directions_step, std::span<const uint32_t> elements);
-  void shoot_sky();
+  void add_sky_directions(uint32_t step, uint32_t first, uint32_t end, std::span<const uint32_t> elements,
+                          std::vector<glm::dvec3>& sums);
+  void finish_sky_factors(uint32_t step, std::span<const uint32_t> elements, std::vector<glm::dvec3>& sums) const;
+  bool shoot_sky_part();
   void light_receive(uint32_t e, const glm::dvec3& irradiance);
 
   // solver.cpp: set-up, and the Southwell step that picks the shooter.
@@ -463,6 +466,16 @@ struct Solver::Impl {
   std::vector<Light> lights;
   glm::dvec3 sky{0.0};
   uint32_t light_turn = 0;
+  // The sky's shot under way (shoot_sky_part): its refinement round, whether this is the pass that
+  // distributes the light, the next direction, its receivers and the sums so far.
+  struct SkyShot {
+    bool started = false, final_pass = false;
+    int round = 0;
+    uint32_t next = 0;
+    std::vector<uint32_t> accepted;
+    std::vector<glm::dvec3> sums;
+  };
+  SkyShot sky_shot;
   std::unique_ptr<detail::Hemicube> light_cube;  // at params.resolution, for lights' views
   std::unique_ptr<detail::Hemicube> sky_cube;    // coarser, for the sky's many directions
 

@@ -38,6 +38,16 @@ Scene make_cluttered_room(uint32_t small_boxes = 390, uint32_t seed = 1);
 /// in all, open to the sky (nothing else emits). Deterministic.
 Scene make_lava_field();
 
+/// A Sponza-like atrium, for big inputs: a 24 x 10 m court open to the sky between two storeys of
+/// arcades (columns, arches, balustrades of turned balusters, curtains hung behind the upper
+/// arches), galleries with benches, a fountain and planters with shrubs; lit by a uniform sky and a
+/// sun (a directional light). About 150 000 triangles. Deterministic.
+Scene make_atrium();
+
+/// A finely tessellated object in a small room: a 4 x 3 x 5 m room (0.5 m tiles) lit by a ceiling
+/// panel, with a UV sphere of `rings` x `segments` (200 x 400: 159 200 triangles) on its floor.
+Scene make_sphere_room(int rings = 200, int segments = 400);
+
 /// Appends a quad (counter-clockwise seen from the front) as one patch, or as two triangles when
 /// its corners are not coplanar.
 void add_quad(Scene& scene, const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c,
