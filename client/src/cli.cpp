@@ -97,7 +97,7 @@ std::string usage() {
          "  hemibake room [--patches N] [options]               bake the benchmarks' furnished room\n"
          "  hemibake clutter [options]                          bake the benchmarks' cluttered room\n"
          "  hemibake lava [options]                             bake a floor lit by six emissive spheres\n"
-         "  hemibake atrium [options]                           bake a Sponza-like atrium (150k triangles) under a sky and a sun\n"
+         "  hemibake atrium [options]                           bake a Sponza-like atrium (127k triangles) under a sky and a sun\n"
          "  hemibake bake --server URL IN -o OUT.glb [options]  bake on a hemibake-server\n"
          "  hemibake submit IN [options]                        submit to the server; prints the job id\n"
          "  hemibake status ID | watch ID | cancel ID           a job's state, live progress, cancel it\n"

@@ -360,13 +360,16 @@ void Solver::Impl::shoot_light(const Light& light) {
 // Per element of `elements` (indexed by element): the sky's irradiance per unit radiance, visible
 // (x) and with nothing hidden (y), from every `step`-th of the sky's directions.
 // Adds to `sums` (per element: visible and open) the sky's parallel projections along directions
-// first, first + step, ... before `end` (each of weight 4 pi step / kSkyDirections).
-void Solver::Impl::add_sky_directions(uint32_t step, uint32_t first, uint32_t end, std::span<const uint32_t> elements,
-                                      std::vector<glm::dvec3>& sums) {
+// first, first + step, ... (each of weight 4 pi step / kSkyDirections), until the last or, given
+// `seconds`, once that long has passed. Returns the next direction.
+uint32_t Solver::Impl::add_sky_directions(uint32_t step, uint32_t first, std::span<const uint32_t> elements,
+                                          std::vector<glm::dvec3>& sums, double seconds) {
+  const auto t0 = Clock::now();
   sums.resize(e_patch.size(), glm::dvec3(0.0));
   const double omega = 4.0 * kPi * step / kSkyDirections;
-  LightView v;
-  for (uint32_t k = first; k < end; k += step) {
+  LightView v;  // one for all the directions: its per-element lists keep their memory
+  uint32_t k = first;
+  for (; k < kSkyDirections && (seconds <= 0.0 || seconds_since(t0) < seconds); k += step) {
     const glm::dvec3 towards_sky = fibonacci_direction(k, kSkyDirections);
     v = parallel_view(-towards_sky, sky_cube->resolution());
     v.cube = sky_cube.get();
@@ -383,6 +386,7 @@ void Solver::Impl::add_sky_directions(uint32_t step, uint32_t first, uint32_t en
       }
     });
   }
+  return k;
 }
 
 // The sums over every step-th direction as F(element -> sky) per element: x visible, y open.
@@ -407,7 +411,7 @@ void Solver::Impl::finish_sky_factors(uint32_t step, std::span<const uint32_t> e
 
 std::vector<glm::dvec3> Solver::Impl::sky_factors(uint32_t step, std::span<const uint32_t> elements) {
   std::vector<glm::dvec3> sums;
-  add_sky_directions(step, 0, kSkyDirections, elements, sums);
+  add_sky_directions(step, 0, elements, sums, 0.0);
   finish_sky_factors(step, elements, sums);
   return sums;
 }
@@ -429,12 +433,7 @@ bool Solver::Impl::shoot_sky_part() {
   }
   const uint32_t step = sh.final_pass ? 1 : kSkyRefineStep;
   grow_scratch();
-  const auto t0 = Clock::now();
-  while (sh.next < kSkyDirections && seconds_since(t0) < kSkyPartSeconds) {
-    const uint32_t end = std::min(kSkyDirections, sh.next + step);
-    add_sky_directions(step, sh.next, end, sh.accepted, sh.sums);
-    sh.next = end;
-  }
+  sh.next = add_sky_directions(step, sh.next, sh.accepted, sh.sums, kSkyPartSeconds);
   if (sh.next < kSkyDirections) return false;
   std::vector<glm::dvec3> f = std::move(sh.sums);
   sh.sums.clear();

@@ -227,8 +227,8 @@ struct Solver::Impl {
   void light_factors(const Light* light, const std::vector<LightView>& views, std::span<const uint32_t> elements);
   void shoot_light(const Light& light);
   std::vector<glm::dvec3> sky_factors(uint32_t directions_step, std::span<const uint32_t> elements);
-  void add_sky_directions(uint32_t step, uint32_t first, uint32_t end, std::span<const uint32_t> elements,
-                          std::vector<glm::dvec3>& sums);
+  uint32_t add_sky_directions(uint32_t step, uint32_t first, std::span<const uint32_t> elements,
+                              std::vector<glm::dvec3>& sums, double seconds);
   void finish_sky_factors(uint32_t step, std::span<const uint32_t> elements, std::vector<glm::dvec3>& sums) const;
   bool shoot_sky_part();
   void light_receive(uint32_t e, const glm::dvec3& irradiance);
