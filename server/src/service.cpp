@@ -1143,8 +1143,15 @@ void Service::events_async(const std::string& id, uint64_t after, std::chrono::m
 // Whether the last event of finished job `r` says how it ended. The worker of a running job writes
 // that event after the state changed (a DELETE changes it first), on another node with a shared
 // store; a stream that ended in between would miss it. Jobs that end with no such event (failed at
-// a restart after their last attempt) end their streams after a grace period.
+// a restart after their last attempt) end their streams after a grace period, unless this node's
+// worker still runs the job: a DELETE that lands during a long step (seconds, under load) is
+// answered by the worker only at the step's end, and a stream that ended at the grace period
+// missed its "cancelled" progress and state.
 bool Service::final_event_written(const JobRecord& r) {
+  {
+    std::lock_guard lock(mutex_);
+    if (active_.count(r.id) != 0) return false;
+  }
   if (unix_now() - r.finished > 3.0 || r.last_event == 0) return true;
   const auto last = store_->events_after(r.id, r.last_event - 1, 1);
   if (last.empty() || last[0].type != "state") return false;
