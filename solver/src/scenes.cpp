@@ -213,6 +213,20 @@ struct Lcg {
   double in(double lo, double hi) { return lo + (hi - lo) * next(); }
 };
 
+// A rectangle from `o` spanned by `u` and `v` (counter-clockwise seen from the front) in cells no
+// wider than `cell`.
+void add_grid(Scene& s, const glm::dvec3& o, const glm::dvec3& u, const glm::dvec3& v, const glm::dvec3& rho,
+              const glm::dvec3& e, double cell, uint32_t material) {
+  const int nu = std::max(1, static_cast<int>(std::ceil(glm::length(u) / cell - 1e-9)));
+  const int nv = std::max(1, static_cast<int>(std::ceil(glm::length(v) / cell - 1e-9)));
+  for (int i = 0; i < nu; ++i)
+    for (int j = 0; j < nv; ++j) {
+      const glm::dvec3 a = o + u * (double(i) / nu) + v * (double(j) / nv);
+      const glm::dvec3 du = u / double(nu), dv = v / double(nv);
+      add_quad(s, a, a + du, a + du + dv, a + dv, rho, e, material);
+    }
+}
+
 }  // namespace
 
 Scene make_cluttered_room(uint32_t small_boxes, uint32_t seed) {
@@ -225,14 +239,7 @@ Scene make_cluttered_room(uint32_t small_boxes, uint32_t seed) {
   // A rectangle from `o` spanned by `u` and `v` (counter-clockwise seen from the front) in cells no
   // wider than `cell`.
   auto rect = [&](V o, V u, V v, const glm::dvec3& rho, const glm::dvec3& e, double cell) {
-    const int nu = std::max(1, static_cast<int>(std::ceil(glm::length(u) / cell - 1e-9)));
-    const int nv = std::max(1, static_cast<int>(std::ceil(glm::length(v) / cell - 1e-9)));
-    for (int i = 0; i < nu; ++i)
-      for (int j = 0; j < nv; ++j) {
-        const V a = o + u * (double(i) / nu) + v * (double(j) / nv);
-        const V du = u / double(nu), dv = v / double(nv);
-        add_quad(s, a, a + du, a + du + dv, a + dv, rho, e, material);
-      }
+    add_grid(s, o, u, v, rho, e, cell, material);
   };
   // An axis-aligned box, faces outward; `open_bottom` for what stands on something.
   auto box = [&](V lo, V hi, const glm::dvec3& rho, bool open_bottom, double cell) {
@@ -434,15 +441,7 @@ Scene make_atrium() {
   uint32_t material = 0;
   // A rectangle from `o` spanned by `u` and `v` (counter-clockwise seen from the front) in cells no
   // wider than `cell`.
-  auto rect = [&](V o, V u, V v, const glm::dvec3& rho, double cell) {
-    const int nu = std::max(1, static_cast<int>(std::ceil(glm::length(u) / cell - 1e-9)));
-    const int nv = std::max(1, static_cast<int>(std::ceil(glm::length(v) / cell - 1e-9)));
-    for (int i = 0; i < nu; ++i)
-      for (int j = 0; j < nv; ++j) {
-        const V a = o + u * (double(i) / nu) + v * (double(j) / nv);
-        add_quad(s, a, a + u / double(nu), a + u / double(nu) + v / double(nv), a + v / double(nv), rho, none, material);
-      }
-  };
+  auto rect = [&](V o, V u, V v, const glm::dvec3& rho, double cell) { add_grid(s, o, u, v, rho, none, cell, material); };
   // An axis-aligned box, faces outward (no bottom).
   auto box = [&](V lo, V hi, const glm::dvec3& rho, double cell) {
     const V d = hi - lo;
@@ -594,14 +593,7 @@ Scene make_sphere_room(int rings, int segments) {
   Scene s;
   const glm::dvec3 wall(0.7), floor(0.5, 0.45, 0.4), none(0.0);
   // A 4 x 3 x 5 m room seen from inside, 0.5 m tiles, with a 1 x 1 m ceiling panel.
-  auto rect = [&](V o, V u, V v, const glm::dvec3& rho, uint32_t material) {
-    const int nu = static_cast<int>(std::ceil(glm::length(u) / 0.5 - 1e-9)), nv = static_cast<int>(std::ceil(glm::length(v) / 0.5 - 1e-9));
-    for (int i = 0; i < nu; ++i)
-      for (int j = 0; j < nv; ++j) {
-        const V a = o + u * (double(i) / nu) + v * (double(j) / nv);
-        add_quad(s, a, a + u / double(nu), a + u / double(nu) + v / double(nv), a + v / double(nv), rho, none, material);
-      }
-  };
+  auto rect = [&](V o, V u, V v, const glm::dvec3& rho, uint32_t material) { add_grid(s, o, u, v, rho, none, 0.5, material); };
   rect(V(0, 0, 0), V(0, 0, 5), V(4, 0, 0), floor, 0);
   rect(V(0, 3, 0), V(4, 0, 0), V(0, 0, 5), wall, 1);
   rect(V(0, 0, 0), V(4, 0, 0), V(0, 3, 0), wall, 1);
