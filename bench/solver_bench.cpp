@@ -421,8 +421,8 @@ int main(int argc, char** argv) {
     bigs.push_back({"sphere room (ceiling panel)", make_sphere_room()});
     const double budget = argc > 2 ? std::atof(argv[2]) : 180.0;
     std::printf("## Big inputs (default settings, all threads, at most %.0f s each)\n\n", budget);
-    std::printf("| scene | triangles | patches | time (s) | converged | unshot | shots | replayed | hemicubes | elements | longest shot (s) | peak memory (MB) |\n");
-    std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    std::printf("| scene | triangles | patches | shooters | time (s) | converged | unshot | shots | replayed | hemicubes | elements | longest shot (s) | peak memory (MB) |\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     struct Out {
       Stats st;
       double longest;
@@ -452,8 +452,9 @@ int main(int argc, char** argv) {
             return Out{solver.stats(), longest};
           },
           &peak);
-      std::printf("| %s | %llu | %zu | %.1f | %s | %.4f | %llu | %llu | %llu | %llu | %.2f | %.0f |\n", b.name,
-                  static_cast<unsigned long long>(triangles), b.scene.patches.size(), o.st.seconds, o.st.converged ? "yes" : "no",
+      std::printf("| %s | %llu | %zu | %llu | %.1f | %s | %.4f | %llu | %llu | %llu | %llu | %.2f | %.0f |\n", b.name,
+                  static_cast<unsigned long long>(triangles), b.scene.patches.size(),
+                  static_cast<unsigned long long>(o.st.shooters), o.st.seconds, o.st.converged ? "yes" : "no",
                   o.st.unshot_fraction, static_cast<unsigned long long>(o.st.shots), static_cast<unsigned long long>(o.st.replayed_shots),
                   static_cast<unsigned long long>(o.st.hemicubes), static_cast<unsigned long long>(o.st.elements), o.longest, peak / 1024.0);
       std::fflush(stdout);

@@ -22,9 +22,9 @@ double now_seconds() {
 }
 
 void print_stats(const Console& c, const solver::Stats& st) {
-  std::fprintf(c.out, "  %s after %.3f s: %llu shots (%llu replayed, %llu of them partly anew), %llu hemicubes, %llu elements, unshot %.5f\n",
+  std::fprintf(c.out, "  %s after %.3f s: %llu shots of %llu shooters (%llu replayed, %llu of them partly anew), %llu hemicubes, %llu elements, unshot %.5f\n",
                st.converged ? "converged" : st.cancelled ? "cancelled" : "stopped at a limit", st.seconds,
-               static_cast<unsigned long long>(st.shots), static_cast<unsigned long long>(st.replayed_shots),
+               static_cast<unsigned long long>(st.shots), static_cast<unsigned long long>(st.shooters), static_cast<unsigned long long>(st.replayed_shots),
                static_cast<unsigned long long>(st.replays_reshot), static_cast<unsigned long long>(st.hemicubes),
                static_cast<unsigned long long>(st.elements), st.unshot_fraction);
   if (st.passes > 1)

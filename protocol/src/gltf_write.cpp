@@ -469,6 +469,7 @@ Value bake_record(Method method, const solver::Params& params, const solver::Sta
   s["shots"] = Value(static_cast<double>(stats.shots));
   s["elements"] = Value(static_cast<double>(stats.elements));
   s["patches"] = Value(static_cast<double>(stats.patches));
+  s["shooters"] = Value(static_cast<double>(stats.shooters));
   s["seconds"] = Value(stats.seconds);
   s["unshot_fraction"] = Value(stats.unshot_fraction);
   s["converged"] = Value(stats.converged);

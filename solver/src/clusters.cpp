@@ -25,14 +25,19 @@ int orientation_class(const glm::dvec3& n) {
 }  // namespace
 
 
-// Cluster node `id` over cluster_patch[begin, end), and its subtree.
-void Solver::Impl::build_cluster(uint32_t id, uint32_t begin, uint32_t end) {
+// Cluster node `id` over cluster_patch[begin, end), and its subtree. A node is cut at the median
+// of its patches' centres, or of their normals where the normals' spread exceeds kClusterCone by
+// more than the node's width exceeds `limit`: a curved surface's facets (a column's, a wavy
+// curtain's) then part by where they face, into clusters that span the surface, instead of into
+// slices that each hold every orientation until they are down to a facet or two.
+void Solver::Impl::build_cluster(uint32_t id, uint32_t begin, uint32_t end, double limit) {
   HEMIBAKE_DCHECK(begin < end && end <= cluster_patch.size() && id < c_nodes.size());
   ClusterNode node;
   node.begin = begin;
   node.end = end;
   glm::dvec3 lo(std::numeric_limits<double>::max()), hi(std::numeric_limits<double>::lowest());
   glm::dvec3 clo = lo, chi = hi;  // of the patch centres
+  glm::dvec3 nlo = lo, nhi = hi;  // of the patch normals
   for (uint32_t i = begin; i < end; ++i) {
     const uint32_t q = cluster_patch[i];
     const Patch& patch = patches[q];
@@ -46,6 +51,8 @@ void Solver::Impl::build_cluster(uint32_t id, uint32_t begin, uint32_t end) {
     node.area += prep.area[q];
     clo = glm::min(clo, pc);
     chi = glm::max(chi, pc);
+    nlo = glm::min(nlo, prep.normal[q]);
+    nhi = glm::max(nhi, prep.normal[q]);
   }
   node.centre /= node.area;
   const double nl = glm::length(node.normal);
@@ -59,14 +66,17 @@ void Solver::Impl::build_cluster(uint32_t id, uint32_t begin, uint32_t end) {
       node.diameter = std::max(node.diameter, 2.0 * glm::distance(node.centre, patch.corners[k]));
   }
   if (end - begin > 1) {
-    // Median cut of the patch centres across their widest extent.
-    const uint32_t mid = median_cut(cluster_patch, begin, end, clo, chi, [&](uint32_t q) {
-      return polygon_centre(patches[q].corners, patches[q].corner_count);
-    });
+    const double spread = (1.0 - node.min_cos) / (1.0 - kClusterCone);
+    const double width = limit > 0.0 ? node.diameter / limit : 0.0;
+    const uint32_t mid = spread > 1.0 && spread >= width
+                             ? median_cut(cluster_patch, begin, end, nlo, nhi, [&](uint32_t q) { return prep.normal[q]; })
+                             : median_cut(cluster_patch, begin, end, clo, chi, [&](uint32_t q) {
+                                 return polygon_centre(patches[q].corners, patches[q].corner_count);
+                               });
     node.child = static_cast<uint32_t>(c_nodes.size());
     c_nodes.resize(c_nodes.size() + 2);
-    build_cluster(node.child, begin, mid);
-    build_cluster(node.child + 1, mid, end);
+    build_cluster(node.child, begin, mid, limit);
+    build_cluster(node.child + 1, mid, end, limit);
   }
   c_nodes[id] = node;
 }
@@ -95,10 +105,10 @@ void Solver::Impl::build_clusters() {
       for (uint32_t q : members) pooled[{orientation_class(prep.normal[q]), {e.x, e.y, e.z}}].push_back(q);
       continue;
     }
-    if (members.size() >= 2) cut_into_units(members, limit, false);
+    if (members.size() >= 2) cut_into_units(members, limit);
   }
   for (auto& [key, members] : pooled)
-    if (members.size() >= 2) cut_into_units(members, limit, true);
+    if (members.size() >= 2) cut_into_units(members, limit);
   for (uint32_t p = 0; p < patches.size(); ++p) {
     if (p_unit[p] != kNone) continue;
     p_unit[p] = static_cast<uint32_t>(unit_patch.size());
@@ -147,29 +157,30 @@ std::vector<std::vector<uint32_t>> Solver::Impl::cluster_candidates(double limit
 
 // Builds the cluster tree over `members` and cuts it from the top until the pieces are narrow
 // enough and flat enough (kClusterCone); each piece of two or more patches becomes a unit.
-void Solver::Impl::cut_into_units(const std::vector<uint32_t>& members, double limit, bool across) {
+void Solver::Impl::cut_into_units(const std::vector<uint32_t>& members, double limit) {
   const uint32_t begin = static_cast<uint32_t>(cluster_patch.size());
   cluster_patch.insert(cluster_patch.end(), members.begin(), members.end());
   const uint32_t root = static_cast<uint32_t>(c_nodes.size());
   c_nodes.emplace_back();
-  build_cluster(root, begin, static_cast<uint32_t>(cluster_patch.size()));
-  // A cluster across objects holds faces at different depths along its normal (box tops of
-  // several heights): its centroid may lie inside one of the boxes, whose inner faces are absorbing
-  // backs. Its hemicube stands in front of all of its patches instead.
-  if (across)
-    for (uint32_t c = root; c < c_nodes.size(); ++c) {
-      ClusterNode& node = c_nodes[c];
-      double back = 0.0;
-      for (uint32_t i = node.begin; i < node.end; ++i) {
-        const Patch& patch = patches[cluster_patch[i]];
-        for (uint32_t k = 0; k < patch.corner_count; ++k) {
-          const double d = glm::dot(node.normal, patch.corners[k] - node.centre);
-          node.front = std::max(node.front, d);
-          back = std::max(back, -d);
-        }
+  build_cluster(root, begin, static_cast<uint32_t>(cluster_patch.size()), limit);
+  // A cluster's faces lie at different depths along its normal (box tops of several heights across
+  // objects; the crests and troughs of a wavy curtain): its centroid may lie inside a box, whose
+  // inner faces are absorbing backs, or behind its own surface's crests. Its hemicube stands in front
+  // of all of its patches instead.
+  for (uint32_t c = root; c < c_nodes.size(); ++c) {
+    ClusterNode& node = c_nodes[c];
+    double back = 0.0;
+    for (uint32_t i = node.begin; i < node.end; ++i) {
+      const Patch& patch = patches[cluster_patch[i]];
+      for (uint32_t k = 0; k < patch.corner_count; ++k) {
+        const double d = glm::dot(node.normal, patch.corners[k] - node.centre);
+        node.front = std::max(node.front, d);
+        back = std::max(back, -d);
       }
-      node.depth = node.front + back;
     }
+    node.depth = node.front + back;
+    if (node.depth <= kRoundingLength * prep.diagonal) node.front = node.depth = 0.0;  // flat
+  }
   std::vector<uint32_t> stack{root};
   while (!stack.empty()) {
     const uint32_t c = stack.back();

@@ -89,6 +89,7 @@ Solver::Impl::Impl(const Scene& scene, const Params& p, const Impl* first, const
   p_shooting.assign(patches.size(), 0);
   build_patch_bvh();
   stats.patches = patches.size();
+  stats.shooters = unit_patch.size();
   stats.elements = leaves.size();
   stats.emitted_power = emitted_power;
   update_unshot_total();

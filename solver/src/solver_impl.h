@@ -155,7 +155,7 @@ struct Solver::Impl {
     double power;                     // unshot power shot: channel_sum(dB) * area
     std::vector<glm::dvec3> points;   // points whose hull holds the piece (facing tests)
     int depth;                        // hemicube level (each halves the resolution)
-    double rear = 0.0;                // a cluster across objects: how far behind `centre` it reaches
+    double rear = 0.0;                // a cluster not flat: how far behind `centre` it reaches
     bool may_refine;                  // near receivers are left to sub-pieces
     // Where dB comes from (for replays): the unshot power of the leaves under `src`, divided by
     // src_area.
@@ -203,10 +203,10 @@ struct Solver::Impl {
     double min_cos = 1.0;         // least cosine between a patch's normal and `normal`
     double area = 0.0, diameter = 0.0;
     std::array<glm::dvec3, 8> box{};  // corners of the bounding box of its patches' corners
-    // Across objects: how far in front of `centre`, along `normal`, its foremost patch corner lies
-    // (0 for a cluster of one surface); the hemicube stands there (shoot_cluster).
+    // How far in front of `centre`, along `normal`, its foremost patch corner lies (0 for a flat
+    // cluster); the hemicube stands there (shoot_cluster).
     double front = 0.0;
-    double depth = 0.0;  // across objects: from its rearmost patch corner to its foremost, along `normal`
+    double depth = 0.0;  // from its rearmost patch corner to its foremost, along `normal`
   };
   // A node of the bounding-box tree over the patches (patch_bvh.cpp).
   struct BoxNode {
@@ -278,8 +278,8 @@ struct Solver::Impl {
   void build_clusters();
   void find_surfaces();
   std::vector<std::vector<uint32_t>> cluster_candidates(double limit) const;
-  void cut_into_units(const std::vector<uint32_t>& members, double limit, bool across);
-  void build_cluster(uint32_t id, uint32_t begin, uint32_t end);
+  void cut_into_units(const std::vector<uint32_t>& members, double limit);
+  void build_cluster(uint32_t id, uint32_t begin, uint32_t end, double limit);
 
   // shooters.cpp: a unit breaks into pieces, each of which shoot_piece shoots.
   void shoot_patch(uint32_t p, const std::vector<uint32_t>& receivers, bool whole_scene);

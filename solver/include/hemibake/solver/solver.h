@@ -160,6 +160,7 @@ struct Stats {
   uint64_t reused_children = 0;  ///< children whose form factor came from their parent's pixels
   uint64_t elements = 0;         ///< leaf elements now
   uint64_t patches = 0;          ///< input patches
+  uint64_t shooters = 0;         ///< what shoots: clusters of patches (Params::cluster_size) and patches alone
   uint64_t peak_fragments = 0;   ///< most pixel fragments held at once
   double seconds = 0.0;          ///< wall time in run()/step()
   double seconds_projecting = 0.0;  ///< in those projections (incl. resolving pixel lists)
