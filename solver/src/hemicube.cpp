@@ -496,13 +496,30 @@ struct GroupSum {
   float trans;
 };
 
+// The side (bit 32 of a pixel's surface id) on which a neighbour across `link` of a surface on
+// side `side` is folded behind it, or tiles with it (a back face is projected reversed, so a
+// different side flips the link's case).
+uint64_t fold_side(uint64_t side, const GroupAdjacency::Link& link) {
+  return link.folded ? side : side ^ (uint64_t{1} << 32);
+}
+uint64_t tile_side(uint64_t side, const GroupAdjacency::Link& link) {
+  return link.folded ? side ^ (uint64_t{1} << 32) : side;
+}
+
 // One thread's share of resolve(): the rule for one pixel's fragments, with the lists it reuses
 // from pixel to pixel. A pixel's fragments are fragments[order[lo]] .. fragments[order[hi - 1]].
 class PixelResolver {
  public:
   PixelResolver(std::span<Fragment> fragments, std::span<const uint32_t> order,
                 std::span<const uint32_t> group_of, const GroupAdjacency& adjacency)
-      : fragments_(fragments), order_(order), group_of_(group_of), adjacency_(adjacency) {}
+      : fragments_(fragments), order_(order), group_of_(group_of), adjacency_(adjacency) {
+    thread_local std::vector<Slot> slots;
+    thread_local uint32_t stamp = 0;
+    if (slots.size() < adjacency.id_bound()) slots.resize(adjacency.id_bound());
+    slots_ = slots.data();
+    slot_count_ = adjacency.id_bound();
+    stamp_ = &stamp;
+  }
 
   // Classical: the nearest fragment takes the pixel.
   void nearest(uint32_t lo, uint32_t hi);
@@ -510,6 +527,10 @@ class PixelResolver {
   // meet, one in front of another): the rule of layers() without lists or sorting. False, doing
   // nothing, when the pixel holds more.
   bool two_surfaces(uint32_t lo, uint32_t hi);
+  // The nearest surface covers the pixel by itself and shares no edge with another of the pixel's
+  // surfaces (a wall in front of a room's clutter): it takes the pixel and the rest nothing, as in
+  // layers(), without lists or sorting. False, doing nothing, otherwise.
+  bool front_covers(uint32_t lo, uint32_t hi);
   // Any number of surfaces: E_k = A_k (1 - f_{k-1}) over the pixel's layers, nearest first.
   void layers(uint32_t lo, uint32_t hi);
 
@@ -520,6 +541,8 @@ class PixelResolver {
     return group_of_[element];
   }
   enum class Meet : uint8_t { kApart, kTile, kFold };
+  template <class SideOf, class Fn>
+  void neighbours_in_pixel(uint32_t i, SideOf side_of, Fn fn);
   Meet meet(uint64_t a, uint64_t b);
   void sum_groups(uint32_t lo, uint32_t hi);
   bool merge_neighbours();
@@ -531,6 +554,11 @@ class PixelResolver {
   }
   // A surface's place among the pixel's (sorted) surfaces, or -1.
   int64_t index_of(uint64_t id) const {
+    const uint32_t low = static_cast<uint32_t>(id);
+    if (low < slot_count_) {
+      const Slot& slot = slots_[low];
+      return slot.stamp == *stamp_ ? slot.at[id >> 32] : -1;
+    }
     const auto it = std::lower_bound(groups_.begin(), groups_.end(), id,
                                      [](const GroupSum& g, uint64_t v) { return g.group < v; });
     return it != groups_.end() && it->group == id ? it - groups_.begin() : -1;
@@ -550,7 +578,43 @@ class PixelResolver {
   std::vector<uint32_t> rank_;  // per group root: its place in `layers_`
   std::vector<double> fold_cap_;  // per group root: the most a fold leaves it (share_pixel)
   std::vector<std::pair<uint32_t, uint32_t>> folds_;  // pairs of the pixel's groups folded one behind the other
+  std::vector<std::pair<uint32_t, uint32_t>> met_;    // neighbours_in_pixel: (surface id, group)
+  // Per thread, per surface id of the adjacency's: where the surface's two sides sit among the
+  // pixel's groups, valid while `stamp` is the pixel's (sum_groups), so that index_of looks
+  // neighbours up directly (a binary search per neighbour was 14 % of a 127k-triangle bake).
+  struct Slot {
+    uint32_t stamp = 0;
+    std::array<int32_t, 2> at{-1, -1};
+  };
+  Slot* slots_ = nullptr;
+  size_t slot_count_ = 0;
+  uint32_t* stamp_ = nullptr;
 };
+
+// Calls fn(j, link) for each of the pixel's groups j that shares an edge with group i, in
+// increasing id, where j is on the side side_of(i's side, link) names. By i's links when it has
+// few; by the pixel's groups when it has more (a floor shares edges with much that stands on it,
+// and a pixel holds a few surfaces).
+template <class SideOf, class Fn>
+void PixelResolver::neighbours_in_pixel(uint32_t i, SideOf side_of, Fn fn) {
+  const uint64_t side = groups_[i].group & ~uint64_t{0xffffffffu};
+  const uint32_t id = static_cast<uint32_t>(groups_[i].group);
+  const std::span<const GroupAdjacency::Link> links = adjacency_.neighbours(id);
+  if (links.size() <= 2 * groups_.size()) {
+    for (const GroupAdjacency::Link& link : links) {
+      const int64_t j = index_of(side_of(side, link) | (link.key & 0xffffffffu));
+      if (j >= 0) fn(static_cast<uint32_t>(j), link);
+    }
+    return;
+  }
+  met_.clear();
+  for (uint32_t j = 0; j < groups_.size(); ++j) met_.emplace_back(static_cast<uint32_t>(groups_[j].group), j);
+  std::sort(met_.begin(), met_.end());
+  for (const auto& [other, j] : met_) {
+    const GroupAdjacency::Link* link = adjacency_.find(id, other);
+    if (link != nullptr && (groups_[j].group & ~uint64_t{0xffffffffu}) == side_of(side, *link)) fn(j, *link);
+  }
+}
 
 // How two surfaces (with their side bits) meet in a pixel: apart, side by side, or one folded
 // behind the other (GroupAdjacency; a back face is projected reversed, so a different side flips
@@ -625,6 +689,38 @@ bool PixelResolver::two_surfaces(uint32_t lo, uint32_t hi) {
   return true;
 }
 
+bool PixelResolver::front_covers(uint32_t lo, uint32_t hi) {
+  // The nearest surface: the one with the nearest fragment (ties to the lower id, as in
+  // order_layers).
+  uint64_t front = surface_of(fragments_[order_[lo]].element);
+  float depth = fragments_[order_[lo]].inv_depth;
+  for (uint32_t k = lo + 1; k < hi; ++k) {
+    const Fragment& f = fragments_[order_[k]];
+    const uint64_t g = surface_of(f.element);
+    if (f.inv_depth > depth || (f.inv_depth == depth && g < front)) {
+      front = g;
+      depth = f.inv_depth;
+    }
+  }
+  // Its coverage, summed in the order sum_groups sums it.
+  double area = 0.0;
+  for (uint32_t k = lo; k < hi; ++k)
+    if (surface_of(fragments_[order_[k]].element) == front) area += fragments_[order_[k]].area;
+  if (area < 1.0) return false;
+  // A neighbour in the pixel may join its layer (merge_neighbours): left to layers().
+  for (const GroupAdjacency::Link& link : adjacency_.neighbours(static_cast<uint32_t>(front))) {
+    const uint32_t other = static_cast<uint32_t>(link.key & 0xffffffffu);
+    for (uint32_t k = lo; k < hi; ++k)
+      if (static_cast<uint32_t>(surface_of(fragments_[order_[k]].element)) == other) return false;
+  }
+  const float trans = static_cast<float>(area > 1.0 ? 1.0 / area : 1.0);
+  for (uint32_t k = lo; k < hi; ++k) {
+    Fragment& f = fragments_[order_[k]];
+    f.trans = surface_of(f.element) == front ? trans : 0.0f;
+  }
+  return true;
+}
+
 void PixelResolver::layers(uint32_t lo, uint32_t hi) {
   sum_groups(lo, hi);
   const bool any_fold = merge_neighbours();
@@ -652,6 +748,18 @@ void PixelResolver::sum_groups(uint32_t lo, uint32_t hi) {
     groups_.back().area += f.area;
     groups_.back().inv_depth = std::max(groups_.back().inv_depth, f.inv_depth);
   }
+  if (slot_count_ == 0) return;
+  if (++*stamp_ == 0) {  // wrapped: no slot may look current
+    for (size_t i = 0; i < slot_count_; ++i) slots_[i].stamp = 0;
+    *stamp_ = 1;
+  }
+  for (uint32_t j = 0; j < groups_.size(); ++j) {
+    const uint32_t low = static_cast<uint32_t>(groups_[j].group);
+    if (low >= slot_count_) continue;
+    Slot& slot = slots_[low];
+    if (slot.stamp != *stamp_) slot = {*stamp_, {-1, -1}};
+    slot.at[groups_[j].group >> 32] = static_cast<int32_t>(j);
+  }
 }
 
 // Merges groups that project side by side (GroupAdjacency). A surface's neighbours are looked up
@@ -664,30 +772,19 @@ bool PixelResolver::merge_neighbours() {
   // through neighbours that tile with both (the floors of two rooms meet under the wall between
   // them, and each tiles with the wall's side that faces its room).
   folds_.clear();
-  for (uint32_t i = 0; i < groups_.size(); ++i) {
-    const uint64_t side = groups_[i].group & ~uint64_t{0xffffffffu};
-    for (const GroupAdjacency::Link& link : adjacency_.neighbours(static_cast<uint32_t>(groups_[i].group))) {
-      const uint64_t fold_side = link.folded ? side : side ^ (uint64_t{1} << 32);
-      const int64_t j = index_of(fold_side | (link.key & 0xffffffffu));
-      if (j >= 0) folds_.emplace_back(i, static_cast<uint32_t>(j));
-    }
-  }
-  for (uint32_t i = 0; i < groups_.size(); ++i) {
-    const uint64_t side = groups_[i].group & ~uint64_t{0xffffffffu};
-    for (const GroupAdjacency::Link& link : adjacency_.neighbours(static_cast<uint32_t>(groups_[i].group))) {
-      const uint64_t tile_side = link.folded ? side ^ (uint64_t{1} << 32) : side;
-      const int64_t j = index_of(tile_side | (link.key & 0xffffffffu));
-      if (j < 0) continue;
-      const uint32_t ri = root(i), rj = root(static_cast<uint32_t>(j));
-      if (ri == rj) continue;
+  for (uint32_t i = 0; i < groups_.size(); ++i)
+    neighbours_in_pixel(i, fold_side, [&](uint32_t j, const GroupAdjacency::Link&) { folds_.emplace_back(i, j); });
+  for (uint32_t i = 0; i < groups_.size(); ++i)
+    neighbours_in_pixel(i, tile_side, [&](uint32_t j, const GroupAdjacency::Link&) {
+      const uint32_t ri = root(i), rj = root(j);
+      if (ri == rj) return;
       bool apart = false;
       for (const auto& [x, y] : folds_) {
         const uint32_t rx = root(x), ry = root(y);
         apart = apart || (rx == ri && ry == rj) || (rx == rj && ry == ri);
       }
       if (!apart) groups_[std::max(ri, rj)].root = std::min(ri, rj);
-    }
-  }
+    });
   return !folds_.empty();
 }
 
@@ -724,15 +821,11 @@ void PixelResolver::share_pixel(bool any_fold) {
     for (uint32_t i = 0; i < groups_.size(); ++i) {
       const uint32_t ri = root(i);
       if (groups_[ri].area <= 0.0) continue;
-      const uint64_t side = groups_[i].group & ~uint64_t{0xffffffffu};
-      for (const GroupAdjacency::Link& link : adjacency_.neighbours(static_cast<uint32_t>(groups_[i].group))) {
-        const uint64_t fold_side = link.folded ? side : side ^ (uint64_t{1} << 32);
-        const int64_t j = index_of(fold_side | (link.key & 0xffffffffu));
-        if (j < 0) continue;
-        const uint32_t rj = root(static_cast<uint32_t>(j));
+      neighbours_in_pixel(i, fold_side, [&](uint32_t j, const GroupAdjacency::Link&) {
+        const uint32_t rj = root(j);
         if (rank_[rj] < rank_[ri])
           fold_cap_[ri] = std::min(fold_cap_[ri], std::max(0.0, groups_[ri].area - groups_[rj].area) / groups_[ri].area);
-      }
+      });
     }
   }
   double f = 0.0;  // the paper's f_{k-1}: the pixel's fraction taken by nearer layers
@@ -770,7 +863,7 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
         pixel.nearest(lo, hi);
       } else if (hi - lo == 1) {
         fragments[order[lo]].trans = 1.0f;
-      } else if (!pixel.two_surfaces(lo, hi)) {
+      } else if (!pixel.two_surfaces(lo, hi) && !pixel.front_covers(lo, hi)) {
         pixel.layers(lo, hi);
       }
     }

@@ -61,6 +61,8 @@ class GroupAdjacency {
   /// The links of `a`, in increasing b.
   std::span<const Link> neighbours(uint32_t a) const;
   bool empty() const { return links_.empty(); }
+  /// One past the largest id with links when they are indexed by id (dense ids), else 0.
+  size_t id_bound() const { return first_.empty() ? 0 : first_.size() - 1; }
 
  private:
   std::vector<Link> links_;
