@@ -25,11 +25,19 @@ int orientation_class(const glm::dvec3& n) {
 }  // namespace
 
 
+// Whether a cluster node is too wide (`limit`), its normals too spread (kClusterCone) or its faces
+// too far apart along its normal (kClusterDepth) to shoot as one piece.
+bool Solver::Impl::cluster_unfit(const ClusterNode& node, double limit) {
+  return node.diameter > limit || node.min_cos < kClusterCone || node.depth > kClusterDepth * node.diameter;
+}
+
 // Cluster node `id` over cluster_patch[begin, end), and its subtree. A node is cut at the median
-// of its patches' centres, or of their normals where the normals' spread exceeds kClusterCone by
-// more than the node's width exceeds `limit`: a curved surface's facets (a column's, a wavy
-// curtain's) then part by where they face, into clusters that span the surface, instead of into
-// slices that each hold every orientation until they are down to a facet or two.
+// of its patches' centres; or of their normals where the normals' spread exceeds kClusterCone by
+// more than the node's width exceeds `limit`, so that a curved surface's facets (a column's, a wavy
+// curtain's) part by where they face, into clusters that span the surface, instead of into slices
+// that each hold every orientation until they are down to a facet or two; or along its normal where
+// its faces lie deeper than kClusterDepth of its width (the outer and inner faces of a double-sided
+// ball, which look the same way from opposite sides).
 void Solver::Impl::build_cluster(uint32_t id, uint32_t begin, uint32_t end, double limit) {
   HEMIBAKE_DCHECK(begin < end && end <= cluster_patch.size() && id < c_nodes.size());
   ClusterNode node;
@@ -60,19 +68,47 @@ void Solver::Impl::build_cluster(uint32_t id, uint32_t begin, uint32_t end, doub
   node.min_cos = nl > 0.0 ? 1.0 : -1.0;
   for (uint32_t i = begin; i < end; ++i) node.min_cos = std::min(node.min_cos, glm::dot(node.normal, prep.normal[cluster_patch[i]]));
   for (int k = 0; k < 8; ++k) node.box[k] = glm::dvec3(k & 1 ? hi.x : lo.x, k & 2 ? hi.y : lo.y, k & 4 ? hi.z : lo.z);
+  // Its faces lie at different depths along its normal (box tops of several heights across
+  // objects; the crests and troughs of a wavy curtain): its centroid may lie inside a box, whose
+  // inner faces are absorbing backs, or behind its own surface's crests. Its hemicube stands in
+  // front of all of its patches instead (shoot_cluster).
+  double back = 0.0;
   for (uint32_t i = begin; i < end; ++i) {
     const Patch& patch = patches[cluster_patch[i]];
-    for (uint32_t k = 0; k < patch.corner_count; ++k)
+    for (uint32_t k = 0; k < patch.corner_count; ++k) {
       node.diameter = std::max(node.diameter, 2.0 * glm::distance(node.centre, patch.corners[k]));
+      const double d = glm::dot(node.normal, patch.corners[k] - node.centre);
+      node.front = std::max(node.front, d);
+      back = std::max(back, -d);
+    }
   }
+  node.depth = node.front + back;
+  if (node.depth <= kRoundingLength * prep.diagonal) node.front = node.depth = 0.0;  // flat
   if (end - begin > 1) {
+    // Cut where the node is furthest from a unit (cluster_unfit): on the normals, along the mean
+    // normal (a double-sided object's outer and inner faces that look the same way), or on the
+    // centres.
     const double spread = (1.0 - node.min_cos) / (1.0 - kClusterCone);
     const double width = limit > 0.0 ? node.diameter / limit : 0.0;
-    const uint32_t mid = spread > 1.0 && spread >= width
-                             ? median_cut(cluster_patch, begin, end, nlo, nhi, [&](uint32_t q) { return prep.normal[q]; })
-                             : median_cut(cluster_patch, begin, end, clo, chi, [&](uint32_t q) {
-                                 return polygon_centre(patches[q].corners, patches[q].corner_count);
-                               });
+    const double thick = node.depth / (kClusterDepth * node.diameter);
+    const glm::dvec3 axis = node.normal;
+    auto along = [&](uint32_t q) {
+      return glm::dvec3(glm::dot(axis, polygon_centre(patches[q].corners, patches[q].corner_count)), 0.0, 0.0);
+    };
+    double dlo = std::numeric_limits<double>::max(), dhi = std::numeric_limits<double>::lowest();
+    for (uint32_t i = begin; i < end; ++i) {
+      dlo = std::min(dlo, along(cluster_patch[i]).x);
+      dhi = std::max(dhi, along(cluster_patch[i]).x);
+    }
+    uint32_t mid;
+    if (spread > 1.0 && spread >= width && spread >= thick)
+      mid = median_cut(cluster_patch, begin, end, nlo, nhi, [&](uint32_t q) { return prep.normal[q]; });
+    else if (thick > 1.0 && thick >= width && dhi > dlo)
+      mid = median_cut(cluster_patch, begin, end, glm::dvec3(dlo, 0, 0), glm::dvec3(dhi, 0, 0), along);
+    else
+      mid = median_cut(cluster_patch, begin, end, clo, chi, [&](uint32_t q) {
+        return polygon_centre(patches[q].corners, patches[q].corner_count);
+      });
     node.child = static_cast<uint32_t>(c_nodes.size());
     c_nodes.resize(c_nodes.size() + 2);
     build_cluster(node.child, begin, mid, limit);
@@ -155,37 +191,19 @@ std::vector<std::vector<uint32_t>> Solver::Impl::cluster_candidates(double limit
   return by_group;
 }
 
-// Builds the cluster tree over `members` and cuts it from the top until the pieces are narrow
-// enough and flat enough (kClusterCone); each piece of two or more patches becomes a unit.
+// Builds the cluster tree over `members` and cuts it from the top until the pieces fit
+// (cluster_unfit); each piece of two or more patches becomes a unit.
 void Solver::Impl::cut_into_units(const std::vector<uint32_t>& members, double limit) {
   const uint32_t begin = static_cast<uint32_t>(cluster_patch.size());
   cluster_patch.insert(cluster_patch.end(), members.begin(), members.end());
   const uint32_t root = static_cast<uint32_t>(c_nodes.size());
   c_nodes.emplace_back();
   build_cluster(root, begin, static_cast<uint32_t>(cluster_patch.size()), limit);
-  // A cluster's faces lie at different depths along its normal (box tops of several heights across
-  // objects; the crests and troughs of a wavy curtain): its centroid may lie inside a box, whose
-  // inner faces are absorbing backs, or behind its own surface's crests. Its hemicube stands in front
-  // of all of its patches instead.
-  for (uint32_t c = root; c < c_nodes.size(); ++c) {
-    ClusterNode& node = c_nodes[c];
-    double back = 0.0;
-    for (uint32_t i = node.begin; i < node.end; ++i) {
-      const Patch& patch = patches[cluster_patch[i]];
-      for (uint32_t k = 0; k < patch.corner_count; ++k) {
-        const double d = glm::dot(node.normal, patch.corners[k] - node.centre);
-        node.front = std::max(node.front, d);
-        back = std::max(back, -d);
-      }
-    }
-    node.depth = node.front + back;
-    if (node.depth <= kRoundingLength * prep.diagonal) node.front = node.depth = 0.0;  // flat
-  }
   std::vector<uint32_t> stack{root};
   while (!stack.empty()) {
     const uint32_t c = stack.back();
     stack.pop_back();
-    if ((c_nodes[c].diameter > limit || c_nodes[c].min_cos < kClusterCone) && c_nodes[c].child != kNone) {
+    if (cluster_unfit(c_nodes[c], limit) && c_nodes[c].child != kNone) {
       stack.push_back(c_nodes[c].child);
       stack.push_back(c_nodes[c].child + 1);
       continue;

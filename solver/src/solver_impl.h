@@ -93,6 +93,10 @@ constexpr double kStraddlePower = 0.05;
 // normals stay within this cosine (20 degrees) of it, so a receiver's cosine at the cluster errs by
 // under 6 % where it faces the cluster (build_clusters).
 constexpr double kClusterCone = 0.9397;
+// ... and its faces lie within this share of its width along that normal: a cluster of a
+// double-sided ball's outer faces on one side and its inner faces on the other (the same normals)
+// would shoot the inner faces' light out of the ball from in front of the outer ones.
+constexpr double kClusterDepth = 0.5;
 // A shooting piece with an absorbing back close in front of it that takes at least this share of
 // the light from its centre is refined (absorber_close).
 constexpr double kAbsorberShare = 0.1;
@@ -280,6 +284,7 @@ struct Solver::Impl {
   std::vector<std::vector<uint32_t>> cluster_candidates(double limit) const;
   void cut_into_units(const std::vector<uint32_t>& members, double limit);
   void build_cluster(uint32_t id, uint32_t begin, uint32_t end, double limit);
+  static bool cluster_unfit(const ClusterNode& node, double limit);
 
   // shooters.cpp: a unit breaks into pieces, each of which shoot_piece shoots.
   void shoot_patch(uint32_t p, const std::vector<uint32_t>& receivers, bool whole_scene);
