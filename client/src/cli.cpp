@@ -116,7 +116,8 @@ std::string usage() {
          "  --wireframe FILE.png    bake, cornell, room: also render the mesh (flat, element edges) to a PNG\n"
          "  --camera X,Y,Z:TX,TY,TZ the renders' camera and the point it looks at\n"
          "  --retry-seconds S       server commands: keep trying for up to S s while the server answers 503\n"
-         "                          (its job store busy or unreachable), waiting as it asks (default 60; 0: no)\n";
+         "                          (its job store busy or unreachable) or 429 (its queue full), waiting as it\n"
+         "                          asks, or cannot be reached (restarting) (default 60; 0: no)\n";
 }
 
 std::string parse_command_line(std::span<const std::string> args, CommandLine& o) {

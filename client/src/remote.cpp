@@ -1,11 +1,12 @@
 #include "hemibake/client/remote.h"
 
+#include "http_call.h"
+
 #include <boost/asio/connect.hpp>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 #include <nlohmann/json.hpp>
-
 
 #include <algorithm>
 #include <cctype>
@@ -35,20 +36,28 @@ std::string seconds_text(double seconds) {
   return text;
 }
 
-struct Reply {
-  int status = 0;
-  std::string body;
-  std::map<std::string, std::string> headers;
-  std::string error;           ///< a transport failure
-  double retry_after = -1.0;   ///< seconds, from Retry-After (delay-seconds); -1: none
-  double gave_up_after = -1.0; ///< a 503 still answered after this many seconds of retries
-};
-
 // Retry-After as delay-seconds (RFC 9110, section 10.2.3); -1 if absent or an HTTP-date, which
 // hemibake-server never sends.
 double parse_retry_after(const std::string& value) {
   if (value.empty() || !std::all_of(value.begin(), value.end(), [](unsigned char ch) { return std::isdigit(ch) != 0; })) return -1.0;
   return std::min(std::strtod(value.c_str(), nullptr), 3600.0);
+}
+
+// How a connection failed, by its error. Refused: nothing listens there (a server restarting), so
+// nothing was sent. Reset, aborted, a broken pipe, or closed before a whole answer: the server (or
+// a proxy) went away on the way, after the request may have arrived.
+Failure failure_of(const beast::error_code& ec) {
+  if (ec == net::error::connection_refused) return Failure::kRefused;
+  if (ec == net::error::connection_reset || ec == net::error::connection_aborted || ec == net::error::broken_pipe ||
+      ec == net::error::eof || ec == http::error::end_of_stream || ec == http::error::partial_message)
+    return Failure::kCut;
+  return Failure::kOther;
+}
+
+std::string failure_text(const Remote& r, Failure failure, const beast::error_code& ec) {
+  if (failure == Failure::kCut)
+    return "the server at " + r.host + ":" + r.port + " closed the connection before it answered (" + ec.message() + ")";
+  return "cannot reach the server at " + r.host + ":" + r.port + ": " + ec.message();
 }
 
 Reply call(const Remote& r, http::verb verb, const std::string& target, const std::string& body = {},
@@ -78,8 +87,10 @@ Reply call(const Remote& r, http::verb verb, const std::string& target, const st
     for (const auto& f : parser.get()) out.headers[std::string(f.name_string())] = std::string(f.value());
     out.retry_after = parse_retry_after(std::string(parser.get()[http::field::retry_after]));
   } catch (const boost::system::system_error& e) {
-    out.error = "cannot reach the server at " + r.host + ":" + r.port + ": " + e.code().message();
+    out.failure = failure_of(e.code());
+    out.error = failure_text(r, out.failure, e.code());
   } catch (const std::exception& e) {
+    out.failure = Failure::kOther;
     out.error = std::string("cannot reach the server at ") + r.host + ":" + r.port + ": " + e.what();
   }
   return out;
@@ -93,16 +104,21 @@ std::string server_error(const Reply& reply) {
 
 // Prints the server's error for a failed call; returns the exit status 1.
 int report(const Remote& r, const Reply& reply, const Console& c) {
-  if (!reply.error.empty()) {
-    std::fprintf(c.err, "hemibake: %s\n", reply.error.c_str());
-    return 1;
-  }
   const std::string gave_up =
       reply.gave_up_after > 0 ? " (still so after " + seconds_text(reply.gave_up_after) + "; --retry-seconds waits longer)" : "";
+  if (!reply.error.empty()) {
+    std::fprintf(c.err, "hemibake: %s%s\n", reply.error.c_str(), gave_up.c_str());
+    return 1;
+  }
   const std::string message = server_error(reply);
   if (message.empty()) {
     if (reply.status == 503) {  // a proxy or load balancer in front of the server says it has none to send to
       std::fprintf(c.err, "hemibake: the server at %s:%s is unavailable (503)%s\n", r.host.c_str(), r.port.c_str(), gave_up.c_str());
+      return 1;
+    }
+    if (reply.status == 429) {  // hemibake-server says why (its queue is full); this is a proxy's rate limit
+      std::fprintf(c.err, "hemibake: the server at %s:%s has too many requests (429: its queue is full, or a proxy limits the rate)%s\n",
+                   r.host.c_str(), r.port.c_str(), gave_up.c_str());
       return 1;
     }
     // Not one of ours (a proxy, another web server): its page would only bury the point.
@@ -115,57 +131,80 @@ int report(const Remote& r, const Reply& reply, const Console& c) {
   return 1;
 }
 
-// Waits between tries of a request that the server answered 503 (its job store is busy or cannot
-// be reached, it has too much waiting, it is stopping; a proxy with no server to send to): as long
-// as Retry-After asks (5 s without one), for up to Remote::retry_seconds from the first 503, saying
-// on stderr what it waits for.
+// Waits between tries of a request, for up to Remote::retry_seconds from the first failure, saying
+// on stderr what it waits for. The server may ask to be asked later: 503 (its job store is busy or
+// cannot be reached, it has too much waiting, it is stopping; a proxy with no server to send to) or
+// 429 (its queue is full); then it waits as Retry-After says (5 s without one). Or the connection
+// may fail (refused or cut while the server restarts); then it waits 0.5 s, twice as long each
+// time up to 5 s: a restart takes a second or two, and a server that stays away is not asked
+// more than once per 5 s.
 class Retrier {
  public:
   Retrier(const Remote& r, const Console& c, std::string what) : r_(r), c_(c), what_(std::move(what)) {}
-  /// After a 503 (`why`: the server's reason): waits and returns true, or returns false once the
-  /// time is up.
+  /// After a 503 or 429 (`why`: the server's reason): waits and returns true, or returns false
+  /// once the time is up.
   bool wait(double retry_after, const std::string& why) {
+    backoff_ = kFirstBackoff;  // the server answers: a later failed connection is a new outage
+    return pause(retry_after >= 0.0 ? std::max(retry_after, 0.1) : 5.0, why);
+  }
+  /// After a failed connection (`why`: how it failed): waits and returns true, or returns false
+  /// once the time is up.
+  bool wait_to_reconnect(const std::string& why) {
+    const double seconds = backoff_;
+    backoff_ = std::min(2.0 * backoff_, kLastBackoff);
+    return pause(seconds, why);
+  }
+  /// The request was answered: a later outage has the whole time again.
+  void reset() {
+    waiting_ = false;
+    backoff_ = kFirstBackoff;
+  }
+
+ private:
+  static constexpr double kFirstBackoff = 0.5;
+  static constexpr double kLastBackoff = 5.0;
+
+  bool pause(double seconds, const std::string& why) {
     const auto now = Clock::now();
     if (!waiting_) start_ = now;
     waiting_ = true;
     const double left = r_.retry_seconds - std::chrono::duration<double>(now - start_).count();
     if (left <= 0.0) return false;
-    const double pause = std::min(retry_after >= 0.0 ? std::max(retry_after, 0.1) : 5.0, left);
-    std::fprintf(c_.err, "hemibake: %s: %s; trying again in %s\n", what_.c_str(), why.c_str(), seconds_text(pause).c_str());
+    seconds = std::min(seconds, left);
+    std::fprintf(c_.err, "hemibake: %s: %s; trying again in %s\n", what_.c_str(), why.c_str(), seconds_text(seconds).c_str());
     std::fflush(c_.err);
-    std::this_thread::sleep_for(std::chrono::duration<double>(pause));
+    std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
     return true;
   }
-  /// The request was answered: a later outage has the whole time again.
-  void reset() { waiting_ = false; }
 
- private:
   const Remote& r_;
   const Console& c_;
   std::string what_;
   bool waiting_ = false;
   Clock::time_point start_;
+  double backoff_ = kFirstBackoff;
 };
 
-std::string unavailable_reason(const Reply& reply) {
+// Whether the server asks to be asked again later.
+bool come_back_later(const Reply& reply) { return reply.status == 503 || reply.status == 429; }
+
+// Why the server asks to be asked later, for the wait's message.
+std::string busy_reason(const Reply& reply) {
   const std::string message = server_error(reply);
-  return "the server is unavailable (503" + (message.empty() ? std::string() : ": " + message) + ")";
+  return (reply.status == 429 ? "the server is busy (429" : "the server is unavailable (503") +
+         (message.empty() ? std::string() : ": " + message) + ")";
 }
 
-// `call`, tried again while the server answers 503 (see Retrier). The last answer is returned; if
-// it is still 503, gave_up_after says for how long it was tried.
-Reply call_retrying(const Remote& r, const Console& c, const std::string& what, http::verb verb, const std::string& target,
-                    const std::string& body = {}, const std::string& content_type = {},
-                    const std::map<std::string, std::string>& headers = {}) {
-  Retrier retry(r, c, what);
-  for (;;) {
-    Reply reply = call(r, verb, target, body, content_type, headers);
-    if (reply.status != 503) return reply;
-    if (!retry.wait(reply.retry_after, unavailable_reason(reply))) {
-      reply.gave_up_after = r.retry_seconds;
-      return reply;
-    }
-  }
+// Whether a request may be sent again after a try that may have reached the server: the
+// idempotent methods (RFC 9110, section 9.2.2; a DELETE of a job already cancelled is answered
+// 409, see remote_cancel), and a request with an Idempotency-Key (the server answers its repeat with
+// the job the first try made).
+bool repeatable(http::verb verb, const std::map<std::string, std::string>& headers) {
+  if (verb == http::verb::get || verb == http::verb::head || verb == http::verb::put || verb == http::verb::delete_ ||
+      verb == http::verb::options)
+    return true;
+  return std::any_of(headers.begin(), headers.end(),
+                     [](const auto& h) { return beast::iequals(h.first, "Idempotency-Key") && !h.second.empty(); });
 }
 
 // A fresh Idempotency-Key: a submission tried again after a lost answer names the job it made.
@@ -214,6 +253,31 @@ std::string query_of(const protocol::JobSpec& spec) {
 
 }  // namespace
 
+Reply call_retrying(const Remote& r, const Console& c, const std::string& what, const std::string& method,
+                    const std::string& target, const std::string& body, const std::string& content_type,
+                    const std::map<std::string, std::string>& headers) {
+  const http::verb verb = http::string_to_verb(method);
+  Retrier retry(r, c, what);
+  for (bool cut_before = false;;) {
+    Reply reply = call(r, verb, target, body, content_type, headers);
+    reply.earlier_try_cut = cut_before;
+    bool again = false;
+    if (come_back_later(reply)) {
+      again = retry.wait(reply.retry_after, busy_reason(reply));
+    } else if (reply.failure == Failure::kRefused || (reply.failure == Failure::kCut && repeatable(verb, headers))) {
+      again = retry.wait_to_reconnect(reply.error);
+    } else {
+      if (reply.failure == Failure::kCut) reply.error += "; not tried again, since the server may have acted on it";
+      return reply;
+    }
+    if (!again) {
+      reply.gave_up_after = r.retry_seconds;
+      return reply;
+    }
+    cut_before = cut_before || reply.failure == Failure::kCut;
+  }
+}
+
 std::string parse_server(const std::string& url, Remote& out) {
   std::string rest = url;
   if (rest.rfind("http://", 0) == 0) rest = rest.substr(7);
@@ -241,7 +305,7 @@ int remote_submit(const Remote& r, const std::string& path, const protocol::JobS
   const bool glb = bytes.size() >= 4 && bytes.compare(0, 4, "glTF") == 0;
   // One key for every try: a try whose answer was lost made the job, and the next one is answered
   // with that job instead of making a second.
-  const Reply reply = call_retrying(r, c, "submitting " + path, http::verb::post, "/v1/jobs" + query_of(spec), bytes,
+  const Reply reply = call_retrying(r, c, "submitting " + path, "POST", "/v1/jobs" + query_of(spec), bytes,
                                     glb ? "model/gltf-binary" : "model/gltf+json", {{"Idempotency-Key", new_idempotency_key()}});
   if (reply.status != 202 && reply.status != 200) return report(r, reply, c);
   const json j = answer_json(r, reply, c);
@@ -254,7 +318,7 @@ int remote_submit(const Remote& r, const std::string& path, const protocol::JobS
 }
 
 int remote_status(const Remote& r, const std::string& id, const Console& c) {
-  const Reply reply = call_retrying(r, c, "reading the status of job " + id, http::verb::get, job_path(id));
+  const Reply reply = call_retrying(r, c, "reading the status of job " + id, "GET", job_path(id));
   if (reply.status != 200) return report(r, reply, c);
   const json j = answer_json(r, reply, c);
   if (j.is_null()) return 1;
@@ -356,19 +420,24 @@ int remote_watch(const Remote& r, const std::string& id, const Console& c) {
     try {
       refused = follow_events(r, id, last_event, printer, c, ended);
     } catch (const boost::system::system_error& e) {
+      // Opening the stream failed. Refused or cut (a server restarting): asking again is safe.
       printer.finish();
-      std::fprintf(c.err, "hemibake: cannot reach the server at %s:%s: %s\n", r.host.c_str(), r.port.c_str(),
-                   e.code().message().c_str());
-      return 1;
+      Reply lost;
+      lost.failure = failure_of(e.code());
+      lost.error = failure_text(r, lost.failure, e.code());
+      if (lost.failure != Failure::kRefused && lost.failure != Failure::kCut) return report(r, lost, c);
+      if (retry.wait_to_reconnect(lost.error)) continue;
+      lost.gave_up_after = r.retry_seconds;
+      return report(r, lost, c);
     } catch (const std::exception& e) {
       printer.finish();
       std::fprintf(c.err, "hemibake: cannot follow job %s: %s\n", id.c_str(), e.what());
       return 1;
     }
     if (ended) break;
-    if (refused.status == 503) {
+    if (come_back_later(refused)) {
       printer.finish();
-      if (!retry.wait(refused.retry_after, unavailable_reason(refused))) {
+      if (!retry.wait(refused.retry_after, busy_reason(refused))) {
         refused.gave_up_after = r.retry_seconds;
         return report(r, refused, c);
       }
@@ -384,7 +453,7 @@ int remote_watch(const Remote& r, const std::string& id, const Console& c) {
     // event read.
     if (last_event > before) retry.reset();  // it had got going: a new cut has the whole time again
     printer.finish();
-    const Reply reply = call_retrying(r, c, "reading the status of job " + id, http::verb::get, job_path(id));
+    const Reply reply = call_retrying(r, c, "reading the status of job " + id, "GET", job_path(id));
     if (reply.status != 200) return report(r, reply, c);
     const json j = answer_json(r, reply, c);
     if (j.is_null()) return 1;
@@ -398,7 +467,7 @@ int remote_watch(const Remote& r, const std::string& id, const Console& c) {
   }
   printer.finish();
   // The stream ends after the final state; read it back to be sure of it.
-  const Reply reply = call_retrying(r, c, "reading the status of job " + id, http::verb::get, job_path(id));
+  const Reply reply = call_retrying(r, c, "reading the status of job " + id, "GET", job_path(id));
   if (reply.status != 200) return report(r, reply, c);
   const json j = answer_json(r, reply, c);
   if (j.is_null()) return 1;
@@ -408,7 +477,7 @@ int remote_watch(const Remote& r, const std::string& id, const Console& c) {
 }
 
 int remote_fetch(const Remote& r, const std::string& id, const std::string& out_path, const Console& c) {
-  const Reply reply = call_retrying(r, c, "fetching the result of job " + id, http::verb::get, job_path(id) + "/result");
+  const Reply reply = call_retrying(r, c, "fetching the result of job " + id, "GET", job_path(id) + "/result");
   if (reply.status != 200) return report(r, reply, c);
   if (reply.body.compare(0, 4, "glTF") != 0) {
     std::fprintf(c.err, "hemibake: the server at %s:%s did not answer with a GLB; is it a hemibake-server?\n", r.host.c_str(),
@@ -425,7 +494,19 @@ int remote_fetch(const Remote& r, const std::string& id, const std::string& out_
 }
 
 int remote_cancel(const Remote& r, const std::string& id, const Console& c) {
-  const Reply reply = call_retrying(r, c, "cancelling job " + id, http::verb::delete_, job_path(id));
+  const Reply reply = call_retrying(r, c, "cancelling job " + id, "DELETE", job_path(id));
+  if (reply.status == 409 && reply.earlier_try_cut) {
+    // The server answers a DELETE of a job that has ended with 409. An earlier try was cut after
+    // it was sent, and may have been the one that cancelled the job: if the job is cancelled now,
+    // the cancel is done (also if someone else cancelled it meanwhile: it is cancelled either way).
+    // Ended otherwise, the 409 stands.
+    const Reply now = call_retrying(r, c, "reading the status of job " + id, "GET", job_path(id));
+    const json j = now.status == 200 ? json::parse(now.body, nullptr, false) : json();
+    if (j.is_object() && j.value("state", "") == "cancelled") {
+      std::fprintf(c.out, "job %s cancelled\n", id.c_str());
+      return 0;
+    }
+  }
   if (reply.status != 200) return report(r, reply, c);
   if (answer_json(r, reply, c).is_null()) return 1;
   std::fprintf(c.out, "job %s cancelled\n", id.c_str());
@@ -434,7 +515,7 @@ int remote_cancel(const Remote& r, const std::string& id, const Console& c) {
 
 int remote_list(const Remote& r, const std::string& state, const Console& c) {
   std::string target = "/v1/jobs?limit=100" + (state.empty() ? std::string() : "&state=" + state);
-  const Reply reply = call_retrying(r, c, "listing jobs", http::verb::get, target);
+  const Reply reply = call_retrying(r, c, "listing jobs", "GET", target);
   if (reply.status != 200) return report(r, reply, c);
   const json j = answer_json(r, reply, c);
   if (j.is_null()) return 1;

@@ -1,5 +1,6 @@
 // The command line through its library: parsing against the wire's parameter rules, a local bake
 // read back by the independent baked-file reader, and the progress a log sees.
+#include "captured.h"
 #include "hemibake/client/cli.h"
 #include "hemibake/protocol/gltf.h"
 
@@ -25,36 +26,6 @@ std::string error_of(std::vector<std::string> args) {
   CommandLine fresh;
   return parse_command_line(args, fresh);
 }
-
-// A console whose two streams are read back as text.
-struct Captured {
-  char* out_text = nullptr;
-  char* err_text = nullptr;
-  size_t out_size = 0, err_size = 0;
-  Console console;
-  Captured() {
-    console.out = open_memstream(&out_text, &out_size);
-    console.err = open_memstream(&err_text, &err_size);
-  }
-  ~Captured() {
-    close();
-    std::free(out_text);
-    std::free(err_text);
-  }
-  void close() {
-    if (console.out) std::fclose(console.out);
-    if (console.err) std::fclose(console.err);
-    console.out = console.err = nullptr;
-  }
-  std::string out() {
-    std::fflush(console.out);
-    return std::string(out_text, out_size);
-  }
-  std::string err() {
-    std::fflush(console.err);
-    return std::string(err_text, err_size);
-  }
-};
 
 TEST(CommandLine, OptionsSetTheSameFieldsAsTheWireNames) {
   CommandLine cl;

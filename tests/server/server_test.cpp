@@ -391,7 +391,7 @@ TEST(Client, BakesOnTheServerAndReportsErrors) {
   std::filesystem::remove(out);
   const std::string missing = std::string(HEMIBAKE_CLIENT) + " status nope --server " + url + " 2>/dev/null";
   EXPECT_NE(std::system(missing.c_str()), 0);
-  const std::string unreachable = std::string(HEMIBAKE_CLIENT) + " list --server http://127.0.0.1:1 2>/dev/null";
+  const std::string unreachable = std::string(HEMIBAKE_CLIENT) + " list --server http://127.0.0.1:1 --retry-seconds 0 2>/dev/null";
   EXPECT_NE(std::system(unreachable.c_str()), 0);
 }
 

@@ -31,6 +31,7 @@ struct CommandLine {
   std::string token;                ///< bearer token (HEMIBAKE_TOKEN, filled by run_main)
   std::string state;                ///< list: --state
   double retry_seconds = 60.0;      ///< --retry-seconds: how long to keep trying a server that answers 503
+                                    ///< or 429 or cannot be reached
   uint32_t patches = 6300;          ///< room: about this many patches
   std::optional<Camera> camera;     ///< --camera X,Y,Z:TX,TY,TZ
 };
