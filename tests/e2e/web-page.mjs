@@ -450,6 +450,7 @@ async function cancel({ server, page, record, out, log }) {
   assert.ok(await page.locator('#cancel').isDisabled(), 'Cancel stays enabled after the job ended');
   // The worker stops: no progress event after the cancellation, and the server's state stays.
   await new Promise((resolve) => setTimeout(resolve, 1500));
+  assert.equal(await page.locator('#f-eta').textContent(), '–', 'a cancelled job still shows a time left');
   assert.equal((await (await fetch(`${server.origin}/v1/jobs/${id}`)).json()).state, 'cancelled');
   const states = await page.evaluate(() => window.__states);
   log(`data-job-state: ${states.join(' -> ')}`);

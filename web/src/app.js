@@ -460,11 +460,20 @@ function setState(current, state, error) {
   badge.textContent = state;
   badge.className = `state state-${state}`;
   $('cancel').disabled = kFinal.has(state);
+  $('f-eta').textContent = timeLeft(state, current.progress);
   if (error) $('job-error').textContent = `The bake failed: ${error}`;
   if (state === 'succeeded') loadResult(current);
   if (state === 'cancelled') $('view-caption').textContent = current.preview ? 'Cancelled; the last preview is shown.' : 'Cancelled.';
   if (state === 'failed' && !current.preview) $('view-caption').textContent = 'No result.';
   if (kFinal.has(state)) loadJobs();
+}
+
+// What the "Time left" field says: nothing once the job ended without finishing its bake (the
+// last progress event's estimate would stay on a cancelled or failed job).
+function timeLeft(state, p) {
+  if (state === 'cancelled' || state === 'failed') return '–';
+  if (!p) return '–';
+  return p.phase === 'done' ? '0 s' : p.eta_seconds >= 0 ? formatSeconds(p.eta_seconds) : 'unknown';
 }
 
 function showProgress(current, p, live) {
@@ -474,7 +483,7 @@ function showProgress(current, p, live) {
   $('f-unshot').textContent = p.unshot_fraction !== undefined ? formatFraction(p.unshot_fraction) : '–';
   $('f-elements').textContent = p.elements !== undefined ? p.elements.toLocaleString('en') : '–';
   $('f-elapsed').textContent = p.elapsed_seconds !== undefined ? formatSeconds(p.elapsed_seconds) : '–';
-  $('f-eta').textContent = p.phase === 'done' ? '0 s' : p.eta_seconds >= 0 ? formatSeconds(p.eta_seconds) : 'unknown';
+  $('f-eta').textContent = timeLeft(current.state, p);
   if (live && (p.phase === 'shooting' || p.phase === 'done')) plot.add(p.elapsed_seconds, p.unshot_fraction);
   if (p.phase !== 'shooting') current.previewRequest?.abort();
 }
