@@ -90,7 +90,7 @@ void Solver::Impl::build_cluster(uint32_t id, uint32_t begin, uint32_t end, doub
     // centres.
     const double spread = (1.0 - node.min_cos) / (1.0 - kClusterCone);
     const double width = limit > 0.0 ? node.diameter / limit : 0.0;
-    const double thick = node.depth / (kClusterDepth * node.diameter);
+    const double thick = node.diameter > 0.0 ? node.depth / (kClusterDepth * node.diameter) : 0.0;
     const glm::dvec3 axis = node.normal;
     auto along = [&](uint32_t q) {
       return glm::dvec3(glm::dot(axis, polygon_centre(patches[q].corners, patches[q].corner_count)), 0.0, 0.0);
