@@ -95,15 +95,18 @@ void Solver::Impl::build_cluster(uint32_t id, uint32_t begin, uint32_t end, doub
     auto along = [&](uint32_t q) {
       return glm::dvec3(glm::dot(axis, polygon_centre(patches[q].corners, patches[q].corner_count)), 0.0, 0.0);
     };
+    const bool by_normals = spread > 1.0 && spread >= width && spread >= thick;
+    // Along the normal when that is due and the centres lie at more than one depth there.
     double dlo = std::numeric_limits<double>::max(), dhi = std::numeric_limits<double>::lowest();
-    for (uint32_t i = begin; i < end; ++i) {
-      dlo = std::min(dlo, along(cluster_patch[i]).x);
-      dhi = std::max(dhi, along(cluster_patch[i]).x);
-    }
+    if (!by_normals && thick > 1.0 && thick >= width)
+      for (uint32_t i = begin; i < end; ++i) {
+        dlo = std::min(dlo, along(cluster_patch[i]).x);
+        dhi = std::max(dhi, along(cluster_patch[i]).x);
+      }
     uint32_t mid;
-    if (spread > 1.0 && spread >= width && spread >= thick)
+    if (by_normals)
       mid = median_cut(cluster_patch, begin, end, nlo, nhi, [&](uint32_t q) { return prep.normal[q]; });
-    else if (thick > 1.0 && thick >= width && dhi > dlo)
+    else if (dhi > dlo)
       mid = median_cut(cluster_patch, begin, end, glm::dvec3(dlo, 0, 0), glm::dvec3(dhi, 0, 0), along);
     else
       mid = median_cut(cluster_patch, begin, end, clo, chi, [&](uint32_t q) {

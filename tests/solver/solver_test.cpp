@@ -750,6 +750,17 @@ TEST(Solver, DISABLED_ClustersAcrossSmallObjectsKeepTheEnergyOfShootingAlone) {
   EXPECT_LT(st.shots * 4, st_alone.shots * 3);
 }
 
+// Area-weighted mean radiosity (RGB mean) of the elements of `material`'s patches.
+double mean_radiosity(const Scene& scene, const Mesh& mesh, uint32_t material) {
+  double ba = 0.0, a = 0.0;
+  for (const auto& el : mesh.elements)
+    if (scene.patches[el.patch].material == material) {
+      ba += (el.radiosity.x + el.radiosity.y + el.radiosity.z) / 3.0 * el.area;
+      a += el.area;
+    }
+  return ba / a;
+}
+
 // A tessellated sphere resting on a floor tile, in a room lit by a ceiling panel: the sphere's
 // clusters shoot weak light (under FEPS of the emitted power), and the tile under the sphere faces
 // the bottom cluster within a diameter. Weak cluster pieces no longer hand all their receivers to
@@ -765,18 +776,10 @@ TEST(Solver, ClustersOfASphereRestingOnAFloorLightItAsItsFacetsAlone) {
   alone_params.cluster_size = 0.0;
   Solver alone(scene, alone_params);
   ASSERT_TRUE(alone.run().converged);
-  // Mean radiosity (RGB mean) of the sphere's facets (material 3) or the floor's (material 0).
-  auto mean_of = [&](const Mesh& m, uint32_t material) {
-    double ba = 0.0, a = 0.0;
-    for (const auto& el : m.elements)
-      if (scene.patches[el.patch].material == material) {
-        ba += (el.radiosity.x + el.radiosity.y + el.radiosity.z) / 3.0 * el.area;
-        a += el.area;
-      }
-    return ba / a;
-  };
+  // The sphere's facets (material 3) and the floor (material 0).
   for (uint32_t material : {0u, 3u})
-    EXPECT_NEAR(mean_of(clustered.mesh(), material) / mean_of(alone.mesh(), material), 1.0, 0.01) << material;
+    EXPECT_NEAR(mean_radiosity(scene, clustered.mesh(), material) / mean_radiosity(scene, alone.mesh(), material), 1.0, 0.01)
+        << material;
 }
 
 // Curved surfaces (a wavy double-sided curtain, a column of 16 sides) cluster by where their facets
@@ -827,17 +830,9 @@ TEST(Solver, CurvedSurfacesClusterByOrientationAndLightAsTheirFacetsAlone) {
   const Solver room_only(make_sphere_room(12, 24), params);
   ASSERT_GT(clustered.stats().shooters, room_only.stats().shooters);
   EXPECT_LE(clustered.stats().shooters - room_only.stats().shooters, curved / 3);
-  auto mean_of = [&](const Mesh& m, uint32_t material) {
-    double ba = 0.0, a = 0.0;
-    for (const auto& el : m.elements)
-      if (scene.patches[el.patch].material == material) {
-        ba += (el.radiosity.x + el.radiosity.y + el.radiosity.z) / 3.0 * el.area;
-        a += el.area;
-      }
-    return ba / a;
-  };
   for (uint32_t material : {0u, 1u, 3u, 4u, 5u, 6u})
-    EXPECT_NEAR(mean_of(clustered.mesh(), material) / mean_of(alone.mesh(), material), 1.0, 0.01) << material;
+    EXPECT_NEAR(mean_radiosity(scene, clustered.mesh(), material) / mean_radiosity(scene, alone.mesh(), material), 1.0, 0.01)
+        << material;
 }
 
 }  // namespace
