@@ -29,17 +29,19 @@ constexpr double kNearPlane = 1e-9;
 // A pixel covered by less than this fraction gets no fragment (rounding of the scan converter).
 constexpr double kMinCoverage = 1e-9;
 
-// Axes of the five faces in the hemicube's own frame (x, y tangent, z the normal).
+// Axes of the faces in the hemicube's own frame (x, y tangent, z the normal): the top, the four
+// side faces (halves of them, but for a full cube), and a full cube's bottom.
 struct LocalFace {
   glm::dvec3 right, up, forward;
   bool top;
 };
-constexpr std::array<LocalFace, 5> kLocalFaces{{
+constexpr std::array<LocalFace, 6> kLocalFaces{{
     {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}, true},
     {{0, 1, 0}, {0, 0, 1}, {1, 0, 0}, false},
     {{0, -1, 0}, {0, 0, 1}, {-1, 0, 0}, false},
     {{-1, 0, 0}, {0, 0, 1}, {0, 1, 0}, false},
     {{1, 0, 0}, {0, 0, 1}, {0, -1, 0}, false},
+    {{1, 0, 0}, {0, -1, 0}, {0, 0, -1}, true},
 }};
 
 // Keeps the part of `in` where dist(q) >= 0 (Sutherland-Hodgman against one plane). A convex
@@ -72,7 +74,8 @@ inline glm::dvec3 to_face(size_t f, const glm::dvec3& l) {
     case 1: return glm::dvec3(l.y, l.z, l.x);
     case 2: return glm::dvec3(-l.y, l.z, -l.x);
     case 3: return glm::dvec3(-l.x, l.z, l.y);
-    default: return glm::dvec3(l.x, l.z, -l.y);
+    case 4: return glm::dvec3(l.x, l.z, -l.y);
+    default: return glm::dvec3(l.x, -l.y, -l.z);
   }
 }
 
@@ -139,17 +142,17 @@ std::span<const GroupAdjacency::Link> GroupAdjacency::neighbours(uint32_t a) con
   return {links_.data() + (b - links_.begin()), static_cast<size_t>(e - b)};
 }
 
-Hemicube::Hemicube(uint32_t resolution) : n_(resolution) {
+Hemicube::Hemicube(uint32_t resolution, bool full) : n_(resolution), full_(full), face_count_(full ? 6 : 5) {
   assert(resolution >= 2 && resolution % 2 == 0);
   const uint32_t half = n_ / 2;
-  pixel_count_ = n_ * n_ + 4 * n_ * half;
+  pixel_count_ = full ? 6 * n_ * n_ : n_ * n_ + 4 * n_ * half;
   dff_.resize(pixel_count_);
   const double step = 2.0 / n_;
   uint32_t offset = 0;
-  for (size_t f = 0; f < kLocalFaces.size(); ++f) {
+  for (size_t f = 0; f < face_count_; ++f) {
     const LocalFace& lf = kLocalFaces[f];
-    const uint32_t height = lf.top ? n_ : half;
-    const double b_min = lf.top ? -1.0 : 0.0;
+    const uint32_t height = lf.top || full ? n_ : half;
+    const double b_min = lf.top || full ? -1.0 : 0.0;
     for (uint32_t row = 0; row < height; ++row) {
       for (uint32_t col = 0; col < n_; ++col) {
         // The exact form factor of the pixel (Lambert) rather than the classical centre-point
@@ -160,7 +163,7 @@ Hemicube::Hemicube(uint32_t resolution) : n_(resolution) {
             lf.right * a0 + lf.up * b0 + lf.forward, lf.right * a1 + lf.up * b0 + lf.forward,
             lf.right * a1 + lf.up * b1 + lf.forward, lf.right * a0 + lf.up * b1 + lf.forward};
         dff_[offset + row * n_ + col] =
-            point_polygon_form_factor(glm::dvec3(0.0), glm::dvec3(0, 0, 1), corners);
+            full ? 0.0 : point_polygon_form_factor(glm::dvec3(0.0), glm::dvec3(0, 0, 1), corners);
       }
     }
     faces_[f].b_min = b_min;
@@ -169,7 +172,10 @@ Hemicube::Hemicube(uint32_t resolution) : n_(resolution) {
     offset += height * n_;
   }
   HEMIBAKE_DCHECK(offset == pixel_count_);
-  // The pixels tile the hemisphere: their exact form factors sum to 1.
+  // A full cube's pixels tile the sphere: each one's share of it.
+  if (full)
+    for (uint32_t px = 0; px < pixel_count_; ++px) dff_[px] = pixel_solid_angle(px) / (4.0 * std::numbers::pi);
+  // The pixels tile the hemisphere (the sphere): their exact form factors (shares) sum to 1.
   HEMIBAKE_DCHECK(std::abs(std::accumulate(dff_.begin(), dff_.end(), 0.0) - 1.0) < 1e-6);
   place(glm::dvec3(0.0), glm::dvec3(0, 0, 1), glm::dvec3(0, 1, 0));
 }
@@ -186,7 +192,7 @@ void Hemicube::place(const glm::dvec3& eye, const glm::dvec3& normal, const glm:
   frame_y_ = b;
   frame_z_ = normal;
   auto to_world = [&](const glm::dvec3& v) { return v.x * t + v.y * b + v.z * normal; };
-  for (size_t f = 0; f < kLocalFaces.size(); ++f) {
+  for (size_t f = 0; f < face_count_; ++f) {
     faces_[f].right = to_world(kLocalFaces[f].right);
     faces_[f].up = to_world(kLocalFaces[f].up);
     faces_[f].forward = to_world(kLocalFaces[f].forward);
@@ -195,7 +201,7 @@ void Hemicube::place(const glm::dvec3& eye, const glm::dvec3& normal, const glm:
 
 size_t Hemicube::pixel_square(uint32_t pixel, std::array<double, 4>& square) const {
   size_t f = 0;
-  while (f + 1 < faces_.size() && pixel >= faces_[f + 1].offset) ++f;
+  while (f + 1 < face_count_ && pixel >= faces_[f + 1].offset) ++f;
   const uint32_t local = pixel - faces_[f].offset;
   const double step = 2.0 / n_;
   const double a0 = -1.0 + (local % n_) * step, b0 = faces_[f].b_min + (local / n_) * step;
@@ -232,7 +238,14 @@ int Hemicube::common_face(const ProjectScratch& s) const {
     const glm::dvec3& l = s.local[i];
     const double ax = std::abs(l.x), ay = std::abs(l.y);
     int f;
-    if (l.z > ax && l.z > ay) {
+    if (full_) {
+      // Each face's frustum is where its axis dominates (strictly).
+      const double az = std::abs(l.z);
+      if (az > ax && az > ay) f = l.z > 0.0 ? 0 : 5;
+      else if (ax > ay && ax > az) f = l.x > 0.0 ? 1 : 2;
+      else if (ay > ax && ay > az) f = l.y > 0.0 ? 3 : 4;
+      else return -1;  // on a face boundary
+    } else if (l.z > ax && l.z > ay) {
       f = 0;
     } else if (l.z > 0.0 && ax > ay && ax > l.z) {
       f = l.x > 0.0 ? 1 : 2;
@@ -450,7 +463,7 @@ void Hemicube::project(std::span<const glm::dvec3> polygon, uint32_t element, Me
                        ProjectScratch& scratch, std::vector<Fragment>& out,
                        const glm::dvec3* plane_normal) const {
   to_local(polygon, scratch);
-  bool any_in_front = false;
+  bool any_in_front = full_;
   for (int i = 0; i < scratch.local_n; ++i) any_in_front = any_in_front || scratch.local[i].z > 0.0;
   if (!any_in_front) return;  // wholly below the hemicube's base
   const glm::dvec3 normal = plane_normal != nullptr ? *plane_normal : newell_normal(polygon);
@@ -458,7 +471,7 @@ void Hemicube::project(std::span<const glm::dvec3> polygon, uint32_t element, Me
   // The faces' frusta are convex cones, so a convex polygon whose corners all lie in one face's
   // frustum lies wholly on that face: the other four need not be looked at.
   const int single = common_face(scratch);
-  for (size_t f = 0; f < faces_.size(); ++f) {
+  for (size_t f = 0; f < face_count_; ++f) {
     if (single >= 0 && static_cast<int>(f) != single) continue;
     if (!clip_to_face(f, scratch, single >= 0)) continue;
     rasterize(faces_[f], element, method, normal, offset, {}, false, scratch, out);
@@ -471,7 +484,7 @@ void Hemicube::project_child(std::span<const glm::dvec3> polygon, uint32_t eleme
   if (parent.empty()) return;
   to_local(polygon, scratch);
   size_t begin = 0;
-  for (size_t f = 0; f < faces_.size(); ++f) {
+  for (size_t f = 0; f < face_count_; ++f) {
     const Face& face = faces_[f];
     // The parent's fragments on this face (they are sorted by pixel, faces in order).
     const uint32_t end_pixel = face.offset + face.height * n_;
@@ -890,11 +903,12 @@ double point_polygon_form_factor(const glm::dvec3& eye, const glm::dvec3& normal
   return std::abs(sum) / (2.0 * std::numbers::pi);
 }
 
-std::vector<double> hemicube_form_factors(const glm::dvec3& eye, const glm::dvec3& normal,
-                                          std::span<const ReceiverPolygon> polygons, Method method,
-                                          uint32_t resolution, const glm::dvec3& up_hint) {
-  detail::Hemicube cube(resolution);
-  cube.place(eye, glm::normalize(normal), up_hint);
+namespace {
+
+// Each polygon's visible share of the placed cube's view: its fragments' coverage times their
+// transmission, summed with the pixels' delta form factors (a full cube's: shares of the sphere).
+std::vector<double> visible_shares(const detail::Hemicube& cube, const glm::dvec3& eye,
+                                   std::span<const ReceiverPolygon> polygons, Method method) {
   detail::ProjectScratch scratch;
   std::vector<detail::Fragment> frags;
   std::vector<uint32_t> group_of(polygons.size());
@@ -944,6 +958,25 @@ std::vector<double> hemicube_form_factors(const glm::dvec3& eye, const glm::dvec
   const auto& dff = cube.delta_form_factors();
   for (const auto& f : frags) ff[f.element] += static_cast<double>(f.area) * f.trans * dff[f.pixel];
   return ff;
+}
+
+}  // namespace
+
+std::vector<double> hemicube_form_factors(const glm::dvec3& eye, const glm::dvec3& normal,
+                                          std::span<const ReceiverPolygon> polygons, Method method,
+                                          uint32_t resolution, const glm::dvec3& up_hint) {
+  detail::Hemicube cube(resolution);
+  cube.place(eye, glm::normalize(normal), up_hint);
+  return visible_shares(cube, eye, polygons, method);
+}
+
+std::vector<double> cube_solid_angles(const glm::dvec3& eye, std::span<const ReceiverPolygon> polygons, Method method,
+                                      uint32_t resolution, const glm::dvec3& normal, const glm::dvec3& up_hint) {
+  detail::Hemicube cube(resolution, true);
+  cube.place(eye, glm::normalize(normal), up_hint);
+  std::vector<double> shares = visible_shares(cube, eye, polygons, method);
+  for (double& x : shares) x *= 4.0 * std::numbers::pi;
+  return shares;
 }
 
 }  // namespace hemibake::solver

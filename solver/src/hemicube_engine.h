@@ -19,7 +19,7 @@ namespace hemibake::solver::detail {
 /// of them (at 32 bytes the Cornell box solved 13 % slower). The element's occlusion group is
 /// looked up by element (resolve's `group_of`).
 struct Fragment {
-  uint32_t pixel = 0;    ///< global pixel index (top face, then the four half faces)
+  uint32_t pixel = 0;    ///< global pixel index (top face, then the four half faces; a full cube's bottom last)
   uint32_t element = 0;  ///< the caller's id for the polygon
   float area = 0.0f;     ///< covered fraction of the pixel (classical: 1, the centre is inside)
   union {
@@ -88,12 +88,16 @@ struct ProjectScratch {
 
 class Hemicube {
  public:
-  /// resolution: even, >= 2. Precomputes every pixel's exact delta form factor.
-  explicit Hemicube(uint32_t resolution);
+  /// resolution: even, >= 2. Precomputes every pixel's exact delta form factor. `full`: a whole
+  /// cube of six resolution x resolution faces around the eye (a volume cluster's view, whose
+  /// pixels the caller weights), the top facing `normal` as placed.
+  explicit Hemicube(uint32_t resolution, bool full = false);
 
   uint32_t resolution() const { return n_; }
   uint32_t pixel_count() const { return pixel_count_; }
-  /// Exact form factor of each pixel from the hemicube's centre (they sum to 1).
+  bool full() const { return full_; }
+  /// Exact form factor of each pixel from the hemicube's centre (they sum to 1); a full cube's
+  /// pixels' shares of the sphere's solid angle (they sum to 1).
   const std::vector<double>& delta_form_factors() const { return dff_; }
 
   /// The world direction from the eye through the centre of pixel `pixel` (not unit), as placed.
@@ -140,9 +144,11 @@ class Hemicube {
                  bool child, ProjectScratch& scratch, std::vector<Fragment>& out) const;
 
   uint32_t n_;
+  bool full_;
+  size_t face_count_;  // 5, or 6 for a full cube
   uint32_t pixel_count_;
   std::vector<double> dff_;
-  std::array<Face, 5> faces_{};
+  std::array<Face, 6> faces_{};
   glm::dvec3 eye_{0.0};
   glm::dvec3 frame_x_{1, 0, 0}, frame_y_{0, 1, 0}, frame_z_{0, 0, 1};
 };

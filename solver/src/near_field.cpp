@@ -33,7 +33,8 @@ bool Solver::Impl::is_close(const Piece& piece, uint32_t e) const {
   // On a cluster's own curved surface, a receiver with the cluster's centroid behind its plane
   // (a convex surface: a sphere's facets) sees none of the cluster. Without this every cluster
   // of a 159k-facet sphere went down to single patches (526 659 hemicubes for 1303 shots).
-  if (piece.points.size() > 4 && p_surface[q] == p_surface[p] && glm::dot(nq, centre - oq) <= 0.0) return false;
+  if (piece.points.size() > 4 && !piece.volume && p_surface[q] == p_surface[p] && glm::dot(nq, centre - oq) <= 0.0)
+    return false;
   const bool within = glm::distance(centre, e_centre[e]) - e_radius[e] < kNearFactor * piece.diameter;
   if (!within) {
     // The piece's centre behind the receiver's plane, or just in front of it: the centre's
@@ -48,6 +49,7 @@ bool Solver::Impl::is_close(const Piece& piece, uint32_t e) const {
     hi = std::max(hi, d);
   }
   if (hi <= eps || (!within && lo >= -eps)) return false;
+  if (piece.volume) return true;  // it shoots every way
   bool in_front = false;
   for (uint32_t i = 0; i < corner_count(e) && !in_front; ++i)
     in_front = glm::dot(piece.normal, vpos[e_corner[e][i]] - centre) > eps - piece.rear;
@@ -134,6 +136,9 @@ double Solver::Impl::exact_form_factor(const Piece& piece, uint32_t e, int side)
 // back_hidden), or one that faces the piece. Its share of the centre's view then differs from most
 // of the piece's (shoot_piece).
 bool Solver::Impl::absorber_close(const Piece& piece) const {
+  // A volume cluster's box holds no other object's surface (foreign_inside), and its cube has no
+  // front side.
+  if (piece.volume) return false;
   const glm::dvec3& c = piece.centre;
   const double r = piece.diameter;
   const double eps = kRoundingLength * prep.diagonal;

@@ -97,8 +97,17 @@ double Solver::Impl::shooter_light(const ShooterShape& s, const glm::dvec3& x, c
     }
     return f;
   }
-  if (glm::dot(s.normal, d) >= 0.0) return 0.0;
   const double r = std::sqrt(r2);
+  if (s.volume) {
+    // The cluster's area facing x, as a share (its lobe along -d), stands for cos_s.
+    const glm::dvec3 w = -d / r;
+    double facing = 0.0;
+    for (int a = 0; a < 3; ++a) facing += w[a] > 0.0 ? s.lobe[2 * a] * w[a] : -s.lobe[2 * a + 1] * w[a];
+    const double cos_r = glm::dot(n, d) / r;
+    if (!(cos_r > 0.0 && facing > 0.0)) return 0.0;
+    return s.area * cos_r * facing / (std::numbers::pi * r2 + s.area);
+  }
+  if (glm::dot(s.normal, d) >= 0.0) return 0.0;
   const double cos_r = glm::dot(n, d) / r, cos_s = -glm::dot(s.normal, d) / r;
   if (!(cos_r > 0.0 && cos_s > 0.0)) return 0.0;
   return s.area * cos_r * cos_s / (std::numbers::pi * r2 + s.area);
@@ -116,6 +125,21 @@ ShooterShape Solver::Impl::shape_of(const Piece& piece) const {
     std::copy(piece.points.begin(), piece.points.end(), s.poly.begin());
   } else {
     s.src = piece.src;
+  }
+  if (piece.volume) {
+    s.volume = true;
+    const ClusterNode& node = c_nodes[piece.cluster];
+    double sum = 0.0;
+    for (uint32_t i = node.begin; i < node.end; ++i) {
+      const uint32_t q = cluster_patch[i];
+      for (int a = 0; a < 3; ++a) {
+        const double part = prep.normal[q][a] * prep.area[q];
+        s.lobe[2 * a + (part < 0.0 ? 1 : 0)] += std::abs(part);
+        sum += std::abs(part);
+      }
+    }
+    if (sum > 0.0)
+      for (double& x : s.lobe) x /= sum;
   }
   return s;
 }

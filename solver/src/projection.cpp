@@ -10,9 +10,10 @@
 namespace hemibake::solver {
 
 // F(piece -> element) for each element, summed over its fragments: covered area times the pixel's
-// delta form factor, with (e_ff) and without (e_ff_open) the pixel's transmission.
+// delta form factor (a volume cluster's: the share of its light through the pixel), with (e_ff)
+// and without (e_ff_open) the pixel's transmission.
 void Solver::Impl::sum_form_factors(std::span<const uint32_t> elements) {
-  const auto& dff = cube->delta_form_factors();
+  const auto& dff = *pixel_weight;
   pool.parallel_for(elements.size(), [&](size_t b, size_t e, size_t) {
     for (size_t i = b; i < e; ++i) {
       const uint32_t el = elements[i];

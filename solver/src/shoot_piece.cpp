@@ -4,8 +4,15 @@
 // the form factors for a replay (shot_cache.cpp) and distributes the piece's unshot radiosity.
 #include "solver_impl.h"
 
+#include <glm/geometric.hpp>
+#include <glm/vec4.hpp>
+
 #include <algorithm>
+#include <array>
+#include <cmath>
 #include <limits>
+#include <map>
+#include <numeric>
 
 namespace hemibake::solver {
 namespace {
@@ -44,6 +51,10 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   const bool coarse = place_hemicube(piece);
   project(seen);
   sum_form_factors(accepted);  // the occluders' own form factors are not needed
+  double seen_share = 0.0;  // of a deferred volume piece's light: what meets a front face
+  if (defer_far && piece.volume)
+    for (const Fragment& f : frags)
+      if (!(f.element & detail::kBackFace)) seen_share += static_cast<double>(f.area) * f.trans * (*pixel_weight)[f.pixel];
 
   double split_room = std::numeric_limits<double>::infinity();
   const bool settled = refine(piece, shaft, accepted, seen, split_room);
@@ -52,6 +63,25 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   if (!settled) record_broken = true;  // kMaxRounds still splitting: no headroom to record
   if (recording != nullptr) record_piece(piece, coarse, split_room, accepted);
   gap_share = covered_share(piece.src);
+  if (defer_far && piece.volume) {
+    defer_far = false;
+    auto far = std::make_unique<FarShare>();
+    far->src = piece.src;
+    far->shape = shape_of(piece);
+    far->dB = piece.dB;
+    far->gap = gap_share;
+    far->seen = seen_share;
+    if (recording != nullptr && !record_broken && !recording->pieces.empty()) far->record_piece = recording->pieces.size() - 1;
+    for (uint32_t e : accepted)
+      if (f_recv[e] > 0.0) {
+        far->recv.push_back(e);
+        far->f.push_back(f_recv[e]);
+        far->power += f_recv[e] * e_area[e] * channel_sum(piece.dB);
+      }
+    far_pending = std::move(far);
+    gap_share = 0.0;
+    return near;
+  }
   const ShooterShape shape = shape_of(piece);
   shooter_shape = &shape;
   ++grid_shooter;
@@ -62,10 +92,15 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
 }
 
 // The piece's own patches stay out of its hemicube (a curved cluster's may stand in front of it)
-// and are no absorbers in front of it (absorber_close).
+// and are no absorbers in front of it (absorber_close); so do a volume cluster's faces' other sides
+// (foreign_inside lets them pass through its box).
 void Solver::Impl::mark_shooting_patches(const Piece& piece) {
   ++shooting_stamp;
-  for (uint32_t e : piece.src) p_shooting[e_patch[e]] = shooting_stamp;
+  for (uint32_t e : piece.src) {
+    p_shooting[e_patch[e]] = shooting_stamp;
+    // A volume cluster's faces' other sides lie where they do, inside its cube.
+    if (piece.volume && prep.twin[e_patch[e]] != kNone) p_shooting[prep.twin[e_patch[e]]] = shooting_stamp;
+  }
 }
 
 // Receivers split by earlier pieces of the shot are replaced by their leaves.
@@ -117,7 +152,7 @@ int Solver::Impl::coarser_levels(double power) const {
 // for about 30 % more time.
 bool Solver::Impl::finer_level(const Piece& piece, double power) const {
   // Clusters at depth 0 are the whole-scene shots (step); their quarters go down the levels.
-  return params.method == Method::kAntiAliased && piece.points.size() > 4 && piece.depth == 0 &&
+  return params.method == Method::kAntiAliased && piece.points.size() > 4 && !piece.volume && piece.depth == 0 &&
          power >= kFinePower * emitted_power;
 }
 
@@ -136,6 +171,25 @@ bool Solver::Impl::place_hemicube(const Piece& piece) {
   ++stamp;
   const size_t level = std::min<size_t>(static_cast<size_t>(piece.depth) + coarser, cubes.size() - 1);
   cube = &cubes[level];
+  if (piece.volume) {
+    VolumeCube& v = volume_cubes[level];
+    if (!v.cube) {
+      v.cube = std::make_unique<detail::Hemicube>(cubes[level].resolution(), true);
+      v.cube->place(glm::dvec3(0.0), piece.normal, piece.up);
+      const uint32_t pixels = v.cube->pixel_count();
+      v.dir.resize(pixels);
+      v.omega.resize(pixels);
+      for (uint32_t px = 0; px < pixels; ++px) {
+        v.dir[px] = glm::normalize(v.cube->pixel_direction(px));
+        v.omega[px] = v.cube->pixel_solid_angle(px);
+      }
+    }
+    cube = v.cube.get();
+    cube->place(piece.centre, piece.normal, piece.up);
+    volume_weights(piece, v);
+    pixel_weight = &volume_weight;
+    return coarser > 0;
+  }
   const uint32_t finer_resolution = std::max(params.resolution, std::min(2 * params.resolution, kMaxFinerResolution));
   if (finer && finer_resolution > params.resolution) {
     // Made when first needed, and none at all where the resolution is that fine already.
@@ -143,7 +197,47 @@ bool Solver::Impl::place_hemicube(const Piece& piece) {
     cube = finer_cube.get();
   }
   cube->place(piece.centre, piece.normal, piece.up);
+  pixel_weight = &cube->delta_form_factors();
   return coarser > 0;
+}
+
+// The share of a volume cluster's light that leaves through each pixel of its cube: its faces'
+// areas a_i projected on the pixel's direction w, sum_i a_i max(0, n_i . w) dOmega / pi, over the
+// sum of the faces' areas (the radiosity is taken as the cluster's mean, as for any cluster), so
+// that a flat cluster's weights are the hemicube's delta form factors. Faces of like normal
+// (within about 2 degrees) are summed first; the weights are scaled to sum to exactly 1. The
+// cluster's own faces are left out of its cube: a convex object's faces look away from its
+// centre, so light leaves it unhindered.
+void Solver::Impl::volume_weights(const Piece& piece, const VolumeCube& v) {
+  HEMIBAKE_DCHECK(piece.cluster < c_nodes.size() && v.cube->full());
+  const ClusterNode& node = c_nodes[piece.cluster];
+  std::map<std::array<int, 3>, glm::dvec4> by_normal;  // area times normal, and area
+  for (uint32_t i = node.begin; i < node.end; ++i) {
+    const uint32_t q = cluster_patch[i];
+    const glm::dvec3& n = prep.normal[q];
+    const std::array<int, 3> key{static_cast<int>(std::lround(n.x * 32.0)), static_cast<int>(std::lround(n.y * 32.0)),
+                                 static_cast<int>(std::lround(n.z * 32.0))};
+    by_normal[key] += glm::dvec4(n * prep.area[q], prep.area[q]);
+  }
+  std::vector<glm::dvec4> lobes;  // unit normal, area
+  lobes.reserve(by_normal.size());
+  for (const auto& [key, sum] : by_normal) {
+    const glm::dvec3 n(sum);
+    const double len = glm::length(n);
+    if (len > 0.0) lobes.emplace_back(n / len, sum.w);
+  }
+  const uint32_t pixels = v.cube->pixel_count();
+  volume_weight.resize(pixels);
+  pool.parallel_for(pixels, [&](size_t begin, size_t end, size_t) {
+    for (size_t px = begin; px < end; ++px) {
+      double w = 0.0;
+      for (const glm::dvec4& l : lobes) w += l.w * std::max(0.0, glm::dot(glm::dvec3(l), v.dir[px]));
+      volume_weight[px] = w * v.omega[px];
+    }
+  });
+  const double total = std::accumulate(volume_weight.begin(), volume_weight.end(), 0.0);
+  HEMIBAKE_DCHECK(total > 0.0);
+  for (double& w : volume_weight) w /= total;
 }
 
 // F(element -> piece) for every accepted receiver, visible (f_recv) and unoccluded (f_open): from
@@ -210,7 +304,34 @@ double Solver::Impl::hemicube_share(const std::vector<uint32_t>& accepted) const
 // Southwell step: the piece's unshot radiosity goes to the receivers that took light here.
 void Solver::Impl::distribute(const glm::dvec3& dB, const std::vector<uint32_t>& accepted) {
   for (uint32_t e : accepted)
-    if (f_recv[e] > 0.0) receive(e, dB, f_recv[e]);
+    if (f_recv[e] > 0.0) {
+      receive(e, dB, f_recv[e]);
+      delivered += f_recv[e] * e_area[e] * channel_sum(dB);
+    }
+}
+
+// Gives a volume cluster's deferred far receivers their light, their form factors times `scale`
+// (at most 1), in the shot's record too. A receiver split since takes it on its leaves.
+void Solver::Impl::finish_far(FarShare& far, double scale) {
+  far.shape.src = far.src;
+  shooter_shape = &far.shape;
+  gap_share = far.gap;
+  ++grid_shooter;
+  for (size_t i = 0; i < far.recv.size(); ++i) {
+    const double f = std::min(1.0, far.f[i] * scale);
+    if (!(f > 0.0)) continue;
+    for_leaves(far.recv[i], [&](uint32_t leaf) {
+      receive(leaf, far.dB, f);
+      delivered += f * e_area[leaf] * channel_sum(far.dB);
+    });
+  }
+  shooter_shape = nullptr;
+  gap_share = 0.0;
+  if (recording != nullptr && !record_broken && far.record_piece < recording->pieces.size()) {
+    const ShotRecord::Piece& rp = recording->pieces[far.record_piece];
+    for (uint32_t k = rp.recv_begin; k < rp.recv_end; ++k)
+      recording->f[k] = static_cast<float>(std::min(1.0, recording->f[k] * scale));
+  }
 }
 
 }  // namespace hemibake::solver

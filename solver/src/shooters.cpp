@@ -123,8 +123,8 @@ bool Solver::Impl::uneven_piece(uint32_t element) const {
   return departure > kUnevenShare * total;
 }
 
-// Shoots cluster node c to `receivers` as one piece along its mean normal; `depth` counts the
-// halvings from the unit's root.
+// Shoots cluster node c to `receivers` as one piece along its mean normal, or from a whole cube (a
+// volume cluster whose faces look several ways); `depth` counts the halvings from the unit's root.
 void Solver::Impl::shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bool whole_scene, int depth) {
   if (receivers.empty()) return;
   const ClusterNode& node = c_nodes[c];
@@ -156,13 +156,49 @@ void Solver::Impl::shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bo
   piece.rear = node.depth;
   piece.up = node.box[1] - node.box[0];
   if (glm::length(glm::cross(piece.up, piece.normal)) < kRoundingLength * prep.diagonal) piece.up = node.box[2] - node.box[0];
+  if (volume_shot(node)) {
+    // Its faces look several ways: a whole cube at its centroid, always turned alike (its pixels'
+    // directions are kept per level).
+    piece.volume = true;
+    piece.cluster = c;
+    piece.centre = node.centre;
+    piece.normal = glm::dvec3(0.0, 0.0, 1.0);
+    piece.up = glm::dvec3(0.0, 1.0, 0.0);
+  }
   piece.diameter = node.diameter;
   piece.points.assign(node.box.begin(), node.box.end());
   piece.depth = depth / 2;  // each level halves the area, every second one the width
   // A cluster stands for its patches: receivers near it always go on to its halves, down to single
   // patches, so that clustering never makes a receiver see a coarser shooter than the patches.
   piece.may_refine = true;
-  const std::vector<uint32_t> near = shoot_piece(piece, std::move(receivers), whole_scene);
+  // A volume cluster's near receivers take from its parts what those, where they stand, send their
+  // way: not the share N of its light that its cube saw them take from its centre (the floor under
+  // a cluster of boxes, seen from above it). What its parts do not send them, N P - D, leaves as
+  // the rest of its cube's light does, (1 - N) P, a share of it to the far receivers (the rest to
+  // the sky or into absorbing backs): their form factors are scaled by 1 + (N P - D) / ((1 - N) P),
+  // so that a shot in a closed room gives out all of its power (in a room of 100 boxes on a floor
+  // 8.4 % of the clusters' light was lost without). The whole-scene shot sets the scale
+  // (u_far_scale), which a partial shot (reshoot_split) keeps.
+  defer_far = piece.volume && depth == 0;
+  std::vector<uint32_t> near = shoot_piece(piece, std::move(receivers), whole_scene);
+  defer_far = false;
+  std::unique_ptr<FarShare> far = std::move(far_pending);
+  const double before = delivered;
+  shoot_parts(c, near, depth);
+  if (far) {
+    const uint32_t unit = p_unit[cluster_patch[node.begin]];
+    if (u_far_scale.empty()) u_far_scale.assign(unit_node.size(), 1.0);
+    if (whole_scene) {
+      const double p = piece.power, near_share = std::max(0.0, far->seen - far->power / p);
+      u_far_scale[unit] = near_share < 1.0 ? std::max(0.0, 1.0 + (near_share * p - (delivered - before)) / ((1.0 - near_share) * p)) : 1.0;
+    }
+    finish_far(*far, u_far_scale[unit]);
+  }
+}
+
+// Hands the receivers near cluster node c to its parts (shoot_cluster).
+void Solver::Impl::shoot_parts(uint32_t c, const std::vector<uint32_t>& near, int depth) {
+  const ClusterNode& node = c_nodes[c];
   if (near.empty()) return;
   // Near receivers go on to the quarters (the halves' halves: half as wide), as for a patch.
   for (uint32_t h = node.child; h < node.child + 2; ++h) {

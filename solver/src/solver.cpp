@@ -50,6 +50,8 @@ Solver::Impl::Impl(const Scene& scene, const Params& p, const Impl* first, const
     cubes.emplace_back(std::min(res, params.resolution));
   }
   cube = &cubes[0];
+  pixel_weight = &cube->delta_form_factors();
+  volume_cubes.resize(cubes.size());
   aeps_area = params.aeps * prep.total_area;
   shooter_limit = params.shooter_size * prep.diagonal;
   vpos = prep.vertex_position;
@@ -67,6 +69,7 @@ Solver::Impl::Impl(const Scene& scene, const Params& p, const Impl* first, const
     p_unshot[i] = channel_sum(patches[i].emission) * prep.area[i];
     leaves.push_back(p_root[i]);
   }
+  build_patch_bvh();  // clusters look for other objects' surfaces passing through them
   build_clusters();
   source = scene;
   first_pass = solve_params != nullptr;
@@ -87,7 +90,6 @@ Solver::Impl::Impl(const Scene& scene, const Params& p, const Impl* first, const
   if (!first_pass) grid_light.clear();
   p_mark.assign(patches.size(), 0);
   p_shooting.assign(patches.size(), 0);
-  build_patch_bvh();
   stats.patches = patches.size();
   stats.shooters = unit_patch.size();
   stats.elements = leaves.size();

@@ -14,6 +14,7 @@
 
 #include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
+#include <glm/vec4.hpp>
 
 #include <algorithm>
 #include <array>
@@ -146,6 +147,10 @@ struct ShooterShape {
   std::array<glm::dvec3, 4> poly{};
   uint32_t poly_n = 0;            // 0: a cluster
   std::span<const uint32_t> src;  // a cluster's elements (set where it shoots; not kept)
+  // A volume cluster (no normal): its area by where it faces, along +x, -x, +y, -y, +z and -z (the
+  // normals' parts), as shares that sum to 1.
+  bool volume = false;
+  std::array<double, 6> lobe{};
 };
 
 struct Solver::Impl {
@@ -161,6 +166,10 @@ struct Solver::Impl {
     int depth;                        // hemicube level (each halves the resolution)
     double rear = 0.0;                // a cluster not flat: how far behind `centre` it reaches
     bool may_refine;                  // near receivers are left to sub-pieces
+    // A volume cluster (cluster node `cluster`): a whole cube at `centre`, each pixel weighted by
+    // the cluster's faces that look its way (volume_weights); `normal` only turns the cube.
+    bool volume = false;
+    uint32_t cluster = kNone;
     // Where dB comes from (for replays): the unshot power of the leaves under `src`, divided by
     // src_area.
     std::vector<uint32_t> src;
@@ -211,6 +220,9 @@ struct Solver::Impl {
     // cluster); the hemicube stands there (shoot_cluster).
     double front = 0.0;
     double depth = 0.0;  // from its rearmost patch corner to its foremost, along `normal`
+    // Of a pool of faces of small objects across orientations: where its faces look several ways
+    // (volume_shot), it shoots from a whole cube at its centre.
+    bool volume = false;
   };
   // A node of the bounding-box tree over the patches (patch_bvh.cpp).
   struct BoxNode {
@@ -283,13 +295,22 @@ struct Solver::Impl {
   void find_surfaces();
   std::vector<std::vector<uint32_t>> cluster_candidates(double limit) const;
   void cut_into_units(const std::vector<uint32_t>& members, double limit);
+  void cut_into_volume_units(const std::vector<uint32_t>& members, double limit, std::vector<uint32_t>& left);
   void build_cluster(uint32_t id, uint32_t begin, uint32_t end, double limit);
+  uint32_t gap_cut(uint32_t begin, uint32_t end, const glm::dvec3& lo, const glm::dvec3& hi);
+  std::vector<uint32_t> objects() const;
+  bool inner_side(uint32_t q, const glm::dvec4& object_centre) const;
   static bool cluster_unfit(const ClusterNode& node, double limit);
+  static bool volume_shot(const ClusterNode& node) {
+    return node.volume && (node.min_cos < kClusterCone || node.depth > kClusterDepth * node.diameter);
+  }
+  bool foreign_inside(const ClusterNode& node, std::vector<uint32_t>& member_stamp, uint32_t stamp_value) const;
 
   // shooters.cpp: a unit breaks into pieces, each of which shoot_piece shoots.
   void shoot_patch(uint32_t p, const std::vector<uint32_t>& receivers, bool whole_scene);
   void shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers, bool whole_scene);
   void shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bool whole_scene, int depth);
+  void shoot_parts(uint32_t c, const std::vector<uint32_t>& near, int depth);
 
   // shoot_piece.cpp: one hemicube, stage by stage.
   std::vector<uint32_t> shoot_piece(const Piece& piece, std::vector<uint32_t> receivers, bool whole_scene);
@@ -300,9 +321,27 @@ struct Solver::Impl {
   int coarser_levels(double power) const;
   bool finer_level(const Piece& piece, double power) const;
   bool place_hemicube(const Piece& piece);
+  struct VolumeCube;
+  void volume_weights(const Piece& piece, const VolumeCube& v);
   void receiver_form_factors(const Piece& piece, const std::vector<uint32_t>& accepted);
   void distribute(const glm::dvec3& dB, const std::vector<uint32_t>& accepted);
+  // A volume cluster's whole-scene shot gives its far receivers what its parts did not give its
+  // near ones (shoot_cluster): deferred until they have shot.
+  struct FarShare {
+    std::vector<uint32_t> recv, src;
+    std::vector<double> f;
+    glm::dvec3 dB{0.0};
+    ShooterShape shape;
+    double gap = 0.0, power = 0.0;  // gap_share; the power the receivers take at f
+    double seen = 0.0;  // the share of the cube that front faces take (the rest: the sky, backs)
+    size_t record_piece = static_cast<size_t>(-1);  // its piece in the shot's record
+  };
+  void finish_far(FarShare& far, double scale);
   double hemicube_share(const std::vector<uint32_t>& accepted) const;
+  bool defer_far = false;                // shoot_piece keeps a volume piece's light in far_pending
+  std::unique_ptr<FarShare> far_pending;
+  double delivered = 0.0;                // power given out by shots so far (channels summed)
+  std::vector<double> u_far_scale;       // per unit: its last whole-scene shot's far scale
   // Whether element e has form factors from the hemicube in use.
   bool projected(uint32_t e) const { return e_stamp[e] == stamp && e_ff_open[e] > 0.0; }
   // F(element -> piece) from F(piece -> element) = ff, by reciprocity (capped at 1).
@@ -426,6 +465,7 @@ struct Solver::Impl {
   // shoot together (cluster trees in c_nodes; unit_node kNone for a single patch).
   std::vector<ClusterNode> c_nodes;
   std::vector<uint32_t> cluster_patch;
+  bool building_volume = false;  // build_cluster: a volume pool's tree (cut on centres only)
   std::vector<uint32_t> unit_patch, unit_node, p_unit;
   std::vector<double> u_unshot;  // unshot power per unit
   // Replays: per unit, the form factors of its last shot (replay()).
@@ -449,7 +489,17 @@ struct Solver::Impl {
   // shots may use coarser ones still (coarser_levels).
   std::vector<detail::Hemicube> cubes;
   std::unique_ptr<detail::Hemicube> finer_cube;  // for strong cluster shots (finer_level)
+  // Whole cubes for volume clusters, per level as `cubes` (made when first needed), with each
+  // pixel's unit direction and solid angle, and the weights of the one in use.
+  struct VolumeCube {
+    std::unique_ptr<detail::Hemicube> cube;
+    std::vector<glm::dvec3> dir;
+    std::vector<double> omega;
+  };
+  std::vector<VolumeCube> volume_cubes;
+  std::vector<double> volume_weight;
   detail::Hemicube* cube = nullptr;  // the one in use
+  const std::vector<double>* pixel_weight = nullptr;  // its pixels' delta form factors, or volume_weight
   detail::ThreadPool pool;
   std::vector<Fragment> frags;
   std::vector<uint32_t> f_begin, f_end;  // per element: its fragments in `frags`

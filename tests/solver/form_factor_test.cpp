@@ -692,5 +692,87 @@ TEST(AaHemicube, FormFactorsOfTheFacesOfABoxAroundTheEyeSumToOne) {
   expect_box_form_factors_sum_to_one(Method::kAntiAliased);
 }
 
+// --- The full cube of a volume cluster -----------------------------------------------------------
+
+// The exact solid angle of a convex polygon seen from `eye` (Van Oosterom and Strackee's formula
+// for each triangle of a fan).
+double exact_solid_angle(const dvec3& eye, const Poly& p) {
+  double sum = 0.0;
+  for (size_t k = 1; k + 1 < p.size(); ++k) {
+    const dvec3 a = p[0] - eye, b = p[k] - eye, c = p[k + 1] - eye;
+    const double la = glm::length(a), lb = glm::length(b), lc = glm::length(c);
+    const double num = std::abs(glm::dot(a, glm::cross(b, c)));
+    const double den = la * lb * lc + glm::dot(a, b) * lc + glm::dot(a, c) * lb + glm::dot(b, c) * la;
+    sum += 2.0 * std::atan2(num, den);
+  }
+  return sum;
+}
+
+std::vector<double> full_cube(const dvec3& eye, const std::vector<Poly>& polys, const dvec3& normal, const dvec3& up,
+                              uint32_t resolution = kResolution) {
+  std::vector<ReceiverPolygon> receivers;
+  for (const Poly& p : polys) receivers.push_back({p, kNone});
+  return cube_solid_angles(eye, receivers, Method::kAntiAliased, resolution, normal, up);
+}
+
+// The six faces of a random box around the eye, the cube turned at random: together they take the
+// whole sphere (4 pi), and each face its own exact solid angle, wherever it lies, below the
+// cube's top face as well as above.
+TEST(FullCube, FacesOfABoxAroundTheEyeTakeTheirExactSolidAngles) {
+  const uint64_t seed = test_seed();
+  SCOPED_TRACE(seed_note(seed));
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  double worst = 0.0;
+  for (int trial = 0; trial < 10; ++trial) {
+    const dvec3 size(0.5 + 2.5 * u(rng), 0.5 + 2.5 * u(rng), 0.5 + 2.5 * u(rng));
+    const dvec3 eye = size * dvec3(0.05 + 0.9 * u(rng), 0.05 + 0.9 * u(rng), 0.05 + 0.9 * u(rng));
+    const dvec3 n = random_unit(rng), up = random_up(rng, n);
+    const double X = size.x, Y = size.y, Z = size.z;
+    std::vector<Poly> faces = {
+        {{0, 0, 0}, {X, 0, 0}, {X, Y, 0}, {0, Y, 0}}, {{0, 0, Z}, {X, 0, Z}, {X, Y, Z}, {0, Y, Z}},
+        {{0, 0, 0}, {X, 0, 0}, {X, 0, Z}, {0, 0, Z}}, {{0, Y, 0}, {X, Y, 0}, {X, Y, Z}, {0, Y, Z}},
+        {{0, 0, 0}, {0, Y, 0}, {0, Y, Z}, {0, 0, Z}}, {{X, 0, 0}, {X, Y, 0}, {X, Y, Z}, {X, 0, Z}},
+    };
+    for (Poly& f : faces) f = facing(f, eye);
+    const std::vector<double> omega = full_cube(eye, faces, n, up);
+    double sum = 0.0;
+    for (size_t i = 0; i < faces.size(); ++i) {
+      const double exact = exact_solid_angle(eye, faces[i]);
+      worst = std::max(worst, std::abs(omega[i] - exact) / exact);
+      EXPECT_NEAR(omega[i], exact, 1e-2 * exact) << "trial " << trial << " face " << i;
+      sum += omega[i];
+    }
+    EXPECT_NEAR(sum, 4.0 * kPi, 1e-5) << "trial " << trial;
+  }
+  record("full_cube_worst_face_relative_error", worst);
+}
+
+// A random polygon in any direction from the eye, with one in front of it half hiding it: the
+// front one takes its exact solid angle, and the back one loses what the front one covers.
+TEST(FullCube, NearerPolygonHidesWhatItCoversInAnyDirection) {
+  const uint64_t seed = test_seed();
+  SCOPED_TRACE(seed_note(seed));
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (int trial = 0; trial < 20; ++trial) {
+    const dvec3 eye(u(rng), u(rng), u(rng));
+    const dvec3 d = random_unit(rng);
+    const dvec3 t = glm::normalize(glm::cross(d, random_up(rng, d))), b = glm::cross(d, t);
+    // A square 2 m across at 3 m, and before it at 1.5 m a square 0.5 m across over its middle:
+    // it hides as much of the back square as its own solid angle.
+    auto square = [&](double dist, double half) {
+      const dvec3 c = eye + d * dist;
+      return facing(Poly{c - t * half - b * half, c + t * half - b * half, c + t * half + b * half, c - t * half + b * half}, eye);
+    };
+    const Poly back = square(3.0, 1.0), front = square(1.5, 0.25);
+    const dvec3 n = random_unit(rng);
+    const std::vector<double> omega = full_cube(eye, {back, front}, n, random_up(rng, n));
+    const double w_back = exact_solid_angle(eye, back), w_front = exact_solid_angle(eye, front);
+    EXPECT_NEAR(omega[1], w_front, 1e-2 * w_front) << "trial " << trial;
+    EXPECT_NEAR(omega[0], w_back - w_front, 1e-2 * (w_back - w_front)) << "trial " << trial;
+  }
+}
+
 }  // namespace
 }  // namespace hemibake::solver

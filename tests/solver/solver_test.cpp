@@ -761,6 +761,57 @@ double mean_radiosity(const Scene& scene, const Mesh& mesh, uint32_t material) {
   return ba / a;
 }
 
+// Glowing boxes (6 to 18 cm, floating in a 4 m room, nothing else emits) pool into volume clusters: boxes
+// near one another shoot together from one whole cube whatever way their faces look. The light the
+// room's walls and the boxes take stays that of every face shooting alone within 1.5 %, with at most
+// half the shooters of clusters by orientation class.
+TEST(Solver, VolumeClustersOfGlowingBoxesLightTheRoomAsTheirFacesAlone) {
+  Scene scene = make_closed_box(4.0, 8, glm::dvec3(0.6), glm::dvec3(0.0), false);
+  uint64_t state = 777;
+  auto next = [&] {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    return static_cast<double>(state >> 11) * (1.0 / 9007199254740992.0);
+  };
+  using V = glm::dvec3;
+  const V rho(0.5), e(4.0, 3.0, 2.0);
+  for (int i = 0; i < 48; ++i) {
+    // A 4 x 3 x 4 grid of 0.5 m (jittered by 5 cm) in the room's middle, floating.
+    const V centre(1.25 + 0.5 * (i % 4) + 0.1 * (next() - 0.5), 0.8 + 0.5 * ((i / 4) % 3) + 0.1 * (next() - 0.5),
+                   1.25 + 0.5 * (i / 12) + 0.1 * (next() - 0.5));
+    const V half(0.03 + 0.06 * next(), 0.03 + 0.06 * next(), 0.03 + 0.06 * next());
+    const V lo = centre - half, hi = centre + half;
+    add_quad(scene, V(lo.x, hi.y, lo.z), V(lo.x, hi.y, hi.z), V(hi.x, hi.y, hi.z), V(hi.x, hi.y, lo.z), rho, e, 2);
+    add_quad(scene, V(lo.x, lo.y, lo.z), V(hi.x, lo.y, lo.z), V(hi.x, lo.y, hi.z), V(lo.x, lo.y, hi.z), rho, e, 2);
+    add_quad(scene, V(lo.x, lo.y, lo.z), V(lo.x, hi.y, lo.z), V(hi.x, hi.y, lo.z), V(hi.x, lo.y, lo.z), rho, e, 2);
+    add_quad(scene, V(lo.x, lo.y, hi.z), V(hi.x, lo.y, hi.z), V(hi.x, hi.y, hi.z), V(lo.x, hi.y, hi.z), rho, e, 2);
+    add_quad(scene, V(lo.x, lo.y, lo.z), V(lo.x, lo.y, hi.z), V(lo.x, hi.y, hi.z), V(lo.x, hi.y, lo.z), rho, e, 2);
+    add_quad(scene, V(hi.x, lo.y, lo.z), V(hi.x, hi.y, lo.z), V(hi.x, hi.y, hi.z), V(hi.x, lo.y, hi.z), rho, e, 2);
+  }
+  ASSERT_EQ(validate(scene), "");
+  Solver volume(scene, {});
+  ASSERT_TRUE(volume.run().converged);
+  Params by_orientation;
+  by_orientation.cluster_volume = false;
+  const Solver oriented(scene, by_orientation);
+  Params alone_params;
+  alone_params.cluster_size = 0.0;
+  Solver alone(scene, alone_params);
+  ASSERT_TRUE(alone.run().converged);
+  // The boxes' shooters: what the room adds to those of the empty room.
+  const Solver empty(make_closed_box(4.0, 8, glm::dvec3(0.6), glm::dvec3(0.0), false), {});
+  const uint64_t room = empty.stats().shooters;
+  std::printf("the boxes' shooters: volume %llu, by orientation %llu, alone %llu\n",
+              static_cast<unsigned long long>(volume.stats().shooters - room),
+              static_cast<unsigned long long>(oriented.stats().shooters - room),
+              static_cast<unsigned long long>(alone.stats().shooters - room));
+  EXPECT_LE(2 * (volume.stats().shooters - room), oriented.stats().shooters - room);
+  for (uint32_t material : {0u, 2u}) {
+    const double ratio = mean_radiosity(scene, volume.mesh(), material) / mean_radiosity(scene, alone.mesh(), material);
+    std::printf("material %u: volume / alone %.4f\n", material, ratio);
+    EXPECT_NEAR(ratio, 1.0, 0.015) << material;
+  }
+}
+
 // A tessellated sphere resting on a floor tile, in a room lit by a ceiling panel: the sphere's
 // clusters shoot weak light (under FEPS of the emitted power), and the tile under the sphere faces
 // the bottom cluster within a diameter. Weak cluster pieces no longer hand all their receivers to

@@ -28,6 +28,13 @@ std::vector<double> hemicube_form_factors(const glm::dvec3& eye, const glm::dvec
                                           uint32_t resolution,
                                           const glm::dvec3& up_hint = glm::dvec3(0.0, 0.0, 1.0));
 
+/// The solid angle of each polygon visible from `eye`, with the polygons occluding one another,
+/// as the full cube of a volume cluster computes it (six faces of resolution x resolution pixels;
+/// the top one facing `normal`, turned about it by `up_hint`). Polygons facing away get 0.
+std::vector<double> cube_solid_angles(const glm::dvec3& eye, std::span<const ReceiverPolygon> polygons, Method method,
+                                      uint32_t resolution, const glm::dvec3& normal = glm::dvec3(0.0, 0.0, 1.0),
+                                      const glm::dvec3& up_hint = glm::dvec3(0.0, 1.0, 0.0));
+
 /// The exact form factor from a differential area at `eye` with unit normal `normal` to a polygon
 /// that lies wholly in front of it (Lambert's formula: (1 / 2pi) sum_i beta_i cos gamma_i).
 double point_polygon_form_factor(const glm::dvec3& eye, const glm::dvec3& normal,

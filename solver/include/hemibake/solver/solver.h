@@ -89,6 +89,10 @@ struct Params {
   bool cluster_across = true;   ///< surfaces narrower than half cluster_size (faces of small
                                 ///< objects) cluster with nearby faces of like orientation on other
                                 ///< objects; false = only within a surface
+  bool cluster_volume = true;   ///< those faces cluster whatever their orientation, and a cluster
+                                ///< that faces several ways shoots from one whole cube at its
+                                ///< centre, each direction weighted by the faces that look that way
+                                ///< (a volume cluster); false = one cluster per orientation class
   bool reuse_visibility = true; ///< children take visibility from their parent's pixels; false
                                 ///< re-projects the whole scene after every split (for comparison)
   bool gather = false;          ///< after the shots, every vertex of the mesh gathers the radiosity of
