@@ -101,32 +101,54 @@ constexpr auto kRegisterWait = std::chrono::seconds(5);
 constexpr unsigned kLookupThreads = 2;
 constexpr size_t kMaxLookups = 1024;
 
-// What a job's bake may hold in memory, by part, in bytes. The factors are measured (peak RSS of
-// `hemibake bake`, Release, Cornell box): the hemicubes take about 220 bytes per pixel of the top
-// face for each solver thread (resolution 1024: 247 MB; 2048: 926 MB; 1024 on two threads:
-// 487 MB), an element about 1 KB with the output written (400 000: 436 MB). Leaves are at least
-// aeps of the scene's area, so there are at most 1/aeps of them besides patches that are smaller.
+// What a job's bake may hold in memory, by part, in bytes: the growth of a server's peak RSS over
+// its RSS before the job (`hemibake-server --workers 1`, one solver thread, Release; the figures in
+// README under "Limits and failure behaviour"), with a margin over the largest seen.
+// - Hemicubes: 233-273 bytes per pixel of the top face (resolution 400 and 1024), per solver thread.
+// - Elements and patches: the solver's per-element arrays, the output mesh and the GLB written
+//   from it, and per patch its clusters and shooters: about 1.3 KB per element and 1.45 KB per
+//   patch (fitted to the cluttered room's 38 605 elements of 6136 patches and the sphere room's
+//   164 695 of 159 466). Leaves of at least aeps of the scene's area number at most 1/aeps besides
+//   patches that are smaller, but an aa bake splits further along sharp edges of light, down to
+//   aeps / 256 (aa only): the atrium under the sun had 4.75/aeps elements past its patches after 600 shots
+//   (most of them from its first shots), the cluttered room 3.25/aeps. So the count has no bound
+//   from aeps alone, and the worker caps it (max_elements) at kSharpSplits/aeps past the patches,
+//   about twice the most seen: the estimate's count is a limit the bake keeps.
+// - The shot cache: the records kept are at most its size by their capacity, and the record of the
+//   shot under way is dropped once it would outgrow the size on its own; seen 1.05-1.13 times the
+//   size (the cluttered room, lava field, atrium and sphere room at 64 and 256 MB).
+// - The scene as stored, as loaded and as written; images decoded at 4 bytes a pixel.
+// - Fixed: the worker's allocator arenas and thread stacks, the job's own records.
 // hr's links and the reference tracer's paths are not counted.
 struct JobMemory {
-  uint64_t hemicubes = 0, elements = 0, element_count = 0, images = 0, shot_cache = 0, scene = 0;
-  uint64_t total() const { return hemicubes + elements + images + shot_cache + scene; }
+  uint64_t hemicubes = 0, elements = 0, element_count = 0, patches = 0, patch_count = 0, images = 0, shot_cache = 0,
+           scene = 0, fixed = 0;
+  uint64_t total() const { return hemicubes + elements + patches + images + shot_cache + scene + fixed; }
 };
+
+constexpr double kSharpSplits = 8.0;
 
 JobMemory job_memory(const protocol::JobSpec& spec, const protocol::SceneDocument& document, uint64_t scene_bytes,
                      unsigned threads) {
-  constexpr uint64_t kCubeBytesPerPixel = 240, kElementBytes = 1100;
+  constexpr uint64_t kCubeBytesPerPixel = 300, kElementBytes = 1600, kPatchBytes = 1600, kFixedBytes = 16u << 20;
   constexpr uint64_t kFinerResolution = 400;  // shoot_piece's finer hemicube, for low resolutions
   JobMemory m;
   const uint64_t n = spec.params.resolution;
   const uint64_t finer = std::min(2 * n, kFinerResolution);
   m.hemicubes = kCubeBytesPerPixel * (n * n + (finer > n ? finer * finer : 0)) * std::max(1u, threads);
-  const double by_area = spec.params.aeps > 0 ? std::ceil(1.0 / spec.params.aeps) : 1e18;
-  m.element_count = std::min<uint64_t>(spec.params.max_elements,
-                                       static_cast<uint64_t>(std::min(by_area, 1e18)) + protocol::scene_of(document).patches.size());
+  m.patch_count = protocol::scene_of(document).patches.size();
+  // Only the anti-aliased hemicube splits under aeps (a reference job's mesh is an aa solve's).
+  const bool sharp = spec.method == protocol::Method::kAntiAliased || spec.method == protocol::Method::kReference;
+  const double by_area = spec.params.aeps > 0 ? std::ceil((sharp ? kSharpSplits : 1.0) / spec.params.aeps) : 1e18;
+  // Never fewer than the patches: each is an element from the start.
+  m.element_count = std::max<uint64_t>(
+      m.patch_count, std::min<uint64_t>(spec.params.max_elements, static_cast<uint64_t>(std::min(by_area, 1e18)) + m.patch_count));
   m.elements = kElementBytes * m.element_count;
+  m.patches = kPatchBytes * m.patch_count;
   m.images = 4 * protocol::image_pixel_count(document);
-  m.shot_cache = static_cast<uint64_t>(spec.params.shot_cache_mb) << 20;
+  m.shot_cache = (static_cast<uint64_t>(spec.params.shot_cache_mb) << 20) * 5 / 4;
   m.scene = 3 * scene_bytes;  // as stored, as loaded, as written
+  m.fixed = kFixedBytes;
   return m;
 }
 
@@ -503,6 +525,8 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
     end_job(id, nullptr, loaded.error);
     return;
   }
+  // The element count the memory estimate allowed at submit is a limit the bake keeps (job_memory).
+  spec.params.max_elements = job_memory(spec, *loaded.document, scene.size(), options_.solver_threads).element_count;
   bool over_budget = false;
   double last_report = -1.0;
   protocol::JobProgress last;  // the newest progress, stored or not: where a stopped bake stopped
@@ -813,10 +837,11 @@ Response Service::submit(const Request& req, const std::string& query) {
     if (m.total() > options_.max_job_bytes)
       return error(422, "the job would need about " + megabytes(m.total()) + " of memory (hemicubes at resolution " +
                             std::to_string(capped.params.resolution) + ": " + megabytes(m.hemicubes) + "; up to " +
-                            std::to_string(m.element_count) + " elements: " + megabytes(m.elements) + "; images: " +
+                            std::to_string(m.element_count) + " elements: " + megabytes(m.elements) + "; " +
+                            std::to_string(m.patch_count) + " patches: " + megabytes(m.patches) + "; images: " +
                             megabytes(m.images) + "; shot cache: " + megabytes(m.shot_cache) + "; scene: " + megabytes(m.scene) +
-                            "), more than the server's limit of " + megabytes(options_.max_job_bytes) +
-                            " per job (hemibake-server --max-job-mb); lower resolution, max_elements, aeps or shot_cache_mb");
+                            "; the worker: " + megabytes(m.fixed) + "), more than the server's limit of " + megabytes(options_.max_job_bytes) +
+                            " per job (hemibake-server --max-job-mb); lower resolution, max_elements or shot_cache_mb, or raise aeps");
   }
   const std::string params = protocol::params_json(spec);
   const std::string cache_key = sha256_hex(scene) + ":" + sha256_hex(params);
