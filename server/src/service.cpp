@@ -501,7 +501,9 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
     const std::string& id;
     ~Unregister() {
       s->unregister_job(id);
-      s->store_->release(id);
+      // An end left to the end writer keeps the job's claim, so that its write stays fenced (the
+      // writer releases it once the end is written or refused).
+      if (!s->end_unwritten(id)) s->store_->release(id);
     }
   } unregister{this, id};
   if (const auto rec = store_->get(id); rec && rec->state == JobState::kCancelled) {
@@ -606,20 +608,33 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
 // Returns true if the job succeeded.
 bool Service::end_job(const std::string& id, const std::string* result, std::string failure) {
   Unwritten end{result ? std::optional<std::string>(*result) : std::nullopt, std::move(failure)};
+  Change c;
   for (int attempt = 0;; ++attempt) {
-    const Change c = write_end(id, end);
+    // A shared store that cannot be reached is not tried: back, it refuses the writes of a lease
+    // that ran out until this node has renewed it (which it does first thing), and the end writer
+    // waits for that.
+    if (!store_->healthy()) {
+      c.error = "the job store cannot be reached";
+      break;
+    }
+    c = write_end(id, end);
     if (c.made || c.error.empty()) return c.made && end.result;
-    // Only a lock is waited for here: a shared store that cannot be reached (busy too) is waited
-    // for by write_end, for a result, and the end is otherwise left for write_unwritten().
+    // Only a lock is waited for here: a shared store that cannot be reached (busy too) is not, and
+    // the end is left for write_unwritten().
     if (!c.busy || !store_->healthy() || attempt == 2) break;
     std::unique_lock lock(mutex_);
     if (wake_.wait_for(lock, std::chrono::seconds(1 << attempt), [&] { return !running_.load(); })) break;
   }
-  std::fprintf(stderr, "hemibake-server: the end of job %s could not be stored (%s); it is stored when the store writes again\n",
-               id.c_str(), end.failure.c_str());
+  if (end.result)
+    std::fprintf(stderr, "hemibake-server: the result of job %s could not be stored yet (%s); it is kept and stored when the store writes again\n",
+                 id.c_str(), c.error.c_str());
+  else
+    std::fprintf(stderr, "hemibake-server: the end of job %s could not be stored (%s); it is stored when the store writes again\n",
+                 id.c_str(), end.failure.c_str());
   {
     std::lock_guard lock(unwritten_mutex_);
     unwritten_[id] = std::move(end);
+    claims_kept_.insert(id);
   }
   ends_wake_.notify_one();
   return false;
@@ -637,22 +652,21 @@ Change Service::write_end(const std::string& id, Unwritten& end) {
   if (end.result) {
     const std::string etag = "\"" + sha256_hex(*end.result) + "\"";
     c = store_->succeed(id, *end.result, etag);
-    // A shared store that cannot be reached: the result is written once it is back, not turned
-    // into a failure. If that takes longer than the lease, the job has gone back to the queue and
-    // the write is refused; another run then makes the same result.
-    for (int wait = 1; !c.made && !c.error.empty() && !store_->healthy() && wait <= 32; wait *= 2) {
-      std::unique_lock lock(mutex_);
-      if (wake_.wait_for(lock, std::chrono::seconds(wait), [&] { return !running_.load(); })) break;
-      lock.unlock();
-      c = store_->succeed(id, *end.result, etag);
-    }
+    // A shared store that cannot be reached: the result is kept, not turned into a failure, and
+    // written by the end writer once the store is back. The worker does not wait for it: it could
+    // claim nothing meanwhile, and once the store is back it should be baking. The job stays this
+    // node's (its claim is kept, the lease is renewed as soon as the store answers, also past its
+    // expiry unless another node took the job back first), so the write is fenced as any other.
     if (c.made) {
       emit(id, "state", state_event("succeeded", {}));
       return c;
     }
     // Busy, or a shared store still away: the result is kept for a later try (end_job).
     if (c.error.empty() || c.busy || !store_->healthy()) {
-      if (c.error.empty()) note_cancelled(id);
+      if (c.error.empty() && !note_cancelled(id))
+        std::fprintf(stderr, "hemibake-server: the result of job %s was not stored: the job is no longer this node's "
+                             "(its lease ran out and another node took it back; that run makes the result)\n",
+                     id.c_str());
       return c;
     }
     std::fprintf(stderr, "hemibake-server: the result of %s could not be stored: %s\n", id.c_str(), c.error.c_str());
@@ -666,12 +680,23 @@ Change Service::write_end(const std::string& id, Unwritten& end) {
 }
 
 // A job's end found it no longer running: a DELETE came first, and its stream is told so.
-void Service::note_cancelled(const std::string& id) {
-  if (const auto rec = store_->get(id); rec && rec->state == JobState::kCancelled)
-    emit(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
+bool Service::note_cancelled(const std::string& id) {
+  const auto rec = store_->get(id);
+  if (!rec || rec->state != JobState::kCancelled) return false;
+  emit(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
+  return true;
+}
+
+bool Service::end_unwritten(const std::string& id) {
+  std::lock_guard lock(unwritten_mutex_);
+  return claims_kept_.count(id) > 0;
 }
 
 void Service::write_unwritten() {
+  // A shared store is healthy again once this node has renewed its leases, also those that ran out
+  // while it was away (unless another node took the job back): only then is a result's write fenced
+  // by a lease that holds.
+  if (!store_->healthy()) return;
   std::map<std::string, Unwritten> ends;
   {
     std::lock_guard lock(unwritten_mutex_);
@@ -680,7 +705,16 @@ void Service::write_unwritten() {
   }
   for (auto it = ends.begin(); it != ends.end();) {
     const Change c = write_end(it->first, it->second);
-    it = c.made || c.error.empty() ? ends.erase(it) : std::next(it);
+    if (c.made || c.error.empty()) {
+      {
+        std::lock_guard lock(unwritten_mutex_);
+        claims_kept_.erase(it->first);
+      }
+      store_->release(it->first);  // the claim its worker kept (bake's Unregister)
+      it = ends.erase(it);
+    } else {
+      it = std::next(it);
+    }
   }
   std::lock_guard lock(unwritten_mutex_);
   ends.merge(unwritten_);
