@@ -10,6 +10,11 @@
 //   a requeue) carries the owner and attempt number it claimed with, and checks that the lease has
 //   not expired. A node that was paused past its lease and comes back finds the job re-queued or
 //   claimed again (owner cleared or attempt moved on), so its writes change nothing.
+// - A node that could not reach the database renews, at its first renewal once it can, also the
+//   leases that ran out meanwhile, unless a node took the job back first (owner cleared or attempt
+//   moved on): the job was nobody else's, and the result of a bake that finished while the
+//   database was away is written rather than thrown away and baked again. A node that was paused
+//   instead does not know it was, and does not revive its leases.
 // - LISTEN/NOTIFY on one extra connection: new jobs wake idle workers, new events wake event
 //   streams on every node, a cancel reaches the owning node at once. Notifications can be lost
 //   when that connection drops; after reconnecting the listener wakes every stream and worker, and
@@ -600,12 +605,14 @@ class PgStore final : public Store {
       }
       ids += "}";
       attempts += "}";
+      // Back from an outage: leases that ran out meanwhile are renewed too (see the top of the file).
+      const bool was_away = !healthy_;
       Result r = exec("UPDATE jobs SET lease_until = clock_timestamp() + $3 * interval '1 second'"
                       " FROM unnest($1::text[], $2::int[]) AS o(id, attempt)"
                       " WHERE jobs.id = o.id AND jobs.attempts = o.attempt AND jobs.owner = $4 AND jobs.state = 'running'"
-                      "   AND jobs.lease_until > clock_timestamp()"
+                      "   AND (jobs.lease_until > clock_timestamp() OR $5::boolean)"
                       " RETURNING jobs.id",
-                      {text(ids), text(attempts), num(options_.lease_seconds), text(node_)});
+                      {text(ids), text(attempts), num(options_.lease_seconds), text(node_), text(was_away ? "true" : "false")});
       if (!r.ok()) {
         healthy_ = false;
         backoff = std::min(backoff * 2, 5.0);

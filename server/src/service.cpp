@@ -101,32 +101,54 @@ constexpr auto kRegisterWait = std::chrono::seconds(5);
 constexpr unsigned kLookupThreads = 2;
 constexpr size_t kMaxLookups = 1024;
 
-// What a job's bake may hold in memory, by part, in bytes. The factors are measured (peak RSS of
-// `hemibake bake`, Release, Cornell box): the hemicubes take about 220 bytes per pixel of the top
-// face for each solver thread (resolution 1024: 247 MB; 2048: 926 MB; 1024 on two threads:
-// 487 MB), an element about 1 KB with the output written (400 000: 436 MB). Leaves are at least
-// aeps of the scene's area, so there are at most 1/aeps of them besides patches that are smaller.
+// What a job's bake may hold in memory, by part, in bytes: the growth of a server's peak RSS over
+// its RSS before the job (`hemibake-server --workers 1`, one solver thread, Release; the figures in
+// README under "Limits and failure behaviour"), with a margin over the largest seen.
+// - Hemicubes: 233-273 bytes per pixel of the top face (resolution 400 and 1024), per solver thread.
+// - Elements and patches: the solver's per-element arrays, the output mesh and the GLB written
+//   from it, and per patch its clusters and shooters: about 1.3 KB per element and 1.45 KB per
+//   patch (fitted to the cluttered room's 38 605 elements of 6136 patches and the sphere room's
+//   164 695 of 159 466). Leaves of at least aeps of the scene's area number at most 1/aeps besides
+//   patches that are smaller, but an aa bake splits further along sharp edges of light, down to
+//   aeps / 256 (aa only): the atrium under the sun had 4.75/aeps elements past its patches after 600 shots
+//   (most of them from its first shots), the cluttered room 3.25/aeps. So the count has no bound
+//   from aeps alone, and the worker caps it (max_elements) at kSharpSplits/aeps past the patches,
+//   about twice the most seen: the estimate's count is a limit the bake keeps.
+// - The shot cache: the records kept are at most its size by their capacity, and the record of the
+//   shot under way is dropped once it would outgrow the size on its own; seen 1.05-1.13 times the
+//   size (the cluttered room, lava field, atrium and sphere room at 64 and 256 MB).
+// - The scene as stored, as loaded and as written; images decoded at 4 bytes a pixel.
+// - Fixed: the worker's allocator arenas and thread stacks, the job's own records.
 // hr's links and the reference tracer's paths are not counted.
 struct JobMemory {
-  uint64_t hemicubes = 0, elements = 0, element_count = 0, images = 0, shot_cache = 0, scene = 0;
-  uint64_t total() const { return hemicubes + elements + images + shot_cache + scene; }
+  uint64_t hemicubes = 0, elements = 0, element_count = 0, patches = 0, patch_count = 0, images = 0, shot_cache = 0,
+           scene = 0, fixed = 0;
+  uint64_t total() const { return hemicubes + elements + patches + images + shot_cache + scene + fixed; }
 };
+
+constexpr double kSharpSplits = 8.0;
 
 JobMemory job_memory(const protocol::JobSpec& spec, const protocol::SceneDocument& document, uint64_t scene_bytes,
                      unsigned threads) {
-  constexpr uint64_t kCubeBytesPerPixel = 240, kElementBytes = 1100;
+  constexpr uint64_t kCubeBytesPerPixel = 300, kElementBytes = 1600, kPatchBytes = 1600, kFixedBytes = 16u << 20;
   constexpr uint64_t kFinerResolution = 400;  // shoot_piece's finer hemicube, for low resolutions
   JobMemory m;
   const uint64_t n = spec.params.resolution;
   const uint64_t finer = std::min(2 * n, kFinerResolution);
   m.hemicubes = kCubeBytesPerPixel * (n * n + (finer > n ? finer * finer : 0)) * std::max(1u, threads);
-  const double by_area = spec.params.aeps > 0 ? std::ceil(1.0 / spec.params.aeps) : 1e18;
-  m.element_count = std::min<uint64_t>(spec.params.max_elements,
-                                       static_cast<uint64_t>(std::min(by_area, 1e18)) + protocol::scene_of(document).patches.size());
+  m.patch_count = protocol::scene_of(document).patches.size();
+  // Only the anti-aliased hemicube splits under aeps (a reference job's mesh is an aa solve's).
+  const bool sharp = spec.method == protocol::Method::kAntiAliased || spec.method == protocol::Method::kReference;
+  const double by_area = spec.params.aeps > 0 ? std::ceil((sharp ? kSharpSplits : 1.0) / spec.params.aeps) : 1e18;
+  // Never fewer than the patches: each is an element from the start.
+  m.element_count = std::max<uint64_t>(
+      m.patch_count, std::min<uint64_t>(spec.params.max_elements, static_cast<uint64_t>(std::min(by_area, 1e18)) + m.patch_count));
   m.elements = kElementBytes * m.element_count;
+  m.patches = kPatchBytes * m.patch_count;
   m.images = 4 * protocol::image_pixel_count(document);
-  m.shot_cache = static_cast<uint64_t>(spec.params.shot_cache_mb) << 20;
+  m.shot_cache = (static_cast<uint64_t>(spec.params.shot_cache_mb) << 20) * 5 / 4;
   m.scene = 3 * scene_bytes;  // as stored, as loaded, as written
+  m.fixed = kFixedBytes;
   return m;
 }
 
@@ -479,7 +501,9 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
     const std::string& id;
     ~Unregister() {
       s->unregister_job(id);
-      s->store_->release(id);
+      // An end left to the end writer keeps the job's claim, so that its write stays fenced (the
+      // writer releases it once the end is written or refused).
+      if (!s->end_unwritten(id)) s->store_->release(id);
     }
   } unregister{this, id};
   if (const auto rec = store_->get(id); rec && rec->state == JobState::kCancelled) {
@@ -503,6 +527,8 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
     end_job(id, nullptr, loaded.error);
     return;
   }
+  // The element count the memory estimate allowed at submit is a limit the bake keeps (job_memory).
+  spec.params.max_elements = job_memory(spec, *loaded.document, scene.size(), options_.solver_threads).element_count;
   bool over_budget = false;
   double last_report = -1.0;
   protocol::JobProgress last;  // the newest progress, stored or not: where a stopped bake stopped
@@ -582,20 +608,33 @@ void Service::bake(const std::string& id, const std::string& scene, const std::s
 // Returns true if the job succeeded.
 bool Service::end_job(const std::string& id, const std::string* result, std::string failure) {
   Unwritten end{result ? std::optional<std::string>(*result) : std::nullopt, std::move(failure)};
+  Change c;
   for (int attempt = 0;; ++attempt) {
-    const Change c = write_end(id, end);
+    // A shared store that cannot be reached is not tried: back, it refuses the writes of a lease
+    // that ran out until this node has renewed it (which it does first thing), and the end writer
+    // waits for that.
+    if (!store_->healthy()) {
+      c.error = "the job store cannot be reached";
+      break;
+    }
+    c = write_end(id, end);
     if (c.made || c.error.empty()) return c.made && end.result;
-    // Only a lock is waited for here: a shared store that cannot be reached (busy too) is waited
-    // for by write_end, for a result, and the end is otherwise left for write_unwritten().
+    // Only a lock is waited for here: a shared store that cannot be reached (busy too) is not, and
+    // the end is left for write_unwritten().
     if (!c.busy || !store_->healthy() || attempt == 2) break;
     std::unique_lock lock(mutex_);
     if (wake_.wait_for(lock, std::chrono::seconds(1 << attempt), [&] { return !running_.load(); })) break;
   }
-  std::fprintf(stderr, "hemibake-server: the end of job %s could not be stored (%s); it is stored when the store writes again\n",
-               id.c_str(), end.failure.c_str());
+  if (end.result)
+    std::fprintf(stderr, "hemibake-server: the result of job %s could not be stored yet (%s); it is kept and stored when the store writes again\n",
+                 id.c_str(), c.error.c_str());
+  else
+    std::fprintf(stderr, "hemibake-server: the end of job %s could not be stored (%s); it is stored when the store writes again\n",
+                 id.c_str(), end.failure.c_str());
   {
     std::lock_guard lock(unwritten_mutex_);
     unwritten_[id] = std::move(end);
+    claims_kept_.insert(id);
   }
   ends_wake_.notify_one();
   return false;
@@ -613,22 +652,21 @@ Change Service::write_end(const std::string& id, Unwritten& end) {
   if (end.result) {
     const std::string etag = "\"" + sha256_hex(*end.result) + "\"";
     c = store_->succeed(id, *end.result, etag);
-    // A shared store that cannot be reached: the result is written once it is back, not turned
-    // into a failure. If that takes longer than the lease, the job has gone back to the queue and
-    // the write is refused; another run then makes the same result.
-    for (int wait = 1; !c.made && !c.error.empty() && !store_->healthy() && wait <= 32; wait *= 2) {
-      std::unique_lock lock(mutex_);
-      if (wake_.wait_for(lock, std::chrono::seconds(wait), [&] { return !running_.load(); })) break;
-      lock.unlock();
-      c = store_->succeed(id, *end.result, etag);
-    }
+    // A shared store that cannot be reached: the result is kept, not turned into a failure, and
+    // written by the end writer once the store is back. The worker does not wait for it: it could
+    // claim nothing meanwhile, and once the store is back it should be baking. The job stays this
+    // node's (its claim is kept, the lease is renewed as soon as the store answers, also past its
+    // expiry unless another node took the job back first), so the write is fenced as any other.
     if (c.made) {
       emit(id, "state", state_event("succeeded", {}));
       return c;
     }
     // Busy, or a shared store still away: the result is kept for a later try (end_job).
     if (c.error.empty() || c.busy || !store_->healthy()) {
-      if (c.error.empty()) note_cancelled(id);
+      if (c.error.empty() && !note_cancelled(id))
+        std::fprintf(stderr, "hemibake-server: the result of job %s was not stored: the job is no longer this node's "
+                             "(its lease ran out and another node took it back; that run makes the result)\n",
+                     id.c_str());
       return c;
     }
     std::fprintf(stderr, "hemibake-server: the result of %s could not be stored: %s\n", id.c_str(), c.error.c_str());
@@ -642,12 +680,23 @@ Change Service::write_end(const std::string& id, Unwritten& end) {
 }
 
 // A job's end found it no longer running: a DELETE came first, and its stream is told so.
-void Service::note_cancelled(const std::string& id) {
-  if (const auto rec = store_->get(id); rec && rec->state == JobState::kCancelled)
-    emit(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
+bool Service::note_cancelled(const std::string& id) {
+  const auto rec = store_->get(id);
+  if (!rec || rec->state != JobState::kCancelled) return false;
+  emit(id, "state", json{{"state", "cancelled"}}.dump(-1, ' ', false, kReplaceInvalid));
+  return true;
+}
+
+bool Service::end_unwritten(const std::string& id) {
+  std::lock_guard lock(unwritten_mutex_);
+  return claims_kept_.count(id) > 0;
 }
 
 void Service::write_unwritten() {
+  // A shared store is healthy again once this node has renewed its leases, also those that ran out
+  // while it was away (unless another node took the job back): only then is a result's write fenced
+  // by a lease that holds.
+  if (!store_->healthy()) return;
   std::map<std::string, Unwritten> ends;
   {
     std::lock_guard lock(unwritten_mutex_);
@@ -656,7 +705,16 @@ void Service::write_unwritten() {
   }
   for (auto it = ends.begin(); it != ends.end();) {
     const Change c = write_end(it->first, it->second);
-    it = c.made || c.error.empty() ? ends.erase(it) : std::next(it);
+    if (c.made || c.error.empty()) {
+      {
+        std::lock_guard lock(unwritten_mutex_);
+        claims_kept_.erase(it->first);
+      }
+      store_->release(it->first);  // the claim its worker kept (bake's Unregister)
+      it = ends.erase(it);
+    } else {
+      it = std::next(it);
+    }
   }
   std::lock_guard lock(unwritten_mutex_);
   ends.merge(unwritten_);
@@ -813,10 +871,11 @@ Response Service::submit(const Request& req, const std::string& query) {
     if (m.total() > options_.max_job_bytes)
       return error(422, "the job would need about " + megabytes(m.total()) + " of memory (hemicubes at resolution " +
                             std::to_string(capped.params.resolution) + ": " + megabytes(m.hemicubes) + "; up to " +
-                            std::to_string(m.element_count) + " elements: " + megabytes(m.elements) + "; images: " +
+                            std::to_string(m.element_count) + " elements: " + megabytes(m.elements) + "; " +
+                            std::to_string(m.patch_count) + " patches: " + megabytes(m.patches) + "; images: " +
                             megabytes(m.images) + "; shot cache: " + megabytes(m.shot_cache) + "; scene: " + megabytes(m.scene) +
-                            "), more than the server's limit of " + megabytes(options_.max_job_bytes) +
-                            " per job (hemibake-server --max-job-mb); lower resolution, max_elements, aeps or shot_cache_mb");
+                            "; the worker: " + megabytes(m.fixed) + "), more than the server's limit of " + megabytes(options_.max_job_bytes) +
+                            " per job (hemibake-server --max-job-mb); lower resolution, max_elements or shot_cache_mb, or raise aeps");
   }
   const std::string params = protocol::params_json(spec);
   const std::string cache_key = sha256_hex(scene) + ":" + sha256_hex(params);

@@ -823,12 +823,12 @@ TEST(Handler, JobsThatNeedMoreMemoryThanTheBudgetAreRefusedAtSubmit) {
   EXPECT_NE(big.body.find("limit of 64 MB"), std::string::npos) << big.body;
   const Response cache = f.call("POST", "/v1/jobs?shot_cache_mb=200", cornell(), gltf);
   EXPECT_EQ(cache.status, 422) << cache.body;
-  EXPECT_EQ(f.call("POST", "/v1/jobs?resolution=100&shot_cache_mb=0&convergence=0.3", cornell(), gltf).status, 202);
+  EXPECT_EQ(f.call("POST", "/v1/jobs?resolution=100&shot_cache_mb=0&aeps=0.002&convergence=0.3", cornell(), gltf).status, 202);
   json scene = json::parse(cornell());
   scene["images"] = json::array({{{"uri", png_uri(8, 8)}}});
-  EXPECT_EQ(f.call("POST", "/v1/jobs?shot_cache_mb=0&convergence=0.31", scene.dump(), gltf).status, 202);
+  EXPECT_EQ(f.call("POST", "/v1/jobs?shot_cache_mb=0&aeps=0.002&convergence=0.31", scene.dump(), gltf).status, 202);
   scene["images"].push_back({{"uri", png_uri(8, 8)}});
-  const Response images = f.call("POST", "/v1/jobs?shot_cache_mb=0&convergence=0.32", scene.dump(), gltf);
+  const Response images = f.call("POST", "/v1/jobs?shot_cache_mb=0&aeps=0.002&convergence=0.32", scene.dump(), gltf);
   EXPECT_EQ(images.status, 422) << images.body;
   EXPECT_NE(images.body.find("more than 100 pixels in all"), std::string::npos) << images.body;
 }

@@ -160,6 +160,67 @@ TEST_F(Nodes, DatabaseRestartMidRunLosesNoJob) {
   EXPECT_TRUE(ready);
 }
 
+// A bake that finishes while the database is down, which stays down past the job's lease: the node
+// answers 503 on /readyz, says on stderr that it keeps the result, and its worker does not wait for
+// the database. Once the database is back the node renews the lease that ran out (nobody took the job
+// back meanwhile) and writes the result: the job succeeds at its first attempt, with one
+// "succeeded" event, rather than being baked again. (The result was held up to 63 s by its worker,
+// then refused: the lease had run out, and the job ran again.)
+TEST_F(Nodes, ResultFinishedWhileTheDatabaseIsDownIsWrittenWhenItIsBack) {
+  const std::string errors = temp_dir(db_ + "-stderr");
+  auto a = std::make_unique<ServerProcess>(temp_dir(db_ + "a"),
+                                           std::vector<std::string>{"--store", uri_, "--workers", "1", "--lease-seconds", "2"},
+                                           std::vector<std::string>{}, 0, std::vector<std::string>{}, errors);
+  ASSERT_NE(a->port(), 0);
+  // About 2.5 s of baking (a large hemicube, many small elements).
+  const Reply posted = request(a->port(), http::verb::post, "/v1/jobs?convergence=0.000001&aeps=0.00002&resolution=300&max_shots=200",
+                               cornell(), kGltf);
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = posted.js()["id"];
+  for (int i = 0; i < 500 && sql("SELECT state FROM jobs WHERE id = '" + id + "'") != "running"; ++i) std::this_thread::sleep_for(10ms);
+  ASSERT_EQ(sql("SELECT state FROM jobs WHERE id = '" + id + "'"), "running");
+  pg().stop();
+  struct Restart {  // the other tests need the database, whatever happens here
+    bool up = false;
+    ~Restart() {
+      if (!up) pg().start();
+    }
+  } restart;
+  bool unready = false;
+  for (int i = 0; i < 50 && !unready; ++i) {
+    unready = request(a->port(), http::verb::get, "/readyz").status == 503;
+    if (!unready) std::this_thread::sleep_for(100ms);
+  }
+  EXPECT_TRUE(unready) << "/readyz stayed 200 while the database was down";
+  // The bake ends during the outage and its worker hands the result on at once.
+  const std::string kept = "the result of job " + id + " could not be stored yet";
+  bool said = false;
+  for (int i = 0; i < 300 && !said; ++i) {
+    said = read_file(errors).find(kept) != std::string::npos;
+    if (!said) std::this_thread::sleep_for(100ms);
+  }
+  ASSERT_TRUE(said) << "no word of the kept result in 30 s; stderr:\n" << read_file(errors);
+  std::this_thread::sleep_for(3s);  // past the 2 s lease, renewed last before the database stopped
+  ASSERT_TRUE(restart.up = pg().start());
+  const auto back = std::chrono::steady_clock::now();
+  const json j = wait_finished(a->port(), id, 30s);
+  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - back).count();
+  EXPECT_EQ(j["state"], "succeeded") << j.dump();
+  std::printf("the result was written %.1f s after the database was back\n", took);
+  EXPECT_EQ(sql("SELECT attempts FROM jobs WHERE id = '" + id + "'"), "1") << "the job was baked again";
+  EXPECT_EQ(sql("SELECT count(*) FROM events WHERE job = '" + id + "' AND type = 'state' AND data LIKE '%succeeded%'"), "1");
+  EXPECT_EQ(sql("SELECT count(*) FROM results WHERE job = '" + id + "'"), "1");
+  const Reply result = request(a->port(), http::verb::get, "/v1/jobs/" + id + "/result");
+  EXPECT_EQ(result.status, 200);
+  EXPECT_EQ(result.body.substr(0, 4), "glTF");
+  EXPECT_EQ(read_file(errors).find("was not stored"), std::string::npos) << read_file(errors);
+  // The node takes new work.
+  const Reply next = request(a->port(), http::verb::post, small_job(400), cornell(), kGltf);
+  ASSERT_EQ(next.status, 202) << next.body;
+  EXPECT_EQ(wait_finished(a->port(), next.js()["id"], 30s)["state"], "succeeded");
+  std::filesystem::remove(errors);
+}
+
 // While the database is down, a node cannot tell a job from no job: a job that exists is answered
 // 503 with Retry-After and the cause (not 404 "no such job", not an empty list), on every route
 // that reads it; once the database is back the same requests are answered as before, and a job

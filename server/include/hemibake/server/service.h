@@ -11,6 +11,7 @@
 #include <condition_variable>
 #include <functional>
 #include <map>
+#include <set>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -131,14 +132,17 @@ class Service {
   protocol::LoadLimits load_limits() const;
   /// Ends running job `id`: succeeded with `result`, or failed with `failure` if there is none.
   bool end_job(const std::string& id, const std::string* result, std::string failure);
-  /// A job's end that the store could not write yet: its result (kept only while the store is
-  /// busy), or the failure.
+  /// A job's end that the store could not write yet: its result (kept while the store is busy or
+  /// cannot be reached), or the failure.
   struct Unwritten {
     std::optional<std::string> result;
     std::string failure;
   };
   Change write_end(const std::string& id, Unwritten& end);
-  void note_cancelled(const std::string& id);
+  /// Tells job `id`'s stream "cancelled" if the store says so; returns whether it did.
+  bool note_cancelled(const std::string& id);
+  /// Whether job `id`'s end was left to the end writer, which then holds its claim.
+  bool end_unwritten(const std::string& id);
   /// Tries the ends not written yet again (the end writer).
   void write_unwritten();
   /// The end writer's thread: write_unwritten() with backoff while any end is unwritten.
@@ -205,6 +209,7 @@ class Service {
   std::unique_ptr<Pool> checks_;        // loads and checks submitted scenes
   std::mutex unwritten_mutex_;
   std::map<std::string, Unwritten> unwritten_;
+  std::set<std::string> claims_kept_;  // jobs whose ends wait in unwritten_: their claims are kept
   std::condition_variable ends_wake_;  // an end left unwritten, or the stop (with unwritten_mutex_)
   std::thread end_writer_;
   std::unique_ptr<Pool> lookups_;       // requests that read or write the store
