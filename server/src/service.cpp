@@ -130,12 +130,21 @@ constexpr double kSharpSplits = 8.0;
 
 JobMemory job_memory(const protocol::JobSpec& spec, const protocol::SceneDocument& document, uint64_t scene_bytes,
                      unsigned threads) {
-  constexpr uint64_t kCubeBytesPerPixel = 300, kElementBytes = 1600, kPatchBytes = 1600, kFixedBytes = 16u << 20;
+  constexpr uint64_t kCubeBytesPerPixel = 300, kVolumeCubeBytesPerPixel = 420, kElementBytes = 1600, kPatchBytes = 1600,
+                     kFixedBytes = 16u << 20;
   constexpr uint64_t kFinerResolution = 400;  // shoot_piece's finer hemicube, for low resolutions
   JobMemory m;
   const uint64_t n = spec.params.resolution;
   const uint64_t finer = std::min(2 * n, kFinerResolution);
   m.hemicubes = kCubeBytesPerPixel * (n * n + (finer > n ? finer * finer : 0)) * std::max(1u, threads);
+  // Volume clusters' whole cubes, one per level: six faces of n x n pixels (n at most 256), each
+  // with its delta form factor, direction, solid angle, weight and list start (52 bytes), the
+  // coarser levels a third more: 420 bytes per top-face pixel (counted from the solver's arrays,
+  // not measured).
+  if (spec.params.cluster_volume && spec.params.cluster_across && spec.params.cluster_size > 0.0 &&
+      (spec.method == protocol::Method::kAntiAliased || spec.method == protocol::Method::kClassical ||
+       spec.method == protocol::Method::kReference))
+    m.hemicubes += kVolumeCubeBytesPerPixel * std::min<uint64_t>(n, 256) * std::min<uint64_t>(n, 256);
   m.patch_count = protocol::scene_of(document).patches.size();
   // Only the anti-aliased hemicube splits under aeps (a reference job's mesh is an aa solve's).
   const bool sharp = spec.method == protocol::Method::kAntiAliased || spec.method == protocol::Method::kReference;

@@ -19,6 +19,10 @@ namespace {
 
 // A finer hemicube (finer_level) has at most this resolution: pixels cost memory and time.
 constexpr uint32_t kMaxFinerResolution = 400;
+// A volume cluster's whole cube has at most this resolution per face (six faces, and per pixel a
+// direction, a solid angle and a weight: 20 MB at 256): a cluster of small objects is a weak,
+// distant shooter for most receivers, and at resolution 2048 its cubes would take 2 GB.
+constexpr uint32_t kMaxVolumeResolution = 256;
 
 }  // namespace
 
@@ -174,7 +178,7 @@ bool Solver::Impl::place_hemicube(const Piece& piece) {
   if (piece.volume) {
     VolumeCube& v = volume_cubes[level];
     if (!v.cube) {
-      v.cube = std::make_unique<detail::Hemicube>(cubes[level].resolution(), true);
+      v.cube = std::make_unique<detail::Hemicube>(std::min(cubes[level].resolution(), kMaxVolumeResolution), true);
       v.cube->place(glm::dvec3(0.0), piece.normal, piece.up);
       const uint32_t pixels = v.cube->pixel_count();
       v.dir.resize(pixels);
