@@ -726,11 +726,15 @@ TEST(Solver, ClustersAcrossSmallObjectsKeepTheFurnaceClosedForm) {
 }
 
 // The same room lit by a ceiling panel: the light the 400 boxes and the room reflect, with
-// clusters across boxes, is within 0.5 % of the faces shooting alone. Disabled: it takes about six
-// minutes, and fails with 400 boxes (ratio 1.0077 when written, 4274 shots against 13556: the
-// clustered room is the brighter; which of the two is nearer the truth this does not say); with 100
-// boxes 1.0018, 2998 shots against 5009. Run with --gtest_also_run_disabled_tests
-// (HEMIBAKE_TEST_BOXES=N for another count).
+// clusters across boxes, is within 0.5 % of the faces shooting alone. Disabled: it takes about a
+// minute (the solve alone), and fails with 400 boxes. When written (volume clusters): ratio 0.9887,
+// 3065 shots against 13 622; with clusters by orientation it was 1.0077 (4274 shots). Which is the
+// nearer the truth it also prints: in a closed room of one reflectance every surface together
+// reflects rho / (1 - rho) of the emitted power (a little less here: the panel's back, 1 cm under
+// the ceiling, absorbs what reaches it). With 400 boxes the volume clusters reflect 0.9959 of that
+// and the faces alone 1.0077; with 100 boxes 1.0105 and 1.0131 (ratio 0.9974). Shooting alone
+// gives out more light than the closed form allows, clusters less so. Run with
+// --gtest_also_run_disabled_tests (HEMIBAKE_TEST_BOXES=N for another count).
 TEST(Solver, DISABLED_ClustersAcrossSmallObjectsKeepTheEnergyOfShootingAlone) {
   const uint32_t boxes = std::getenv("HEMIBAKE_TEST_BOXES") ? std::atoi(std::getenv("HEMIBAKE_TEST_BOXES")) : 400;
   const Scene scene = small_boxes_room(boxes, false, glm::dvec3(0.6), glm::dvec3(10.0));
@@ -744,6 +748,19 @@ TEST(Solver, DISABLED_ClustersAcrossSmallObjectsKeepTheEnergyOfShootingAlone) {
   const Stats& st_alone = alone.run();
   ASSERT_TRUE(st_alone.converged);
   const double ratio = reflected_power(scene, across.mesh()) / reflected_power(scene, alone.mesh());
+  {
+    // A closed room of one reflectance: all its surfaces together reflect rho / (1 - rho) of the
+    // emitted power (the quads' areas from two edges: they are rectangles).
+    double emitted = 0.0, across_r = 0.0, alone_r = 0.0;
+    for (const auto& p : scene.patches)
+      emitted += mean3(p.emission) * glm::length(glm::cross(p.corners[1] - p.corners[0], p.corners[3] - p.corners[0]));
+    for (const auto& el : across.mesh().elements)
+      across_r += (mean3(el.radiosity) - mean3(scene.patches[el.patch].emission)) * el.area;
+    for (const auto& el : alone.mesh().elements)
+      alone_r += (mean3(el.radiosity) - mean3(scene.patches[el.patch].emission)) * el.area;
+    const double closed = 0.6 / 0.4 * emitted;
+    std::printf("reflected / closed form: across objects %.5f, alone %.5f\n", across_r / closed, alone_r / closed);
+  }
   std::printf("shots %llu across objects, %llu alone; reflected power ratio %.5f\n",
               static_cast<unsigned long long>(st.shots), static_cast<unsigned long long>(st_alone.shots), ratio);
   EXPECT_NEAR(ratio, 1.0, 0.005);
