@@ -110,12 +110,16 @@ protocol::BakeHooks progress_hooks(ProgressPrinter& printer) {
 
 // A built-in scene through the pipeline, with progress and statistics.
 protocol::Solution solve_builtin(const solver::Scene& scene, const CommandLine& o, const Console& c) {
+  // A built-in scene keeps its own sky (the atrium's) unless --sky gives one: the job's sky, 0 by
+  // default, would otherwise take its place.
+  protocol::JobSpec spec = o.spec;
+  if (spec.sky == glm::dvec3(0.0)) spec.sky = scene.sky;
   protocol::Solution s;
   {
     ProgressPrinter printer(c);
-    s = protocol::solve(scene, o.spec, progress_hooks(printer));
+    s = protocol::solve(scene, spec, progress_hooks(printer));
   }
-  print_solution(c, o.spec, s);
+  print_solution(c, spec, s);
   return s;
 }
 
