@@ -215,10 +215,12 @@ void Solver::Impl::build_clusters() {
   // own patches.
   std::map<std::pair<int, std::array<double, 3>>, std::vector<uint32_t>> pooled;
   std::map<std::array<double, 3>, std::vector<uint32_t>> volume_pooled;  // by emission
-  // Per object (patches joined by common corner points): its area centroid (inner_side).
-  const std::vector<uint32_t> object = objects();
-  std::vector<glm::dvec4> object_centre(patches.size(), glm::dvec4(0.0));
-  for (uint32_t q = 0; q < patches.size(); ++q)
+  // Per object (patches joined by common corner points): its area centroid (inner_side), for
+  // volume clusters only.
+  const bool volume = params.cluster_volume && params.cluster_across && limit > 0.0;
+  const std::vector<uint32_t> object = volume ? objects() : std::vector<uint32_t>{};
+  std::vector<glm::dvec4> object_centre(volume ? patches.size() : 0, glm::dvec4(0.0));
+  for (uint32_t q = 0; volume && q < patches.size(); ++q)
     object_centre[object[q]] +=
         glm::dvec4(polygon_centre(patches[q].corners, patches[q].corner_count) * prep.area[q], prep.area[q]);
   for (const std::vector<uint32_t>& members : cluster_candidates(limit)) {
@@ -231,7 +233,7 @@ void Solver::Impl::build_clusters() {
     if (params.cluster_across && glm::distance(lo, hi) <= 0.5 * limit) {
       const glm::dvec3& e = patches[members[0]].emission;
       for (uint32_t q : members) {
-        if (params.cluster_volume && !inner_side(q, object_centre[object[q]])) {
+        if (volume && !inner_side(q, object_centre[object[q]])) {
           volume_pooled[{e.x, e.y, e.z}].push_back(q);
           continue;
         }

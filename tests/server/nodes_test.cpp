@@ -26,6 +26,14 @@ hemibake_test::PgServer& pg() {
   return server;
 }
 
+// Starts the database again when a test that stopped it ends without having done so (`up`).
+struct RestartDatabase {
+  bool up = false;
+  ~RestartDatabase() {
+    if (!up) pg().start();
+  }
+};
+
 const std::map<std::string, std::string> kGltf = {{"Content-Type", "model/gltf+json"}};
 
 class Nodes : public ::testing::Test {
@@ -180,12 +188,7 @@ TEST_F(Nodes, ResultFinishedWhileTheDatabaseIsDownIsWrittenWhenItIsBack) {
   for (int i = 0; i < 500 && sql("SELECT state FROM jobs WHERE id = '" + id + "'") != "running"; ++i) std::this_thread::sleep_for(10ms);
   ASSERT_EQ(sql("SELECT state FROM jobs WHERE id = '" + id + "'"), "running");
   pg().stop();
-  struct Restart {  // the other tests need the database, whatever happens here
-    bool up = false;
-    ~Restart() {
-      if (!up) pg().start();
-    }
-  } restart;
+  RestartDatabase restart;  // the other tests need the database, whatever happens here
   bool unready = false;
   for (int i = 0; i < 50 && !unready; ++i) {
     unready = request(a->port(), http::verb::get, "/readyz").status == 503;
@@ -236,12 +239,7 @@ TEST_F(Nodes, JobReadsAnswer503WhileTheDatabaseIsDownNot404) {
   const std::vector<std::string> reads = {"/v1/jobs/" + id, "/v1/jobs", "/v1/jobs/" + id + "/result",
                                           "/v1/jobs/" + id + "/events", "/v1/jobs/" + id + "/preview"};
   pg().stop();
-  struct Restart {  // the other tests need the database, whatever happens here
-    bool up = false;
-    ~Restart() {
-      if (!up) pg().start();
-    }
-  } restart;
+  RestartDatabase restart;  // the other tests need the database, whatever happens here
   for (const auto& target : reads) {
     const Reply r = request(a->port(), http::verb::get, target);
     EXPECT_EQ(r.status, 503) << target << ": " << r.body;
@@ -291,12 +289,7 @@ TEST_F(Nodes, MetricsSayTheStoreIsDownInsteadOfCountingNoJobs) {
   EXPECT_EQ(sample(up.body, "hemibake_store_up"), 1.0) << up.body;
   counts_match(up.body);
   pg().stop();
-  struct Restart {  // the other tests need the database, whatever happens here
-    bool up = false;
-    ~Restart() {
-      if (!up) pg().start();
-    }
-  } restart;
+  RestartDatabase restart;  // the other tests need the database, whatever happens here
   const Reply down = request(a->port(), http::verb::get, "/metrics");
   EXPECT_EQ(down.status, 200) << down.body;
   EXPECT_EQ(sample(down.body, "hemibake_store_up"), 0.0) << down.body;
@@ -327,12 +320,7 @@ TEST_F(Nodes, ClientWaitsForTheDatabaseAndGivesUpClearly) {
   const std::string fetched = temp_dir(db_ + "-fetched") + ".glb", baked = temp_dir(db_ + "-baked") + ".glb";
   const std::string client = std::string(HEMIBAKE_CLIENT) + " ";
   pg().stop();
-  struct Restart {
-    bool up = false;
-    ~Restart() {
-      if (!up) pg().start();
-    }
-  } restart;
+  RestartDatabase restart;  // the other tests need the database, whatever happens here
   auto status = std::async(std::launch::async, [&] { return run(client + "status " + id + " --server " + url); });
   auto fetch = std::async(std::launch::async, [&] { return run(client + "fetch " + id + " -o " + fetched + " --server " + url); });
   auto bake = std::async(std::launch::async, [&] {

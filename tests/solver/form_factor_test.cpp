@@ -651,6 +651,29 @@ TEST(AaHemicube, NoSmallElementOfAFarGridSlipsThroughTheCracks) {
 
 // --- Conservation --------------------------------------------------------------------------------
 
+// A random box (0.5 to 3 m a side) with an eye inside it, a random normal and up hint for the
+// cube at the eye, and the box's six faces turned to face the eye.
+struct BoxAroundEye {
+  dvec3 eye, normal, up;
+  std::vector<Poly> faces;
+};
+BoxAroundEye random_box_around_eye(std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  BoxAroundEye b;
+  const dvec3 size(0.5 + 2.5 * u(rng), 0.5 + 2.5 * u(rng), 0.5 + 2.5 * u(rng));
+  b.eye = size * dvec3(0.05 + 0.9 * u(rng), 0.05 + 0.9 * u(rng), 0.05 + 0.9 * u(rng));
+  b.normal = random_unit(rng);
+  b.up = random_up(rng, b.normal);
+  const double X = size.x, Y = size.y, Z = size.z;
+  b.faces = {
+      {{0, 0, 0}, {X, 0, 0}, {X, Y, 0}, {0, Y, 0}}, {{0, 0, Z}, {X, 0, Z}, {X, Y, Z}, {0, Y, Z}},
+      {{0, 0, 0}, {X, 0, 0}, {X, 0, Z}, {0, 0, Z}}, {{0, Y, 0}, {X, Y, 0}, {X, Y, Z}, {0, Y, Z}},
+      {{0, 0, 0}, {0, Y, 0}, {0, Y, Z}, {0, 0, Z}}, {{X, 0, 0}, {X, Y, 0}, {X, Y, Z}, {X, 0, Z}},
+  };
+  for (Poly& f : b.faces) f = facing(f, b.eye);
+  return b;
+}
+
 // The six faces of a random box around the eye, facing it: every direction of the hemisphere
 // meets exactly one face, so their form factors sum to 1 whatever the normal (faces behind the
 // tangent plane are clipped away by the hemicube). The hemicube's pixel factors are exact and sum
@@ -662,19 +685,11 @@ void expect_box_form_factors_sum_to_one(Method method) {
   const uint64_t seed = test_seed();
   SCOPED_TRACE(seed_note(seed));
   std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u(0.0, 1.0);
   double worst = 0.0;
   for (int trial = 0; trial < 10; ++trial) {
-    const dvec3 size(0.5 + 2.5 * u(rng), 0.5 + 2.5 * u(rng), 0.5 + 2.5 * u(rng));
-    const dvec3 eye = size * dvec3(0.05 + 0.9 * u(rng), 0.05 + 0.9 * u(rng), 0.05 + 0.9 * u(rng));
-    const dvec3 n = random_unit(rng), up = random_up(rng, n);
-    const double X = size.x, Y = size.y, Z = size.z;
-    std::vector<Poly> faces = {
-        {{0, 0, 0}, {X, 0, 0}, {X, Y, 0}, {0, Y, 0}}, {{0, 0, Z}, {X, 0, Z}, {X, Y, Z}, {0, Y, Z}},
-        {{0, 0, 0}, {X, 0, 0}, {X, 0, Z}, {0, 0, Z}}, {{0, Y, 0}, {X, Y, 0}, {X, Y, Z}, {0, Y, Z}},
-        {{0, 0, 0}, {0, Y, 0}, {0, Y, Z}, {0, 0, Z}}, {{X, 0, 0}, {X, Y, 0}, {X, Y, Z}, {X, 0, Z}},
-    };
-    for (Poly& f : faces) f = facing(f, eye);
+    const BoxAroundEye box = random_box_around_eye(rng);
+    const dvec3 &eye = box.eye, &n = box.normal, &up = box.up;
+    const std::vector<Poly>& faces = box.faces;
     const std::vector<double> ff = hemicube(eye, n, faces, method, up);
     double sum = 0.0;
     for (double f : ff) sum += f;
@@ -722,19 +737,11 @@ TEST(FullCube, FacesOfABoxAroundTheEyeTakeTheirExactSolidAngles) {
   const uint64_t seed = test_seed();
   SCOPED_TRACE(seed_note(seed));
   std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u(0.0, 1.0);
   double worst = 0.0;
   for (int trial = 0; trial < 10; ++trial) {
-    const dvec3 size(0.5 + 2.5 * u(rng), 0.5 + 2.5 * u(rng), 0.5 + 2.5 * u(rng));
-    const dvec3 eye = size * dvec3(0.05 + 0.9 * u(rng), 0.05 + 0.9 * u(rng), 0.05 + 0.9 * u(rng));
-    const dvec3 n = random_unit(rng), up = random_up(rng, n);
-    const double X = size.x, Y = size.y, Z = size.z;
-    std::vector<Poly> faces = {
-        {{0, 0, 0}, {X, 0, 0}, {X, Y, 0}, {0, Y, 0}}, {{0, 0, Z}, {X, 0, Z}, {X, Y, Z}, {0, Y, Z}},
-        {{0, 0, 0}, {X, 0, 0}, {X, 0, Z}, {0, 0, Z}}, {{0, Y, 0}, {X, Y, 0}, {X, Y, Z}, {0, Y, Z}},
-        {{0, 0, 0}, {0, Y, 0}, {0, Y, Z}, {0, 0, Z}}, {{X, 0, 0}, {X, Y, 0}, {X, Y, Z}, {X, 0, Z}},
-    };
-    for (Poly& f : faces) f = facing(f, eye);
+    const BoxAroundEye box = random_box_around_eye(rng);
+    const dvec3 &eye = box.eye, &n = box.normal, &up = box.up;
+    const std::vector<Poly>& faces = box.faces;
     const std::vector<double> omega = full_cube(eye, faces, n, up);
     double sum = 0.0;
     for (size_t i = 0; i < faces.size(); ++i) {

@@ -656,6 +656,18 @@ TEST(Validate, RejectsBadPatchesWithAMessageNamingThem) {
   EXPECT_NE(validate(params).find("aeps"), std::string::npos);
 }
 
+// A closed box from lo to hi, its six faces looking out.
+void add_box(Scene& scene, const glm::dvec3& lo, const glm::dvec3& hi, const glm::dvec3& rho, const glm::dvec3& e,
+             uint32_t material) {
+  using V = glm::dvec3;
+  add_quad(scene, V(lo.x, hi.y, lo.z), V(lo.x, hi.y, hi.z), V(hi.x, hi.y, hi.z), V(hi.x, hi.y, lo.z), rho, e, material);
+  add_quad(scene, V(lo.x, lo.y, lo.z), V(hi.x, lo.y, lo.z), V(hi.x, lo.y, hi.z), V(lo.x, lo.y, hi.z), rho, e, material);
+  add_quad(scene, V(lo.x, lo.y, lo.z), V(lo.x, hi.y, lo.z), V(hi.x, hi.y, lo.z), V(hi.x, lo.y, lo.z), rho, e, material);
+  add_quad(scene, V(lo.x, lo.y, hi.z), V(hi.x, lo.y, hi.z), V(hi.x, hi.y, hi.z), V(lo.x, hi.y, hi.z), rho, e, material);
+  add_quad(scene, V(lo.x, lo.y, lo.z), V(lo.x, lo.y, hi.z), V(lo.x, hi.y, hi.z), V(lo.x, hi.y, lo.z), rho, e, material);
+  add_quad(scene, V(hi.x, lo.y, lo.z), V(hi.x, hi.y, lo.z), V(hi.x, hi.y, hi.z), V(hi.x, lo.y, hi.z), rho, e, material);
+}
+
 // A closed 4 m room (walls in 0.5 m cells) with `count` small closed boxes (4 to 18 cm, all six
 // faces) on a jittered grid, standing 1 cm above the floor or floating. With `furnace`, every
 // surface emits e and reflects rho; otherwise a 1 m ceiling panel is the only emitter.
@@ -676,13 +688,7 @@ Scene small_boxes_room(uint32_t count, bool furnace, const glm::dvec3& rho, cons
     const double x = 0.1 + 0.19 * (slot % 20) + 0.005, z = 0.1 + 0.19 * (slot / 20) + 0.005;
     const double w = 0.04 + 0.14 * next(), d = 0.04 + 0.14 * next(), h = 0.04 + 0.14 * next();
     const glm::dvec3 lo(x, layer == 0 ? 0.01 : 1.2 + 0.3 * next(), z), hi = lo + glm::dvec3(w, h, d);
-    using V = glm::dvec3;
-    add_quad(scene, V(lo.x, hi.y, lo.z), V(lo.x, hi.y, hi.z), V(hi.x, hi.y, hi.z), V(hi.x, hi.y, lo.z), rho, box_e, 2);
-    add_quad(scene, V(lo.x, lo.y, lo.z), V(hi.x, lo.y, lo.z), V(hi.x, lo.y, hi.z), V(lo.x, lo.y, hi.z), rho, box_e, 2);
-    add_quad(scene, V(lo.x, lo.y, lo.z), V(lo.x, hi.y, lo.z), V(hi.x, hi.y, lo.z), V(hi.x, lo.y, lo.z), rho, box_e, 2);
-    add_quad(scene, V(lo.x, lo.y, hi.z), V(hi.x, lo.y, hi.z), V(hi.x, hi.y, hi.z), V(lo.x, hi.y, hi.z), rho, box_e, 2);
-    add_quad(scene, V(lo.x, lo.y, lo.z), V(lo.x, lo.y, hi.z), V(lo.x, hi.y, hi.z), V(lo.x, hi.y, lo.z), rho, box_e, 2);
-    add_quad(scene, V(hi.x, lo.y, lo.z), V(hi.x, hi.y, lo.z), V(hi.x, hi.y, hi.z), V(hi.x, lo.y, hi.z), rho, box_e, 2);
+    add_box(scene, lo, hi, rho, box_e, 2);
   }
   return scene;
 }
@@ -797,12 +803,7 @@ TEST(Solver, VolumeClustersOfGlowingBoxesLightTheRoomAsTheirFacesAlone) {
                    1.25 + 0.5 * (i / 12) + 0.1 * (next() - 0.5));
     const V half(0.03 + 0.06 * next(), 0.03 + 0.06 * next(), 0.03 + 0.06 * next());
     const V lo = centre - half, hi = centre + half;
-    add_quad(scene, V(lo.x, hi.y, lo.z), V(lo.x, hi.y, hi.z), V(hi.x, hi.y, hi.z), V(hi.x, hi.y, lo.z), rho, e, 2);
-    add_quad(scene, V(lo.x, lo.y, lo.z), V(hi.x, lo.y, lo.z), V(hi.x, lo.y, hi.z), V(lo.x, lo.y, hi.z), rho, e, 2);
-    add_quad(scene, V(lo.x, lo.y, lo.z), V(lo.x, hi.y, lo.z), V(hi.x, hi.y, lo.z), V(hi.x, lo.y, lo.z), rho, e, 2);
-    add_quad(scene, V(lo.x, lo.y, hi.z), V(hi.x, lo.y, hi.z), V(hi.x, hi.y, hi.z), V(lo.x, hi.y, hi.z), rho, e, 2);
-    add_quad(scene, V(lo.x, lo.y, lo.z), V(lo.x, lo.y, hi.z), V(lo.x, hi.y, hi.z), V(lo.x, hi.y, lo.z), rho, e, 2);
-    add_quad(scene, V(hi.x, lo.y, lo.z), V(hi.x, hi.y, lo.z), V(hi.x, hi.y, hi.z), V(hi.x, lo.y, hi.z), rho, e, 2);
+    add_box(scene, lo, hi, rho, e, 2);
   }
   ASSERT_EQ(validate(scene), "");
   Solver volume(scene, {});
