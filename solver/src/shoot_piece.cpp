@@ -55,8 +55,8 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   const bool coarse = place_hemicube(piece);
   project(seen);
   sum_form_factors(accepted);  // the occluders' own form factors are not needed
-  double seen_share = 0.0;  // of a deferred volume piece's light: what meets a front face
-  if (defer_far && piece.volume)
+  double seen_share = 0.0;  // of a deferred piece's light: what meets a front face
+  if (defer_far)
     for (const Fragment& f : frags)
       if (!(f.element & detail::kBackFace)) seen_share += static_cast<double>(f.area) * f.trans * (*pixel_weight)[f.pixel];
 
@@ -67,7 +67,7 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<
   if (!settled) record_broken = true;  // kMaxRounds still splitting: no headroom to record
   if (recording != nullptr) record_piece(piece, coarse, split_room, accepted);
   gap_share = covered_share(piece.src);
-  if (defer_far && piece.volume) {
+  if (defer_far) {
     defer_far = false;
     auto far = std::make_unique<FarShare>();
     far->src = piece.src;
@@ -314,8 +314,30 @@ void Solver::Impl::distribute(const glm::dvec3& dB, const std::vector<uint32_t>&
     }
 }
 
-// Gives a volume cluster's deferred far receivers their light, their form factors times `scale`
-// (at most 1), in the shot's record too. A receiver split since takes it on its leaves.
+// A top piece's far receivers take their light once its parts have served its near ones, `given` of
+// its `power`. The share N of its hemicube (or cube) that front faces took but the far receivers
+// did not is what the near receivers took as seen from its centre; its parts, where they stand,
+// gave them `given` instead. The difference, N P - given, leaves as the rest of the hemicube's
+// light does, (1 - N) P, a share of it to the far receivers (the rest to the sky or into absorbing
+// backs): their form factors are scaled by 1 + (N P - given) / ((1 - N) P), so that a shot in a
+// closed room gives out all of its power, no more and no less (a volume cluster over a floor lost
+// 8.4 % of its light without; a flat patch's near-field parts, which see a wall beside it better
+// than its centre, gave out up to half a percent too much). Only a whole-scene shot sees all its
+// far receivers: a partial one (reshoot_split) keeps the unit's `kept` scale. `parts`: whether any
+// receiver went to the parts (a flat piece whose parts shot nothing keeps its hemicube's light).
+// Returns the scale.
+double Solver::Impl::settle_far(FarShare& far, double power, double given, bool whole_scene, bool parts, double kept) {
+  double scale = kept;
+  if (whole_scene) {
+    const double near_share = std::max(0.0, far.seen - far.power / power);
+    scale = parts && near_share < 1.0 ? std::max(0.0, 1.0 + (near_share * power - given) / ((1.0 - near_share) * power)) : 1.0;
+  }
+  finish_far(far, scale);
+  return scale;
+}
+
+// Gives a top piece's deferred far receivers their light, their form factors times `scale` (at
+// most 1), in the shot's record too. A receiver split since takes it on its leaves.
 void Solver::Impl::finish_far(FarShare& far, double scale) {
   far.shape.src = far.src;
   shooter_shape = &far.shape;

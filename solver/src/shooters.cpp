@@ -62,6 +62,7 @@ void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<u
       part.element = is_leaf ? kNone : e_child[node.element] + k;
       part.source = is_leaf ? node.source : part.element;
       part.unshot = piece.dB;
+      part.top = node.top;
       shoot_node(p, part, receivers, whole_scene);
     }
     return;
@@ -82,7 +83,7 @@ void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<u
       uneven_piece(node.element)) {
     for (uint32_t k = 0; k < 4; ++k) {
       const uint32_t kid = e_child[node.element] + k;
-      ShooterNode part{{}, kid, glm::dvec3(0.0), node.depth, kid};
+      ShooterNode part{{}, kid, glm::dvec3(0.0), node.depth, kid, node.top};
       corners_of(kid, part.c);
       shoot_node(p, part, receivers, whole_scene);
     }
@@ -90,10 +91,14 @@ void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<u
   }
   // Weak shots stay whole.
   piece.may_refine = node.depth < kMaxShooterDepth && piece.power >= params.feps * emitted_power;
+  // A top piece that may refine holds its far receivers' light until its parts have shot (settle_far).
+  defer_far = node.top && piece.may_refine;
   const std::vector<uint32_t> near = shoot_piece(piece, std::move(receivers), whole_scene);
-  if (near.empty()) return;
+  defer_far = false;
+  std::unique_ptr<FarShare> far = std::move(far_pending);
+  const double before = delivered;
   const bool is_leaf = node.element == kNone || e_child[node.element] == kNone;
-  for (uint32_t k = 0; k < 4; ++k) {
+  for (uint32_t k = 0; k < 4 && !near.empty(); ++k) {
     ShooterNode kid;
     child_corners(node.c, n, k, kid.c);
     kid.depth = node.depth + 1;
@@ -102,6 +107,12 @@ void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<u
     kid.unshot = piece.dB;  // a geometric piece of a leaf shares the leaf's unshot radiosity
     shoot_node(p, kid, near, false);
   }
+  if (!far) return;
+  const uint32_t unit = p_unit[p];
+  const double kept = u_far_scale.empty() ? 1.0 : u_far_scale[unit];
+  const double scale = settle_far(*far, piece.power, delivered - before, whole_scene, !near.empty(), kept);
+  far_scale_sum += scale * piece.power;
+  far_scaled_power += piece.power;
 }
 
 // Whether the children of inner element `element` depart from its mean unshot radiosity by more
@@ -133,8 +144,8 @@ void Solver::Impl::shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bo
     const uint32_t p = cluster_patch[node.begin];
     Corners root{};
     corners_of(p_root[p], root);
-    shoot_node(p, {root, p_root[p], glm::dvec3(0.0), std::min(depth / 2, kMaxShooterDepth), p_root[p]},
-               std::move(receivers), whole_scene);
+    shoot_tops(p, {{root, p_root[p], glm::dvec3(0.0), std::min(depth / 2, kMaxShooterDepth), p_root[p], depth == 0}},
+               receivers, whole_scene);
     return;
   }
   Piece piece;
@@ -171,15 +182,9 @@ void Solver::Impl::shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bo
   // A cluster stands for its patches: receivers near it always go on to its halves, down to single
   // patches, so that clustering never makes a receiver see a coarser shooter than the patches.
   piece.may_refine = true;
-  // A volume cluster's near receivers take from its parts what those, where they stand, send their
-  // way: not the share N of its light that its cube saw them take from its centre (the floor under
-  // a cluster of boxes, seen from above it). What its parts do not send them, N P - D, leaves as
-  // the rest of its cube's light does, (1 - N) P, a share of it to the far receivers (the rest to
-  // the sky or into absorbing backs): their form factors are scaled by 1 + (N P - D) / ((1 - N) P),
-  // so that a shot in a closed room gives out all of its power (in a room of 100 boxes on a floor
-  // 8.4 % of the clusters' light was lost without). The whole-scene shot sets the scale
-  // (u_far_scale), which a partial shot (reshoot_split) keeps.
-  defer_far = piece.volume && depth == 0;
+  // The near receivers take from its parts what those, where they stand, send their way (the floor
+  // under a cluster of boxes, seen from above it): its far receivers wait for the rest (settle_far).
+  defer_far = depth == 0;
   std::vector<uint32_t> near = shoot_piece(piece, std::move(receivers), whole_scene);
   defer_far = false;
   std::unique_ptr<FarShare> far = std::move(far_pending);
@@ -188,11 +193,9 @@ void Solver::Impl::shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bo
   if (far) {
     const uint32_t unit = p_unit[cluster_patch[node.begin]];
     if (u_far_scale.empty()) u_far_scale.assign(unit_node.size(), 1.0);
-    if (whole_scene) {
-      const double p = piece.power, near_share = std::max(0.0, far->seen - far->power / p);
-      u_far_scale[unit] = near_share < 1.0 ? std::max(0.0, 1.0 + (near_share * p - (delivered - before)) / ((1.0 - near_share) * p)) : 1.0;
-    }
-    finish_far(*far, u_far_scale[unit]);
+    // A volume cluster's cube settles always: its near receivers are seen from its centre, inside it.
+    u_far_scale[unit] = settle_far(*far, piece.power, delivered - before, whole_scene, piece.volume || !near.empty(),
+                                   u_far_scale[unit]);
   }
 }
 
@@ -240,8 +243,22 @@ void Solver::Impl::shoot_patch(uint32_t p, const std::vector<uint32_t>& receiver
       stack.push_back(kid);
     }
   }
+  for (ShooterNode& top : tops) top.top = true;
   grow_scratch();
+  shoot_tops(p, tops, receivers, whole_scene);
+}
+
+// Shoots patch p's top pieces; a whole-scene shot keeps their far scales' mean, by power, as its
+// unit's (settle_far).
+void Solver::Impl::shoot_tops(uint32_t p, const std::vector<ShooterNode>& tops, const std::vector<uint32_t>& receivers,
+                              bool whole_scene) {
+  far_scale_sum = 0.0;
+  far_scaled_power = 0.0;
   for (const ShooterNode& top : tops) shoot_node(p, top, receivers, whole_scene);
+  if (whole_scene && far_scaled_power > 0.0) {
+    if (u_far_scale.empty()) u_far_scale.assign(unit_node.size(), 1.0);
+    u_far_scale[p_unit[p]] = far_scale_sum / far_scaled_power;
+  }
 }
 
 }  // namespace hemibake::solver

@@ -135,7 +135,10 @@ std::unique_ptr<Solver::Impl> Solver::Impl::next_pass(Impl& first) {
 }
 
 // Element e takes rho dB F of a shot: radiosity and unshot radiosity alike, and the unshot power of
-// its patch and unit, which pick the next shooter.
+// its patch and unit, which pick the next shooter. The shooting unit's own patches (faces of boxes
+// in one cluster light one another) hold their unshot gain until the shot is over: the shot reads
+// their unshot radiosity as it was and clears it at its end (clear_unshot), which lost the gain
+// (1.2 % of the light in a room of 100 boxes clustered across them).
 void Solver::Impl::receive(uint32_t e, const glm::dvec3& dB, double f) {
   // Light goes to leaves only, and only adds: unshot power and radiosity stay non-negative.
   HEMIBAKE_DCHECK(e < e_child.size() && e_child[e] == kNone);
@@ -144,11 +147,15 @@ void Solver::Impl::receive(uint32_t e, const glm::dvec3& dB, double f) {
   const uint32_t q = e_patch[e];
   const glm::dvec3 gain = patches[q].reflectance * dB * f;
   e_b[e] += gain;
-  e_unshot[e] += gain;
   e_gap[e] += gap_share * gain;
   // (find_pools reads no point of a leaf too small to split)
   if (shooter_shape != nullptr && p_grid_n[q] != 0 && e_area[e] >= min_split_area())
     take_on_grid(e, mean(patches[q].reflectance * dB));
+  if (p_unit[q] == shooting_unit) {
+    held.emplace_back(e, gain);  // the shooting unit's own: unshot once it has shot (clear_unshot)
+    return;
+  }
+  e_unshot[e] += gain;
   p_unshot[q] += channel_sum(gain) * e_area[e];
   u_unshot[p_unit[q]] += channel_sum(gain) * e_area[e];
 }
@@ -185,6 +192,7 @@ bool Solver::Impl::step() {
   }
   const auto t0 = Clock::now();
   const uint32_t best = strongest_unit();
+  shooting_unit = best;
   if (replay(best)) {
     ++stats.replayed_shots;
   } else {
@@ -249,6 +257,17 @@ void Solver::Impl::clear_unshot(uint32_t unit) {
     p_unshot[p] = 0.0;
   }
   u_unshot[unit] = 0.0;
+  // What the unit's patches took from one another during its shot (faces of boxes in one cluster)
+  // is theirs to shoot next: it was held back from what the shot read and clears.
+  for (const auto& [e, gain] : held)
+    for_leaves(e, [&](uint32_t leaf) {
+      const uint32_t q = e_patch[leaf];
+      e_unshot[leaf] += gain;
+      p_unshot[q] += channel_sum(gain) * e_area[leaf];
+      u_unshot[unit] += channel_sum(gain) * e_area[leaf];
+    });
+  held.clear();
+  shooting_unit = kNone;
 }
 
 namespace {

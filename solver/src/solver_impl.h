@@ -182,6 +182,7 @@ struct Solver::Impl {
     glm::dvec3 unshot;
     int depth;
     uint32_t source;   // `element`, or for a geometric piece the leaf it was cut from
+    bool top = false;  // a piece of the unit's own cut, not a near-field part (settles its far share)
   };
   // A shot's form factors, kept for a replay (step): per piece, in the order they shot, its
   // sources and the receivers that took light with their F(element -> piece).
@@ -309,6 +310,8 @@ struct Solver::Impl {
   // shooters.cpp: a unit breaks into pieces, each of which shoot_piece shoots.
   void shoot_patch(uint32_t p, const std::vector<uint32_t>& receivers, bool whole_scene);
   void shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers, bool whole_scene);
+  void shoot_tops(uint32_t p, const std::vector<ShooterNode>& tops, const std::vector<uint32_t>& receivers,
+                  bool whole_scene);
   void shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bool whole_scene, int depth);
   void shoot_parts(uint32_t c, const std::vector<uint32_t>& near, int depth);
 
@@ -325,8 +328,8 @@ struct Solver::Impl {
   void volume_weights(const Piece& piece, const VolumeCube& v);
   void receiver_form_factors(const Piece& piece, const std::vector<uint32_t>& accepted);
   void distribute(const glm::dvec3& dB, const std::vector<uint32_t>& accepted);
-  // A volume cluster's whole-scene shot gives its far receivers what its parts did not give its
-  // near ones (shoot_cluster): deferred until they have shot.
+  // A shot's top piece gives its far receivers what its parts did not give its near ones
+  // (settle_far): deferred until they have shot.
   struct FarShare {
     std::vector<uint32_t> recv, src;
     std::vector<double> f;
@@ -337,11 +340,13 @@ struct Solver::Impl {
     size_t record_piece = static_cast<size_t>(-1);  // its piece in the shot's record
   };
   void finish_far(FarShare& far, double scale);
+  double settle_far(FarShare& far, double power, double given, bool whole_scene, bool parts, double kept);
   double hemicube_share(const std::vector<uint32_t>& accepted) const;
-  bool defer_far = false;                // shoot_piece keeps a volume piece's light in far_pending
+  bool defer_far = false;                // shoot_piece keeps the piece's far light in far_pending
   std::unique_ptr<FarShare> far_pending;
   double delivered = 0.0;                // power given out by shots so far (channels summed)
   std::vector<double> u_far_scale;       // per unit: its last whole-scene shot's far scale
+  double far_scaled_power = 0.0, far_scale_sum = 0.0;  // shoot_patch: its tops' scales, by power
   // Whether element e has form factors from the hemicube in use.
   bool projected(uint32_t e) const { return e_stamp[e] == stamp && e_ff_open[e] > 0.0; }
   // F(element -> piece) from F(piece -> element) = ff, by reciprocity (capped at 1).
@@ -471,6 +476,9 @@ struct Solver::Impl {
   // Replays: per unit, the form factors of its last shot (replay()).
   std::vector<ShotRecord> u_record;
   size_t record_bytes = 0;
+  // The unit shooting (step): its patches' own gains are held until it has shot (receive).
+  uint32_t shooting_unit = kNone;
+  std::vector<std::pair<uint32_t, glm::dvec3>> held;
   ShotRecord* recording = nullptr;  // the shot being recorded
   bool record_broken = false;       // a piece of it was skipped (no power): not replayable
 
