@@ -360,9 +360,10 @@ void Solver::Impl::shoot_light(const Light& light) {
 // Per element of `elements` (indexed by element): the sky's irradiance per unit radiance, visible
 // (x) and with nothing hidden (y), from every `step`-th of the sky's directions.
 // Adds to `sums` (per element: visible and open) the sky's parallel projections along directions
-// first, first + step, ... (each of weight 4 pi step / kSkyDirections), until the last or, given
-// `seconds`, once that long has passed. Returns the next direction.
-uint32_t Solver::Impl::add_sky_directions(uint32_t step, uint32_t first, std::span<const uint32_t> elements,
+// first, first + step, ... (each of weight 4 pi step / kSkyDirections) but the multiples of `skip`
+// (0: none), until the last or, given `seconds`, once that long has passed. Returns the next
+// direction.
+uint32_t Solver::Impl::add_sky_directions(uint32_t step, uint32_t skip, uint32_t first, std::span<const uint32_t> elements,
                                           std::vector<glm::dvec3>& sums, double seconds) {
   const auto t0 = Clock::now();
   sums.resize(e_patch.size(), glm::dvec3(0.0));
@@ -370,6 +371,7 @@ uint32_t Solver::Impl::add_sky_directions(uint32_t step, uint32_t first, std::sp
   LightView v;  // one for all the directions: its per-element lists keep their memory
   uint32_t k = first;
   for (; k < kSkyDirections && (seconds <= 0.0 || seconds_since(t0) < seconds); k += step) {
+    if (skip != 0 && k % skip == 0) continue;
     const glm::dvec3 towards_sky = fibonacci_direction(k, kSkyDirections);
     v = parallel_view(-towards_sky, sky_cube->resolution());
     v.cube = sky_cube.get();
@@ -411,7 +413,7 @@ void Solver::Impl::finish_sky_factors(uint32_t step, std::span<const uint32_t> e
 
 std::vector<glm::dvec3> Solver::Impl::sky_factors(uint32_t step, std::span<const uint32_t> elements) {
   std::vector<glm::dvec3> sums;
-  add_sky_directions(step, 0, elements, sums, 0.0);
+  add_sky_directions(step, 0, 0, elements, sums, 0.0);
   finish_sky_factors(step, elements, sums);
   return sums;
 }
@@ -433,11 +435,16 @@ bool Solver::Impl::shoot_sky_part() {
   }
   const uint32_t step = sh.final_pass ? 1 : kSkyRefineStep;
   grow_scratch();
-  sh.next = add_sky_directions(step, sh.next, sh.accepted, sh.sums, kSkyPartSeconds);
+  sh.next = add_sky_directions(step, sh.final_pass && sh.reuse ? kSkyRefineStep : 0, sh.next, sh.accepted, sh.sums,
+                               kSkyPartSeconds);
   if (sh.next < kSkyDirections) return false;
   std::vector<glm::dvec3> f = std::move(sh.sums);
   sh.sums.clear();
   sh.next = 0;
+  // A round that splits nothing leaves the final pass's receivers as they are: its directions'
+  // sums, a quarter of the weight each in the final pass, need not be projected again.
+  std::vector<glm::dvec3> round_sums;
+  if (!sh.final_pass) round_sums = f;
   finish_sky_factors(step, sh.accepted, f);
   if (sh.final_pass) {
     for (uint32_t e : sh.accepted)
@@ -460,6 +467,9 @@ bool Solver::Impl::shoot_sky_part() {
   reset_spread(accepted);
   if (to_split.empty() || !trim_to_element_limit(to_split)) {
     sh.final_pass = true;
+    sh.reuse = true;
+    sh.sums = std::move(round_sums);
+    for (uint32_t e : sh.accepted) sh.sums[e] /= static_cast<double>(kSkyRefineStep);
     return false;
   }
   ++stats.rounds;

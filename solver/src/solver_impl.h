@@ -244,7 +244,7 @@ struct Solver::Impl {
   void light_factors(const Light* light, const std::vector<LightView>& views, std::span<const uint32_t> elements);
   void shoot_light(const Light& light);
   std::vector<glm::dvec3> sky_factors(uint32_t directions_step, std::span<const uint32_t> elements);
-  uint32_t add_sky_directions(uint32_t step, uint32_t first, std::span<const uint32_t> elements,
+  uint32_t add_sky_directions(uint32_t step, uint32_t skip, uint32_t first, std::span<const uint32_t> elements,
                               std::vector<glm::dvec3>& sums, double seconds);
   void finish_sky_factors(uint32_t step, std::span<const uint32_t> elements, std::vector<glm::dvec3>& sums) const;
   bool shoot_sky_part();
@@ -537,6 +537,7 @@ struct Solver::Impl {
     uint32_t next = 0;
     std::vector<uint32_t> accepted;
     std::vector<glm::dvec3> sums;
+    bool reuse = false;  // the final pass starts from the last round's directions (it split nothing)
   };
   SkyShot sky_shot;
   std::unique_ptr<detail::Hemicube> light_cube;  // at params.resolution, for lights' views
