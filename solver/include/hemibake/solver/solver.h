@@ -102,9 +102,10 @@ struct Params {
   bool pools = false;           ///< a quick first pass finds where the light pools on surfaces too
                                 ///< large for any one shot to split (a floor under small lamps), and
                                 ///< the solve proper starts with those elements split (see README)
-  uint32_t shot_cache_mb = 256; ///< memory for the form factors of earlier shots, replayed when the
-                                ///< same shooter shoots again with no more power and an unchanged
-                                ///< mesh (see README); 0 = every shot projects anew
+  uint32_t shot_cache_mb = 1024; ///< memory for the form factors of earlier shots, replayed when the
+                                 ///< same shooter shoots again with no more power and an unchanged
+                                 ///< mesh (see README); 0 = every shot projects anew; taken as it
+                                 ///< fills (a small scene's records take a few MB)
 };
 
 /// Returns an empty string when the parameters are usable, else a message naming the bad one.
