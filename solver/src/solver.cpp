@@ -259,8 +259,8 @@ void Solver::Impl::clear_unshot(uint32_t unit) {
   u_unshot[unit] = 0.0;
   // What the unit's patches took from one another during its shot (faces of boxes in one cluster)
   // is theirs to shoot next: it was held back from what the shot read and clears.
-  for (const auto& [e, gain] : held)
-    for_leaves(e, [&](uint32_t leaf) {
+  for (const std::pair<uint32_t, glm::dvec3>& h : held)
+    for_leaves(h.first, [&, gain = h.second](uint32_t leaf) {
       const uint32_t q = e_patch[leaf];
       e_unshot[leaf] += gain;
       p_unshot[q] += channel_sum(gain) * e_area[leaf];
