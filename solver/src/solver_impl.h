@@ -346,7 +346,7 @@ struct Solver::Impl {
   std::unique_ptr<FarShare> far_pending;
   double delivered = 0.0;                // power given out by shots so far (channels summed)
   std::vector<double> u_far_scale;       // per unit: its last whole-scene shot's far scale
-  double far_scaled_power = 0.0, far_scale_sum = 0.0;  // shoot_patch: its tops' scales, by power
+  double far_scaled_power = 0.0, far_scale_sum = 0.0;  // shoot_tops: its tops' scales, by power
   // Whether element e has form factors from the hemicube in use.
   bool projected(uint32_t e) const { return e_stamp[e] == stamp && e_ff_open[e] > 0.0; }
   // F(element -> piece) from F(piece -> element) = ff, by reciprocity (capped at 1).
