@@ -108,9 +108,8 @@ void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<u
     shoot_node(p, kid, near, false);
   }
   if (!far) return;
-  const uint32_t unit = p_unit[p];
-  const double kept = u_far_scale.empty() ? 1.0 : u_far_scale[unit];
-  const double scale = settle_far(*far, piece.power, delivered - before, whole_scene, !near.empty(), kept);
+  const double scale =
+      settle_far(*far, piece.power, delivered - before, whole_scene, !near.empty(), u_far_scale[p_unit[p]]);
   far_scale_sum += scale * piece.power;
   far_scaled_power += piece.power;
 }
@@ -192,7 +191,6 @@ void Solver::Impl::shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bo
   shoot_parts(c, near, depth);
   if (far) {
     const uint32_t unit = p_unit[cluster_patch[node.begin]];
-    if (u_far_scale.empty()) u_far_scale.assign(unit_node.size(), 1.0);
     // A volume cluster's cube settles always: its near receivers are seen from its centre, inside it.
     u_far_scale[unit] = settle_far(*far, piece.power, delivered - before, whole_scene, piece.volume || !near.empty(),
                                    u_far_scale[unit]);
@@ -255,10 +253,7 @@ void Solver::Impl::shoot_tops(uint32_t p, const std::vector<ShooterNode>& tops, 
   far_scale_sum = 0.0;
   far_scaled_power = 0.0;
   for (const ShooterNode& top : tops) shoot_node(p, top, receivers, whole_scene);
-  if (whole_scene && far_scaled_power > 0.0) {
-    if (u_far_scale.empty()) u_far_scale.assign(unit_node.size(), 1.0);
-    u_far_scale[p_unit[p]] = far_scale_sum / far_scaled_power;
-  }
+  if (whole_scene && far_scaled_power > 0.0) u_far_scale[p_unit[p]] = far_scale_sum / far_scaled_power;
 }
 
 }  // namespace hemibake::solver

@@ -71,6 +71,7 @@ Solver::Impl::Impl(const Scene& scene, const Params& p, const Impl* first, const
   }
   build_patch_bvh();  // clusters look for other objects' surfaces passing through them
   build_clusters();
+  u_far_scale.assign(unit_node.size(), 1.0);
   source = scene;
   first_pass = solve_params != nullptr;
   solve = first_pass ? *solve_params : params;
