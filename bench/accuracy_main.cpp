@@ -4,6 +4,7 @@
 #include "display_error.h"
 
 #include "hemibake/protocol/gltf.h"
+#include "hemibake/protocol/job.h"
 
 #include <chrono>
 #include <cstdio>
@@ -21,7 +22,8 @@ void usage() {
                "  --seed N            their seed (1)\n"
                "  --max-se X          trace each point until its standard error is at most X of its value (0.015)\n"
                "  --reference FILE    read the reference points from FILE if it exists, else trace and write them\n"
-               "  --per-point FILE    write each point's position, reference and displayed values (first bake)\n");
+               "  --per-point FILE    write each point's position, reference and displayed values (first bake)\n"
+               "  --sky R,G,B         the uniform sky the bakes had (a job parameter, not in the file; 0)\n");
 }
 
 bool read_points(const std::string& path, std::vector<hemibake::bench::SurfacePoint>& out) {
@@ -51,6 +53,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> files;
   bench::ReferenceOptions options;
   std::string reference_file, per_point_file;
+  glm::dvec3 sky(0.0);
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto value = [&]() -> const char* {
@@ -65,6 +68,13 @@ int main(int argc, char** argv) {
     else if (a == "--max-se") options.max_std_error = std::strtod(value(), nullptr);
     else if (a == "--reference") reference_file = value();
     else if (a == "--per-point") per_point_file = value();
+    else if (a == "--sky") {
+      const char* text = value();
+      if (std::string e = protocol::parse_colour_value(*protocol::find_param("sky"), text, sky); !e.empty()) {
+        std::fprintf(stderr, "hemibake-accuracy: --sky: %s\n", e.c_str());
+        return 2;
+      }
+    }
     else if (a == "--help" || a == "-h") {
       usage();
       return 0;
@@ -88,7 +98,9 @@ int main(int argc, char** argv) {
   std::vector<bench::SurfacePoint> points;
   if (reference_file.empty() || !read_points(reference_file, points)) {
     const auto t0 = std::chrono::steady_clock::now();
-    points = bench::reference_points(protocol::scene_of(*scene.document), options);
+    solver::Scene lit = protocol::scene_of(*scene.document);
+    if (sky != glm::dvec3(0.0)) lit.sky = sky;
+    points = bench::reference_points(lit, options);
     std::fprintf(stderr, "reference: %zu points traced in %.1f s\n", points.size(),
                  std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     if (!reference_file.empty()) write_points(reference_file, points);

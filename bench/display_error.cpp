@@ -2,6 +2,7 @@
 
 #include "hemibake/baselines/reference.h"
 
+#include <glm/common.hpp>
 #include <glm/geometric.hpp>
 
 #include <algorithm>
@@ -112,7 +113,16 @@ void trace_reference(const solver::Scene& scene, std::vector<SurfacePoint>& poin
 }
 
 bool displayed_value(const solver::Mesh& baked, const glm::dvec3& x, const glm::dvec3& normal, glm::dvec3& out) {
-  // The triangle containing x on the side facing `normal`, nearest to x's plane.
+  // The triangle containing x on the side facing `normal`, nearest to x's plane. A triangle's plane
+  // may lie off x's by 1e-3 of its size, or by 1e-4 of the scene's extent: the written positions
+  // are quantized (Draco, 14 bits by default: up to 3e-5 of the extent), which moves the small
+  // elements of a refined surface off its plane by more than their size allows.
+  glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
+  for (const glm::dvec3& v : baked.positions) {
+    lo = glm::min(lo, v);
+    hi = glm::max(hi, v);
+  }
+  const double slack = baked.positions.empty() ? 0.0 : 1e-4 * glm::length(hi - lo);
   double best = std::numeric_limits<double>::max();
   bool found = false;
   auto consider = [&](const glm::dvec3& pa, const glm::dvec3& pb, const glm::dvec3& pc, const glm::dvec3& ba,
@@ -124,7 +134,7 @@ bool displayed_value(const solver::Mesh& baked, const glm::dvec3& x, const glm::
     if (glm::dot(n, normal) < 0.99 * len) return;
     const double dist = std::abs(glm::dot(x - pa, n)) / len;
     const double size = std::max({glm::length(pb - pa), glm::length(pc - pa), glm::length(pc - pb)});
-    if (dist > 1e-3 * size + 1e-9 || dist >= best) return;
+    if (dist > 1e-3 * size + slack + 1e-9 || dist >= best) return;
     // Barycentric coordinates of x projected onto the plane.
     const glm::dvec3 q = x - pa;
     const double wb = glm::dot(glm::cross(q, pc - pa), n) / n2;

@@ -3,6 +3,13 @@
 // emitted power, and a shadow ray: next-event estimation); the path goes on in a cosine-weighted
 // direction, counting only reflected light where it lands (emission there was already sampled), and
 // ends by Russian roulette on the reflectance.
+//
+// Punctual lights (KHR_lights_punctual) and the uniform sky follow the solver's definitions in
+// solver.h, evaluated here by rays instead of projections. At every path vertex each light is
+// checked with one shadow ray: a point or spot light at distance d and cosine cos_x brings the
+// irradiance I cos_x / d^2 (times the spot's falloff t^2 and the range window), a directional
+// light I cos_x when nothing lies toward it. A path direction that meets no surface sees the sky:
+// the cosine-weighted estimate of its irradiance is pi S.
 #include "hemibake/baselines/reference.h"
 
 #include <embree3/rtcore.h>
@@ -64,7 +71,62 @@ struct Reference::Impl {
   std::vector<Emitter> emitters;
   std::vector<double> cdf;
   double total_power = 0.0;
+  // True when no surface lies within `length` of `from` along the unit `dir` (length may be
+  // infinite).
+  bool clear(const glm::dvec3& from, const glm::dvec3& dir, double length) const;
+  // The irradiance the punctual lights bring to x (normal n), each seen through a shadow ray.
+  glm::dvec3 light_irradiance(const glm::dvec3& x, const glm::dvec3& n) const;
 };
+
+bool Reference::Impl::clear(const glm::dvec3& from, const glm::dvec3& dir, double length) const {
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  RTCRay r{};
+  r.org_x = static_cast<float>(from.x);
+  r.org_y = static_cast<float>(from.y);
+  r.org_z = static_cast<float>(from.z);
+  r.dir_x = static_cast<float>(dir.x);
+  r.dir_y = static_cast<float>(dir.y);
+  r.dir_z = static_cast<float>(dir.z);
+  r.tnear = 0.0f;
+  r.tfar = std::isfinite(length) ? static_cast<float>(length) : std::numeric_limits<float>::infinity();
+  r.mask = 0xffffffffu;
+  rtcOccluded1(scene, &ctx, &r);
+  return r.tfar >= 0.0f;
+}
+
+glm::dvec3 Reference::Impl::light_irradiance(const glm::dvec3& x, const glm::dvec3& n) const {
+  glm::dvec3 sum(0.0);
+  const glm::dvec3 from = x + n * eps;
+  for (const solver::Light& l : input->lights) {
+    if (l.type == solver::Light::Type::kDirectional) {
+      const glm::dvec3 to_light = -glm::normalize(l.direction);
+      const double cos_x = glm::dot(n, to_light);
+      if (cos_x > 0.0 && clear(from, to_light, std::numeric_limits<double>::infinity())) sum += l.intensity * cos_x;
+      continue;
+    }
+    // The light's geometry is x's own; only the shadow ray leaves from the lifted point.
+    const glm::dvec3 to = l.position - x;
+    const double d2 = glm::dot(to, to);
+    if (!(d2 > 0.0)) continue;
+    const double d = std::sqrt(d2);
+    const glm::dvec3 dir = to / d;
+    const double cos_x = glm::dot(n, dir);
+    if (cos_x <= 0.0) continue;
+    double scale = cos_x / d2;
+    if (l.range > 0.0) scale *= std::clamp(1.0 - std::pow(d / l.range, 4.0), 0.0, 1.0);
+    if (l.type == solver::Light::Type::kSpot) {
+      const double cos_outer = std::cos(l.outer_cone), cos_inner = std::cos(l.inner_cone);
+      const double t = std::clamp((glm::dot(-dir, glm::normalize(l.direction)) - cos_outer) / std::max(1e-12, cos_inner - cos_outer), 0.0, 1.0);
+      scale *= t * t;
+    }
+    if (scale <= 0.0) continue;
+    const glm::dvec3 ray = l.position - from;
+    const double length = glm::length(ray);
+    if (clear(from, ray / length, length * (1.0 - 1e-6))) sum += l.intensity * scale;
+  }
+  return sum;
+}
 
 Reference::Reference(const solver::Scene& scene) : impl_(std::make_unique<Impl>()) {
   Impl& s = *impl_;
@@ -141,6 +203,7 @@ ReferencePoint Reference::radiosity_at(uint32_t patch, const glm::dvec3& x0, uin
     glm::dvec3 x = x0;
     glm::dvec3 n = s.normal[patch];
     for (int bounce = 0; bounce < 64; ++bounce) {
+      if (!s.input->lights.empty()) value += weight * s.light_irradiance(x, n);
       // Direct light: a point on an emitter, chosen by power, seen through a shadow ray.
       if (!s.emitters.empty()) {
         const double pick = uni(rng) * s.total_power;
@@ -207,7 +270,10 @@ ReferencePoint Reference::radiosity_at(uint32_t patch, const glm::dvec3& x0, uin
       rh.ray.mask = 0xffffffffu;
       rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
       rtcIntersect1(s.scene, &ctx, &rh);
-      if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) break;  // escaped
+      if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) {  // escaped: the sky
+        value += weight * (std::numbers::pi * s.input->sky);
+        break;
+      }
       uint32_t q = s.tri_patch[rh.hit.primID];
       if (glm::dot(s.normal[q], d) >= 0.0) q = s.twin[q];
       const glm::dvec3 nq = s.normal[q];

@@ -140,10 +140,9 @@ Solution solve_with(const solver::Scene& scene, const JobSpec& spec, const BakeH
 
 std::string bake_error(const SceneDocument& document, const JobSpec& spec) {
   const solver::Scene& scene = scene_of(document);
-  const bool baseline = spec.method == Method::kHierarchical || spec.method == Method::kReference;
-  if (baseline && (!scene.lights.empty() || spec.sky != glm::dvec3(0.0)))
+  if (spec.method == Method::kHierarchical && (!scene.lights.empty() || spec.sky != glm::dvec3(0.0)))
     return std::string("method ") + to_string(spec.method) +
-           " bakes emitting surfaces only; KHR_lights_punctual lights and the sky are baked by aa and classical";
+           " bakes emitting surfaces only; KHR_lights_punctual lights and the sky are baked by aa, classical and reference";
   if (spec.sky != glm::dvec3(0.0)) return {};
   return bake_error(document);
 }

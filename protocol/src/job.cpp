@@ -122,7 +122,7 @@ const ParamInfo kParams[] = {
      [](const JobSpec& s) { return static_cast<double>(s.write.color_bits); },
      [](JobSpec& s, double v) { s.write.color_bits = static_cast<int>(v); }},
     {"sky", "sky", Kind::kColour, 0, kNoLimit,
-     "radiance of a uniform sky around the scene, R,G,B (or one number for grey; aa and classical)",
+     "radiance of a uniform sky around the scene, R,G,B (or one number for grey; aa, classical and reference)",
      [](const JobSpec& s) { return (s.sky.x + s.sky.y + s.sky.z) / 3.0; },
      [](JobSpec& s, double v) { s.sky = glm::dvec3(v); },
      [](const JobSpec& s) { return s.sky; }, [](JobSpec& s, const glm::dvec3& v) { s.sky = v; }},

@@ -4,8 +4,10 @@
 #include "hemibake/solver/hemicube.h"
 #include "hemibake/solver/scenes.h"
 
+#include <glm/geometric.hpp>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 
@@ -64,6 +66,94 @@ TEST(Reference, DirectLightAtGrazingAnglesMatchesTheExactFormFactor) {
     const double expected = 0.7 * 5.0 * solver::point_polygon_form_factor(point, glm::dvec3(0.0, -1.0, 0.0), lamp);
     const ReferencePoint r = reference.radiosity_at(0, point, 20000, 11);
     EXPECT_NEAR(r.radiosity.x, expected, 4.0 * r.std_error.x) << "x = " << x;
+  }
+}
+
+// Punctual lights over a lone floor (nothing else reflects, so B = rho * E with the irradiance
+// E of KHR_lights_punctual's definitions, written out here from the specification): a point light
+// at height h gives I h / d^3; a spot light the same times t^2, t = (cos a - cos outer) / (cos
+// inner - cos outer) clamped to [0, 1]; a range r the window clamp(1 - (d / r)^4, 0, 1); a
+// directional light I cos(theta). A black plate casts a shadow from each.
+TEST(Reference, PunctualLightsMatchTheirClosedForms) {
+  const glm::dvec3 none(0.0), rho(0.5, 0.4, 0.3), intensity(10.0, 20.0, 5.0);
+  const double h = 2.0;
+  auto floor_scene = [&] {
+    solver::Scene scene;
+    solver::add_quad(scene, {-50, 0, -50}, {-50, 0, 50}, {50, 0, 50}, {50, 0, -50}, rho, none, 0);
+    // A black plate 1 m up over x in [3, 5], facing down: it hides the light from floor points
+    // under it and reflects nothing.
+    solver::add_quad(scene, {3, 1, -1}, {5, 1, -1}, {5, 1, 1}, {3, 1, 1}, none, none, 1);
+    return scene;
+  };
+  auto at = [](const solver::Scene& scene, double x, double z) {
+    const Reference reference(scene);
+    return reference.radiosity_at(0, {x, 0.0, z}, 8, 5).radiosity;
+  };
+  auto expect = [](const glm::dvec3& got, const glm::dvec3& want, const char* what) {
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(got[c], want[c], 1e-9 + 1e-6 * want[c]) << what << " channel " << c;
+  };
+  {
+    solver::Scene scene = floor_scene();
+    solver::Light l;
+    l.position = {0, h, 0};
+    l.intensity = intensity;
+    scene.lights.push_back(l);
+    for (double x : {0.0, 1.0, 2.5}) {
+      const double d = std::hypot(x, h);
+      expect(at(scene, x, 0.0), rho * intensity * (h / (d * d * d)), "point");
+    }
+    expect(at(scene, 8.0, 0.0), none, "point, shadowed");  // the ray crosses y = 1 at x = 4
+    scene.lights[0].range = 3.0;
+    const double d = std::hypot(2.0, h);
+    expect(at(scene, 2.0, 0.0), rho * intensity * (h / (d * d * d)) * (1.0 - std::pow(d / 3.0, 4.0)), "point with range");
+    expect(at(scene, 2.5, 0.0), none, "point, beyond its range");
+  }
+  {
+    solver::Scene scene = floor_scene();
+    solver::Light l;
+    l.type = solver::Light::Type::kSpot;
+    l.position = {0, h, 0};
+    l.direction = {0, -1, 0};
+    l.inner_cone = 0.3;
+    l.outer_cone = 0.6;
+    l.intensity = intensity;
+    scene.lights.push_back(l);
+    for (double x : {0.5, 0.9, 1.2, 1.5}) {
+      const double d = std::hypot(x, h), cos_a = h / d;
+      const double t = std::clamp((cos_a - std::cos(0.6)) / (std::cos(0.3) - std::cos(0.6)), 0.0, 1.0);
+      expect(at(scene, 0.0, x), rho * intensity * (h / (d * d * d)) * (t * t), "spot");
+    }
+  }
+  {
+    solver::Scene scene = floor_scene();
+    solver::Light l;
+    l.type = solver::Light::Type::kDirectional;
+    l.direction = glm::normalize(glm::dvec3(-1.0, -std::sqrt(3.0), 0.0));  // 30 degrees from the vertical
+    l.intensity = intensity;
+    scene.lights.push_back(l);
+    expect(at(scene, 0.0, 0.0), rho * intensity * (std::sqrt(3.0) / 2.0), "directional");
+    expect(at(scene, 3.2, 0.0), none, "directional, shadowed");  // the plate's shadow moves 1 / sqrt 3 m
+  }
+}
+
+// The sky of radiance S: an open floor gets B = rho pi S; beside a black wall, rho pi S (1 - F)
+// with F the exact form factor from the point to the wall.
+TEST(Reference, SkyLightsWhatSeesItWithItsOpenShare) {
+  const glm::dvec3 none(0.0), rho(0.6), sky(0.5, 1.0, 2.0);
+  solver::Scene scene;
+  solver::add_quad(scene, {-50, 0, -50}, {-50, 0, 50}, {50, 0, 50}, {50, 0, -50}, rho, none, 0);
+  const std::array<glm::dvec3, 4> wall = {glm::dvec3(1, 0, -2), glm::dvec3(1, 3, -2), glm::dvec3(1, 3, 2), glm::dvec3(1, 0, 2)};
+  solver::add_quad(scene, wall[0], wall[1], wall[2], wall[3], none, none, 1);  // facing -x
+  scene.sky = sky;
+  const Reference reference(scene);
+  const ReferencePoint far = reference.radiosity_at(0, {-40, 0, 0}, 64, 3);
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(far.radiosity[c], rho[c] * M_PI * sky[c], 1e-9) << "open floor, channel " << c;
+  for (double x : {0.0, 0.7}) {
+    const glm::dvec3 point(x, 0, 0);
+    const double f = solver::point_polygon_form_factor(point, glm::dvec3(0, 1, 0), wall);
+    const ReferencePoint r = reference.radiosity_at(0, point, 20000, 7);
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(r.radiosity[c], rho[c] * M_PI * sky[c] * (1.0 - f), 4.0 * r.std_error[c]) << "x = " << x << " channel " << c;
   }
 }
 

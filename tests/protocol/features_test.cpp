@@ -1207,6 +1207,8 @@ TEST(PunctualLightsFeature, DarkSceneMessageNamesEmittersLightsAndSky) {
   EXPECT_EQ(bake_error(*r.document, spec), "");
   spec.method = Method::kHierarchical;
   EXPECT_NE(bake_error(*r.document, spec).find("sky"), std::string::npos);
+  spec.method = Method::kReference;  // its path tracer sees the sky
+  EXPECT_EQ(bake_error(*r.document, spec), "");
 }
 
 struct BadLight {

@@ -1,5 +1,5 @@
 // A Monte Carlo reference for radiosity, independent of any hemicube: path tracing of the diffuse
-// scene with Embree's ray casting.
+// scene with Embree's ray casting. Emitting patches, punctual lights and the sky all light it.
 #pragma once
 
 #include "hemibake/solver/solver.h"

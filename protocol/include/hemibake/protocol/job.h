@@ -37,7 +37,7 @@ struct JobSpec {
   WriteOptions write;      ///< the output file
   uint32_t rays = 4;       ///< hr: visibility rays per link
   uint32_t samples = 256;  ///< reference: paths per vertex
-  glm::dvec3 sky{0.0};     ///< radiance of a uniform sky around the scene (aa and classical)
+  glm::dvec3 sky{0.0};     ///< radiance of a uniform sky around the scene (aa, classical, reference)
 };
 
 /// The solver's parameters for `spec`, with the form-factor mode its method needs (reference bakes
