@@ -99,18 +99,25 @@ void GroupAdjacency::add(uint32_t a, uint32_t b, bool folded) {
   links_.push_back({(static_cast<uint64_t>(b) << 32) | a, folded});
 }
 
-// Groups whose common edges disagree (a fin standing on the line between two floor tiles of one
-// group: one tile on each side) count as tiling, as every neighbour did before orientation was known.
+// Groups whose common edges disagree (a wall standing on the line between two floor tiles of one
+// group, one tile on each side, where the floor goes on around the wall's end) are not linked: they
+// are ordered by depth like any two surfaces. Counted as tiling, the wall and the floor behind it
+// shared every pixel where both showed, half each: a wall on such a floor took two thirds of its
+// sky, and light went through it to the floor beyond.
 void GroupAdjacency::finish() {
   std::sort(links_.begin(), links_.end(), [](const Link& x, const Link& y) { return x.key < y.key; });
   size_t out = 0;
+  bool disagree = false;  // the links merged into links_[out - 1] disagree
   for (size_t i = 0; i < links_.size(); ++i) {
     if (out > 0 && links_[out - 1].key == links_[i].key) {
-      links_[out - 1].folded = links_[out - 1].folded && links_[i].folded;
+      disagree = disagree || links_[out - 1].folded != links_[i].folded;
       continue;
     }
+    if (disagree) --out;
+    disagree = false;
     links_[out++] = links_[i];
   }
+  if (disagree) --out;
   links_.resize(out);
   // Where each a's links start (links are sorted by a): a pixel's resolve looks its surfaces'
   // neighbours up by index instead of searching all links. Sparse ids (a caller's own, from 2^31

@@ -396,6 +396,33 @@ TEST(Sky, FloorOfAWellGetsLambertsFormulaForTheOpening) {
   RecordProperty("p90", std::to_string(e.p90));
 }
 
+// A wall standing on the line between two rows of a black floor's tiles, the floor going on
+// around the wall's ends (one surface on both sides of it): the wall sees the sky but where the
+// floor in front of it hides it, E = pi S (1 - F(point -> floor in front)) by Lambert's formula.
+// The wall and the floor behind it once shared every pixel where both showed, as if they tiled:
+// the wall took two thirds of its light.
+TEST(Sky, WallStandingOnATiledFloorSeesTheSkyTheFloorLeavesIt) {
+  const uint64_t seed = test::test_seed();
+  std::mt19937_64 rng(seed);
+  const double rho = 0.6, s = 1.5;
+  Scene scene;
+  add_floor(scene, -5, 5, -5, 5, 10, V(0.0));  // 1 m tiles; the wall stands on z = 0
+  const uint32_t first_wall = static_cast<uint32_t>(scene.patches.size());
+  for (int i = 0; i < 6; ++i)    // 6 m wide, centred: the floor goes on 2 m past each end
+    for (int j = 0; j < 3; ++j)  // 3 m tall, facing -z
+      scene.patches.push_back(quad(V(-3 + i, j, 0), V(-3 + i, j + 1, 0), V(-2 + i, j + 1, 0), V(-2 + i, j, 0), V(rho)));
+  scene.sky = V(s);
+  const Mesh mesh = solve(scene);
+  const std::vector<V> floor_in_front = {V(-5, 0, -5), V(-5, 0, 0), V(5, 0, 0), V(5, 0, -5)};
+  auto truth = [&](const V& x) { return rho * kPi * s * (1.0 - lambert(x, V(0, 0, -1), floor_in_front)); };
+  const auto samples = sample_mesh(mesh, 2000, rng, [&](uint32_t p) { return p >= first_wall; });
+  const Errors e = relative_errors(samples, truth, [](const Sample&) { return true; });
+  EXPECT_LE(e.median, 0.04) << test::seed_note(seed) << " elements " << mesh.elements.size();
+  EXPECT_LE(e.p90, 0.08) << test::seed_note(seed);
+  RecordProperty("median", std::to_string(e.median));
+  RecordProperty("p90", std::to_string(e.p90));
+}
+
 // A closed room gets nothing from the sky: a closed box of emitting walls stays E / (1 - rho).
 TEST(Sky, ClosedRoomIsUnchanged) {
   const V rho(0.5), e(1.0);
