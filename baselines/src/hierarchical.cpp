@@ -13,6 +13,8 @@
 // the number of threads or on scheduling.
 #include "hemibake/baselines/hierarchical.h"
 
+#include "shadow_ray.h"
+
 #include <embree3/rtcore.h>
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
@@ -352,20 +354,7 @@ class Solver {
       const glm::dvec3 b = random_point(q, rng) + normal_[q.patch] * eps_;
       const glm::dvec3 d = b - a;
       const double len = glm::length(d);
-      RTCIntersectContext ctx;
-      rtcInitIntersectContext(&ctx);
-      RTCRay ray{};
-      ray.org_x = static_cast<float>(a.x);
-      ray.org_y = static_cast<float>(a.y);
-      ray.org_z = static_cast<float>(a.z);
-      ray.dir_x = static_cast<float>(d.x / len);
-      ray.dir_y = static_cast<float>(d.y / len);
-      ray.dir_z = static_cast<float>(d.z / len);
-      ray.tnear = 0.0f;
-      ray.tfar = static_cast<float>(len * (1.0 - 1e-4));
-      ray.mask = 0xffffffffu;
-      rtcOccluded1(rtc_, &ctx, &ray);
-      seen += ray.tfar >= 0.0f;
+      seen += detail::unoccluded(rtc_, a, d / len, len * (1.0 - 1e-4));
     }
     return static_cast<double>(seen) / params_.rays;
   }

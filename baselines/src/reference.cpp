@@ -12,6 +12,8 @@
 // the cosine-weighted estimate of its irradiance is pi S.
 #include "hemibake/baselines/reference.h"
 
+#include "shadow_ray.h"
+
 #include <embree3/rtcore.h>
 #include <glm/geometric.hpp>
 
@@ -71,29 +73,9 @@ struct Reference::Impl {
   std::vector<Emitter> emitters;
   std::vector<double> cdf;
   double total_power = 0.0;
-  // True when no surface lies within `length` of `from` along the unit `dir` (length may be
-  // infinite).
-  bool clear(const glm::dvec3& from, const glm::dvec3& dir, double length) const;
   // The irradiance the punctual lights bring to x (normal n), each seen through a shadow ray.
   glm::dvec3 light_irradiance(const glm::dvec3& x, const glm::dvec3& n) const;
 };
-
-bool Reference::Impl::clear(const glm::dvec3& from, const glm::dvec3& dir, double length) const {
-  RTCIntersectContext ctx;
-  rtcInitIntersectContext(&ctx);
-  RTCRay r{};
-  r.org_x = static_cast<float>(from.x);
-  r.org_y = static_cast<float>(from.y);
-  r.org_z = static_cast<float>(from.z);
-  r.dir_x = static_cast<float>(dir.x);
-  r.dir_y = static_cast<float>(dir.y);
-  r.dir_z = static_cast<float>(dir.z);
-  r.tnear = 0.0f;
-  r.tfar = std::isfinite(length) ? static_cast<float>(length) : std::numeric_limits<float>::infinity();
-  r.mask = 0xffffffffu;
-  rtcOccluded1(scene, &ctx, &r);
-  return r.tfar >= 0.0f;
-}
 
 glm::dvec3 Reference::Impl::light_irradiance(const glm::dvec3& x, const glm::dvec3& n) const {
   glm::dvec3 sum(0.0);
@@ -102,7 +84,8 @@ glm::dvec3 Reference::Impl::light_irradiance(const glm::dvec3& x, const glm::dve
     if (l.type == solver::Light::Type::kDirectional) {
       const glm::dvec3 to_light = -glm::normalize(l.direction);
       const double cos_x = glm::dot(n, to_light);
-      if (cos_x > 0.0 && clear(from, to_light, std::numeric_limits<double>::infinity())) sum += l.intensity * cos_x;
+      if (cos_x > 0.0 && detail::unoccluded(scene, from, to_light, std::numeric_limits<double>::infinity()))
+        sum += l.intensity * cos_x;
       continue;
     }
     // The light's geometry is x's own; only the shadow ray leaves from the lifted point.
@@ -123,7 +106,7 @@ glm::dvec3 Reference::Impl::light_irradiance(const glm::dvec3& x, const glm::dve
     if (scale <= 0.0) continue;
     const glm::dvec3 ray = l.position - from;
     const double length = glm::length(ray);
-    if (clear(from, ray / length, length * (1.0 - 1e-6))) sum += l.intensity * scale;
+    if (detail::unoccluded(scene, from, ray / length, length * (1.0 - 1e-6))) sum += l.intensity * scale;
   }
   return sum;
 }
@@ -220,9 +203,6 @@ ReferencePoint Reference::radiosity_at(uint32_t patch, const glm::dvec3& x0, uin
         const glm::dvec3 dir = to / std::sqrt(r2);
         const double cos_x = glm::dot(n, dir), cos_y = -glm::dot(s.normal[em.patch], dir);
         if (cos_x > 0.0 && cos_y > 0.0) {
-          RTCIntersectContext sctx;
-          rtcInitIntersectContext(&sctx);
-          RTCRay sr{};
           // The shadow ray runs between the two points lifted off their surfaces by eps, so that
           // it stays in front of both planes. (Lifting only x and aiming along x -> y made the
           // ray meet the emitter's plane eps / cos_y short of y: at grazing angles every sample was
@@ -231,17 +211,7 @@ ReferencePoint Reference::radiosity_at(uint32_t patch, const glm::dvec3& x0, uin
           const glm::dvec3 from = x + n * s.eps, target = y + s.normal[em.patch] * s.eps;
           const glm::dvec3 seg = target - from;
           const double seg_len = glm::length(seg);
-          sr.org_x = static_cast<float>(from.x);
-          sr.org_y = static_cast<float>(from.y);
-          sr.org_z = static_cast<float>(from.z);
-          sr.dir_x = static_cast<float>(seg.x / seg_len);
-          sr.dir_y = static_cast<float>(seg.y / seg_len);
-          sr.dir_z = static_cast<float>(seg.z / seg_len);
-          sr.tnear = 0.0f;
-          sr.tfar = static_cast<float>(seg_len * (1.0 - 1e-4));
-          sr.mask = 0xffffffffu;
-          rtcOccluded1(s.scene, &sctx, &sr);
-          if (sr.tfar >= 0.0f) {  // not occluded
+          if (detail::unoccluded(s.scene, from, seg / seg_len, seg_len * (1.0 - 1e-4))) {
             const auto& pe = s.input->patches[em.patch];
             const double power = (pe.emission.x + pe.emission.y + pe.emission.z) * em.area;
             const double prob = power / s.total_power;  // of choosing this triangle
