@@ -119,9 +119,10 @@ int main(int argc, char** argv) {
     if (f == 1 && !per_point_file.empty()) {
       std::FILE* out = std::fopen(per_point_file.c_str(), "w");
       if (out == nullptr) continue;
+      const double slack = bench::plane_slack(baked);
       for (size_t i = 0; i < points.size(); ++i) {
         glm::dvec3 shown(0.0);
-        bench::displayed_value(baked, points[i].position, points[i].normal, shown);
+        bench::displayed_value(baked, points[i].position, points[i].normal, slack, shown);
         std::fprintf(out, "%u %.6g %.6g %.6g %.6g %.6g %.6g %.6g %.6g %.6g %.4f\n", points[i].patch,
                      points[i].position.x, points[i].position.y, points[i].position.z, points[i].reference.x,
                      points[i].reference.y, points[i].reference.z, shown.x, shown.y, shown.z, err.errors[i]);

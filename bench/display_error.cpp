@@ -112,17 +112,20 @@ void trace_reference(const solver::Scene& scene, std::vector<SurfacePoint>& poin
   });
 }
 
-bool displayed_value(const solver::Mesh& baked, const glm::dvec3& x, const glm::dvec3& normal, glm::dvec3& out) {
-  // The triangle containing x on the side facing `normal`, nearest to x's plane. A triangle's plane
-  // may lie off x's by 1e-3 of its size, or by 1e-4 of the scene's extent: the written positions
-  // are quantized (Draco, 14 bits by default: up to 3e-5 of the extent), which moves the small
-  // elements of a refined surface off its plane by more than their size allows.
+double plane_slack(const solver::Mesh& baked) {
+  if (baked.positions.empty()) return 0.0;
   glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
   for (const glm::dvec3& v : baked.positions) {
     lo = glm::min(lo, v);
     hi = glm::max(hi, v);
   }
-  const double slack = baked.positions.empty() ? 0.0 : 1e-4 * glm::length(hi - lo);
+  return 1e-4 * glm::length(hi - lo);
+}
+
+bool displayed_value(const solver::Mesh& baked, const glm::dvec3& x, const glm::dvec3& normal, double slack,
+                     glm::dvec3& out) {
+  // The triangle containing x on the side facing `normal`, nearest to x's plane (within 1e-3 of its
+  // size plus `slack`).
   double best = std::numeric_limits<double>::max();
   bool found = false;
   auto consider = [&](const glm::dvec3& pa, const glm::dvec3& pb, const glm::dvec3& pc, const glm::dvec3& ba,
@@ -178,7 +181,9 @@ DisplayError displayed_error(const std::vector<SurfacePoint>& points, const solv
   out.errors.assign(points.size(), 0.0);
   std::vector<glm::dvec3> shown(points.size(), glm::dvec3(0.0));
   std::vector<uint8_t> hit(points.size(), 0);
-  parallel(points.size(), 0, [&](size_t i) { hit[i] = displayed_value(baked, points[i].position, points[i].normal, shown[i]); });
+  const double slack = plane_slack(baked);
+  parallel(points.size(), 0,
+           [&](size_t i) { hit[i] = displayed_value(baked, points[i].position, points[i].normal, slack, shown[i]); });
   double bake_sum = 0.0, ref_sum = 0.0;
   for (size_t i = 0; i < points.size(); ++i) {
     const double ref = channel_sum(points[i].reference), denom = std::max(ref, floor);

@@ -54,9 +54,16 @@ struct DisplayError {
 /// relative error is 5 % of the points' mean reference, so points in an umbra do not dominate.
 DisplayError displayed_error(const std::vector<SurfacePoint>& points, const solver::Mesh& baked);
 
+/// How far off a triangle's plane a point may lie and still be on it, besides 1e-3 of the
+/// triangle's size: 1e-4 of the extent of `baked` (written positions are quantized: Draco's 14 bits
+/// move small elements off their plane by up to 3e-5 of the extent).
+double plane_slack(const solver::Mesh& baked);
+
 /// The value `baked` displays at a point, interpolated barycentrically over the triangle that
-/// contains it on the side facing `normal`; false if none does. An element loop of more than three
-/// vertices (a solver mesh) is shown as the writer shows it: a fan from its centre.
-bool displayed_value(const solver::Mesh& baked, const glm::dvec3& position, const glm::dvec3& normal, glm::dvec3& out);
+/// contains it on the side facing `normal` (within `slack`, plane_slack(baked)); false if none
+/// does. An element loop of more than three vertices (a solver mesh) is shown as the writer shows
+/// it: a fan from its centre.
+bool displayed_value(const solver::Mesh& baked, const glm::dvec3& position, const glm::dvec3& normal, double slack,
+                     glm::dvec3& out);
 
 }  // namespace hemibake::bench
