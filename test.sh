@@ -3,7 +3,7 @@
 # one instrumented build (clang, Debug with HEMIBAKE_DCHECK, AddressSanitizer and
 # UndefinedBehaviorSanitizer, libFuzzer's coverage counters; in build-sanitize/) runs the unit and
 # integration tests again and gives each libFuzzer target a 10 s run from its seeds (CTest label
-# fuzz). Tests labelled slow (the 100-run SIGKILL test) are left to a manual
+# fuzz); tests labelled heavy (the longest numeric ones) run in the Release build only. Tests labelled slow (the 100-run SIGKILL test) are left to a manual
 # `ctest --test-dir build -L slow`. Arguments go to both ctest runs (e.g. -R Solver). HEMIBAKE_SKIP_SANITIZE=1 skips the second
 # build; HEMIBAKE_SKIP_FUZZ=1 skips the fuzz runs in it. Each stage's wall time is printed.
 set -euo pipefail
@@ -38,6 +38,6 @@ if [[ "${HEMIBAKE_SKIP_SANITIZE:-0}" != 1 ]]; then
   cmake --build build-sanitize -j"$jobs"
   stage sanitize-build
   ASAN_OPTIONS=detect_leaks=1:abort_on_error=1:strict_string_checks=1 UBSAN_OPTIONS=print_stacktrace=1 \
-    ctest --test-dir build-sanitize --output-on-failure -j"$jobs" -LE 'e2e|slow' "$@"
+    ctest --test-dir build-sanitize --output-on-failure -j"$jobs" -LE 'e2e|slow|heavy' "$@"
   stage sanitize-and-fuzz-tests
 fi
