@@ -89,7 +89,13 @@ bool Solver::Impl::gather_step() {
     start_gather();
   }
   if (gather_spent >= gather_budget) {
-    // Out of budget: what is not gathered keeps its elements' mean.
+    // Out of budget: what is not gathered keeps its elements' mean. The vertices gathered so far
+    // (the largest elements' first) keep what they gathered.
+    if (gather_phase == 0)
+      for (size_t i = 0; i < gather_next; ++i) {
+        v_irr[gather_pending[i].id] = gather_pending[i].irr;
+        v_gathered[gather_pending[i].id] = 1;
+      }
     gather_done = true;
     gather_pending.clear();
     gather_workers.clear();
