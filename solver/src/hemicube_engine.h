@@ -105,6 +105,10 @@ class Hemicube {
   /// The solid angle pixel `pixel` subtends at the eye (they sum to 2 pi).
   double pixel_solid_angle(uint32_t pixel) const;
 
+  /// Where a fragment's depth is taken: at its pixel's centre (true) or at the centre of the part
+  /// of the pixel it covers (false, the default; see Hemicube::rasterize).
+  void set_depth_at_pixel_centre(bool on) { centre_depth_ = on; }
+
   /// Places the hemicube at `eye` facing `normal` (unit); `up_hint` fixes the rotation about it.
   void place(const glm::dvec3& eye, const glm::dvec3& normal, const glm::dvec3& up_hint);
   const glm::dvec3& eye() const { return eye_; }
@@ -145,6 +149,7 @@ class Hemicube {
 
   uint32_t n_;
   bool full_;
+  bool centre_depth_ = false;
   size_t face_count_;  // 5, or 6 for a full cube
   uint32_t pixel_count_;
   std::vector<double> dff_;

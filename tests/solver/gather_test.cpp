@@ -21,6 +21,20 @@ namespace {
 
 double mean3(const glm::dvec3& v) { return (v.x + v.y + v.z) / 3.0; }
 
+// A scene solved with the final gather: its mesh and the solve's figures.
+struct Gathered {
+  Mesh mesh;
+  Stats stats;
+};
+Gathered solve_with_gather(const Scene& scene) {
+  EXPECT_EQ(validate(scene), "");
+  Params params;
+  params.gather = true;
+  Solver solver(scene, params);
+  EXPECT_TRUE(solver.run().converged);
+  return {solver.mesh(), solver.stats()};
+}
+
 // A floor 4 x 4 m (one patch) under a 1 x 1 m emitter 1 m up, facing down, nothing else: every
 // point of the floor shows rho E F(point -> emitter). The gather puts that value at every vertex,
 // on the floor's outline too, and the mesh interpolates it between them; as shown at random points
@@ -92,14 +106,10 @@ TEST(Gather, VerticesGatheredBeforeTheBudgetRanOutKeepTheirLight) {
       add_quad(scene, {x0, y0, 2.5}, {x0, y0 + t, 2.5}, {x0 + t, y0 + t, 2.5}, {x0 + t, y0, 2.5}, glm::dvec3(0.0),
                glm::dvec3(0.0), 2);
     }
-  ASSERT_EQ(validate(scene), "");
   const std::vector<glm::dvec3> lamp{{-0.5, 1, -0.5}, {0.5, 1, -0.5}, {0.5, 1, 0.5}, {-0.5, 1, 0.5}};
   auto exact = [&](const glm::dvec3& q) { return rho.x * e.x * point_polygon_form_factor(q, {0, 1, 0}, lamp); };
-  Params params;
-  params.gather = true;
-  Solver solver(scene, params);
-  ASSERT_TRUE(solver.run().converged);
-  const Mesh mesh = solver.mesh();
+  const Gathered solved = solve_with_gather(scene);
+  const Mesh& mesh = solved.mesh;
   // The vertices of the floor's largest elements (at least half the largest one's area).
   auto area = [&](const Mesh::Element& el) {
     double a = 0.0;
@@ -119,8 +129,8 @@ TEST(Gather, VerticesGatheredBeforeTheBudgetRanOutKeepTheirLight) {
   vertices.erase(std::unique(vertices.begin(), vertices.end()), vertices.end());
   // The budget did run out: fewer points were gathered than the mesh has vertices.
   std::printf("%zu vertices in the mesh, %llu gathered; %zu of the floor's largest elements\n", mesh.positions.size(),
-              static_cast<unsigned long long>(solver.stats().gathers), vertices.size());
-  ASSERT_LT(solver.stats().gathers, mesh.positions.size() / 2);
+              static_cast<unsigned long long>(solved.stats.gathers), vertices.size());
+  ASSERT_LT(solved.stats.gathers, mesh.positions.size() / 2);
   ASSERT_GT(vertices.size(), 8u);
   std::vector<double> errors;
   for (uint32_t v : vertices) errors.push_back(std::abs(mesh.radiosity[v].x - exact(mesh.positions[v])) / exact(mesh.positions[v]));
@@ -129,6 +139,54 @@ TEST(Gather, VerticesGatheredBeforeTheBudgetRanOutKeepTheirLight) {
   std::printf("those vertices: median error %.4f, worst %.4f\n", median, worst);
   EXPECT_LT(median, 0.01);
   EXPECT_LT(worst, 0.03);
+}
+
+// A lamp hung 1 cm under a tiled ceiling, seen from a wall at grazing angles: the wall's vertices
+// show rho E F(point -> lamp) (the ceiling is black, so only the lamp lights the wall). Along the
+// lamp's outline the gather's coarse pixels hold both the lamp and the ceiling tiles beside it,
+// which do not overlap it; compared where each one's covered part lies, the ceiling beside the
+// lamp's near edge was the nearer and hid part of the lamp. The gather compares them at the pixel's
+// centre (Hemicube::set_depth_at_pixel_centre).
+TEST(Gather, WallSeesALampHungJustUnderATiledCeilingWhole) {
+  Scene scene;
+  const glm::dvec3 rho(0.5), e(10.0), black(0.0);
+  for (int i = 0; i < 24; ++i)  // the ceiling, 6 x 3 m in 0.25 m tiles at y = 3, facing down
+    for (int j = 0; j < 12; ++j) {
+      const double x0 = 0.25 * i, z0 = 0.25 * j;
+      add_quad(scene, {x0, 3, z0}, {x0 + 0.25, 3, z0}, {x0 + 0.25, 3, z0 + 0.25}, {x0, 3, z0 + 0.25}, black, black, 0);
+    }
+  const std::vector<glm::dvec3> lamp{{2.5, 2.99, 1.2}, {3.5, 2.99, 1.2}, {3.5, 2.99, 1.8}, {2.5, 2.99, 1.8}};
+  add_quad(scene, lamp[0], lamp[1], lamp[2], lamp[3], black, e, 1);
+  for (int i = 0; i < 12; ++i)  // the wall at z = 0, facing +z, in 0.5 m tiles
+    for (int j = 0; j < 6; ++j) {
+      const double x0 = 0.5 * i, y0 = 0.5 * j;
+      add_quad(scene, {x0, y0, 0}, {x0 + 0.5, y0, 0}, {x0 + 0.5, y0 + 0.5, 0}, {x0, y0 + 0.5, 0}, rho, black, 2);
+    }
+  const Gathered solved = solve_with_gather(scene);
+  const Mesh& mesh = solved.mesh;
+  std::vector<double> errors;
+  for (const Mesh::Element& el : mesh.elements) {
+    if (scene.patches[el.patch].material != 2) continue;
+    for (uint32_t i = el.boundary_begin; i < el.boundary_end; ++i) {
+      const glm::dvec3& q = mesh.positions[mesh.boundary[i]];
+      if (q.y < 1.0 || q.y > 2.8 || q.x < 1.0 || q.x > 5.0) continue;
+      const double want = rho.x * e.x * point_polygon_form_factor(q, {0, 0, 1}, lamp);
+      errors.push_back((mesh.radiosity[mesh.boundary[i]].x - want) / want);
+    }
+  }
+  ASSERT_GT(errors.size(), 20u);
+  double sum = 0.0;
+  for (double x : errors) sum += x;
+  std::sort(errors.begin(), errors.end(), [](double a, double b) { return std::abs(a) < std::abs(b); });
+  const double mean = sum / static_cast<double>(errors.size());
+  const double median = std::abs(errors[errors.size() / 2]), p90 = std::abs(errors[errors.size() * 9 / 10]);
+  std::printf("wall under the lamp: %zu vertex values, mean error %+.4f, |error| median %.4f p90 %.4f\n", errors.size(),
+              mean, median, p90);
+  // Compared where each covered part lies: mean -4.7 %, median 1.9 %, p90 13 %. Along one ray:
+  // -2.1 %, 0.2 %, 8.2 %; a bias remains on a tenth of the vertices (some up to 28 % dark), not
+  // yet understood.
+  EXPECT_LT(std::abs(mean), 0.03);
+  EXPECT_LT(median, 0.01);
 }
 
 // A wall standing on an emitting floor (E uniform, 2 x 2 m) and nothing else: a point of the wall
@@ -140,13 +198,9 @@ TEST(Gather, WallOnAGlowingFloorFollowsTheFalloff) {
   add_quad(scene, {-1, 0, -1}, {-1, 0, 1}, {1, 0, 1}, {1, 0, -1}, glm::dvec3(0.0), e, 0);
   // The wall: along the floor's edge z = -1, facing +z, 2 m wide and 2 m high.
   add_quad(scene, {-1, 0, -1}, {1, 0, -1}, {1, 2, -1}, {-1, 2, -1}, rho, glm::dvec3(0.0), 1);
-  ASSERT_EQ(validate(scene), "");
   const std::vector<glm::dvec3> floor{{-1, 0, -1}, {-1, 0, 1}, {1, 0, 1}, {1, 0, -1}};
-  Params params;
-  params.gather = true;
-  Solver solver(scene, params);
-  ASSERT_TRUE(solver.run().converged);
-  const Mesh mesh = solver.mesh();
+  const Gathered solved = solve_with_gather(scene);
+  const Mesh& mesh = solved.mesh;
   double worst = 0.0;
   size_t checked = 0;
   for (const Mesh::Element& el : mesh.elements) {
@@ -189,12 +243,8 @@ TEST(Gather, FloorUnderABoxStaysDark) {
   add_quad(scene, {a, 0, a}, {a, 0, -a}, {a, h, -a}, {a, h, a}, rho, glm::dvec3(0.0), 0);     // +x
   add_quad(scene, {-a, 0, -a}, {-a, 0, a}, {-a, h, a}, {-a, h, -a}, rho, glm::dvec3(0.0), 0); // -x
   add_quad(scene, {-0.5, 2, -0.5}, {0.5, 2, -0.5}, {0.5, 2, 0.5}, {-0.5, 2, 0.5}, glm::dvec3(0.0), e, 1);
-  ASSERT_EQ(validate(scene), "");
-  Params params;
-  params.gather = true;
-  Solver solver(scene, params);
-  ASSERT_TRUE(solver.run().converged);
-  const Mesh mesh = solver.mesh();
+  const Gathered solved = solve_with_gather(scene);
+  const Mesh& mesh = solved.mesh;
   double inside = 0.0, outside = 0.0;
   size_t n_inside = 0;
   for (const Mesh::Element& el : mesh.elements) {
@@ -224,13 +274,9 @@ TEST(Gather, OpenFloorUnderTheSky) {
   for (int i = 0; i < 3; ++i)
     add_quad(scene, {i, 0, 0}, {i, 0, 1}, {i + 1.0, 0, 1}, {i + 1.0, 0, 0}, rho, glm::dvec3(0.0), 0);
   scene.sky = glm::dvec3(0.2, 0.3, 0.1);
-  ASSERT_EQ(validate(scene), "");
-  Params params;
-  params.gather = true;
-  Solver solver(scene, params);
-  ASSERT_TRUE(solver.run().converged);
-  EXPECT_GT(solver.stats().gathers, 0u);
-  const Mesh mesh = solver.mesh();
+  const Gathered solved = solve_with_gather(scene);
+  const Mesh& mesh = solved.mesh;
+  EXPECT_GT(solved.stats.gathers, 0u);
   const glm::dvec3 want = rho * std::numbers::pi * scene.sky;
   for (uint32_t v : mesh.boundary)
     for (int c = 0; c < 3; ++c) ASSERT_NEAR(mesh.radiosity[v][c], want[c], 0.01 * want[c]) << "vertex " << v;
