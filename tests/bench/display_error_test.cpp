@@ -196,6 +196,23 @@ TEST(EmitterNearSurface, SkyPlaneBeforeADoubleSidedWindowWallLightsTheRoomAsTheP
   EXPECT_NEAR(e.mean_ratio, 1.0, 0.04);
 }
 
+// Bakes `document` as a user gets it (the GLB the service writes), writes it to a file and reads
+// the mesh back from that file.
+void bake_written_and_read_back(const protocol::SceneDocument& document, const protocol::JobSpec& spec, const std::string& name,
+                                solver::Mesh& mesh) {
+  const protocol::BakeOutput baked = protocol::bake(document, spec);
+  ASSERT_FALSE(baked.glb.empty()) << baked.error;
+  const std::string path = ::testing::TempDir() + "/" + name;
+  {
+    std::FILE* f = std::fopen(path.c_str(), "wb");
+    ASSERT_NE(f, nullptr);
+    ASSERT_EQ(std::fwrite(baked.glb.data(), 1, baked.glb.size(), f), baked.glb.size());
+    std::fclose(f);
+  }
+  ASSERT_EQ(protocol::read_baked_mesh(path, mesh), "");
+  std::remove(path.c_str());
+}
+
 // Blender's export of a floor and a crate lit by a point light, a spot, a sun and an emissive lamp
 // (scripts/make_blender_lights.py), baked and written as a user gets it (a Draco GLB with
 // quantized positions) and read back: the lights' pools and the crate's shadow show the path
@@ -208,18 +225,8 @@ TEST(PunctualLights, BlenderLightsShowThePathTracersLightInTheWrittenBake) {
   ASSERT_EQ(scene.lights.size(), 3u);
   protocol::JobSpec spec;
   spec.params.threads = 2;
-  const protocol::BakeOutput baked = protocol::bake(*r.document, spec);
-  ASSERT_FALSE(baked.glb.empty()) << baked.error;
-  const std::string path = ::testing::TempDir() + "/blender-lights-baked.glb";
-  {
-    std::FILE* f = std::fopen(path.c_str(), "wb");
-    ASSERT_NE(f, nullptr);
-    ASSERT_EQ(std::fwrite(baked.glb.data(), 1, baked.glb.size(), f), baked.glb.size());
-    std::fclose(f);
-  }
   solver::Mesh mesh;
-  ASSERT_EQ(protocol::read_baked_mesh(path, mesh), "");
-  std::remove(path.c_str());
+  ASSERT_NO_FATAL_FAILURE(bake_written_and_read_back(*r.document, spec, "blender-lights-baked.glb", mesh));
   ReferenceOptions options;
   options.points = 300;
   // The floor's underside (a double-sided material) takes about half of the points, dark in both;
@@ -271,18 +278,8 @@ TEST(GatherBudget, BackOfTheLitYardsWallStaysAsDarkAsThePathTracerSeesIt) {
   protocol::JobSpec spec;
   spec.params.threads = 2;
   spec.params.gather = true;
-  const protocol::BakeOutput baked = protocol::bake(*r.document, spec);
-  ASSERT_FALSE(baked.glb.empty()) << baked.error;
-  const std::string path = ::testing::TempDir() + "/lit-yard-gathered.glb";
-  {
-    std::FILE* f = std::fopen(path.c_str(), "wb");
-    ASSERT_NE(f, nullptr);
-    ASSERT_EQ(std::fwrite(baked.glb.data(), 1, baked.glb.size(), f), baked.glb.size());
-    std::fclose(f);
-  }
   solver::Mesh mesh;
-  ASSERT_EQ(protocol::read_baked_mesh(path, mesh), "");
-  std::remove(path.c_str());
+  ASSERT_NO_FATAL_FAILURE(bake_written_and_read_back(*r.document, spec, "lit-yard-gathered.glb", mesh));
   const DisplayError e = displayed_error(points, mesh);
   std::printf("back of the lit yard's wall, %zu points: median %.4f p90 %.4f, bake/reference %.3f, worst s.e. %.3f\n",
               points.size(), e.median, e.p90, e.mean_ratio, e.worst_std_error);
