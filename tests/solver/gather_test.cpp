@@ -180,11 +180,12 @@ TEST(Gather, WallSeesALampHungJustUnderATiledCeilingWhole) {
   std::sort(errors.begin(), errors.end(), [](double a, double b) { return std::abs(a) < std::abs(b); });
   const double mean = sum / static_cast<double>(errors.size());
   const double median = std::abs(errors[errors.size() / 2]), p90 = std::abs(errors[errors.size() * 9 / 10]);
-  std::printf("wall under the lamp: %zu vertex values, mean error %+.4f, |error| median %.4f p90 %.4f\n", errors.size(),
+  std::printf("wall under the lamp: %llu gathers, %zu vertices; %zu vertex values, mean error %+.4f, |error| median %.4f p90 %.4f\n", static_cast<unsigned long long>(solved.stats.gathers), mesh.positions.size(), errors.size(),
               mean, median, p90);
   // Compared where each covered part lies: mean -4.7 %, median 1.9 %, p90 13 %. Along one ray:
-  // -2.1 %, 0.2 %, 8.2 %; a bias remains on a tenth of the vertices (some up to 28 % dark), not
-  // yet understood.
+  // -2.2 %, 0.9 %, 8.9 %. The rest are vertices the budget does not reach (2048 of 2656 points are
+  // gathered), which show the mean of the elements around them; those gathered are exact (the
+  // same scene written as glTF and baked with --gather: 530 wall vertices, each within 0.1 %).
   EXPECT_LT(std::abs(mean), 0.03);
   EXPECT_LT(median, 0.01);
 }
