@@ -36,8 +36,6 @@ void print_stats(const Console& c, const solver::Stats& st) {
                static_cast<unsigned long long>(st.splits_pools),
                static_cast<unsigned long long>(st.projections), static_cast<unsigned long long>(st.elements_projected),
                static_cast<unsigned long long>(st.reused_children));
-  if (st.gather_skipped)
-    std::fprintf(c.out, "  final gather: left out (light leaves covered surfaces through gaps; vertices average their elements)\n");
   if (st.gathers > 0)
     std::fprintf(c.out, "  final gather: %llu hemicubes, %llu splits, %.3f s\n", static_cast<unsigned long long>(st.gathers),
                  static_cast<unsigned long long>(st.splits_gather), st.seconds_gathering);

@@ -160,7 +160,6 @@ struct Stats {
   uint64_t gathers = 0;          ///< hemicubes placed at points of the mesh by the final gather
   uint64_t splits_gather = 0;    ///< elements split by the final gather (not counted in `splits`' kinds)
   double seconds_gathering = 0.0;  ///< in the final gather
-  bool gather_skipped = false;   ///< the final gather was left out: light leaves covered surfaces
                                  ///< through gaps it cannot see (a lamp just under a ceiling)
   uint64_t reused_children = 0;  ///< children whose form factor came from their parent's pixels
   uint64_t elements = 0;         ///< leaf elements now
