@@ -195,7 +195,8 @@ void Solver::Impl::gather_round() {
     });
     // The points each element's split would make, where it may split at all: the largest
     // elements' first, for a budget that may not reach them all.
-    std::stable_sort(gather_queue.begin(), gather_queue.end(), [&](uint32_t a, uint32_t b) { return e_area[a] > e_area[b]; });
+    std::stable_sort(gather_queue.begin(), gather_queue.end(),
+                     [&](uint32_t a, uint32_t b) { return e_area[a] > e_area[b]; });
     gather_pending.clear();
     std::unordered_map<uint64_t, uint32_t> edge_seen;  // a midpoint is gathered once
     for (uint32_t e : gather_queue) {

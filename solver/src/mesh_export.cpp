@@ -145,7 +145,8 @@ Mesh Solver::mesh(bool ambient) const {
       }
       if (!any) continue;
       const double got = mean(shown) / nc, want = mean(s.e_b[e] + rho * amb);
-      if (std::abs(got - want) > s.gather_tolerance && (got > kGatheredMismatch * want || want > kGatheredMismatch * got))
+      if (std::abs(got - want) > s.gather_tolerance &&
+          (got > kGatheredMismatch * want || want > kGatheredMismatch * got))
         for (uint32_t k = 0; k < nc; ++k) keep_mean[s.e_corner[e][k]] = 1;
     }
   for (uint32_t e : leaves) {

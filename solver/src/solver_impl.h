@@ -608,7 +608,9 @@ struct Solver::Impl::GatherPoint {
 
 // One thread's hemicube and scratch for the final gather.
 struct Solver::Impl::GatherWorker {
-  explicit GatherWorker(uint32_t resolution) : cube(resolution), inline_pool(1) { cube.set_depth_at_pixel_centre(true); }
+  explicit GatherWorker(uint32_t resolution) : cube(resolution), inline_pool(1) {
+    cube.set_depth_at_pixel_centre(true);
+  }
   detail::Hemicube cube;
   detail::ThreadPool inline_pool;
   detail::ProjectScratch scratch;

@@ -198,8 +198,8 @@ TEST(EmitterNearSurface, SkyPlaneBeforeADoubleSidedWindowWallLightsTheRoomAsTheP
 
 // Bakes `document` as a user gets it (the GLB the service writes), writes it to a file and reads
 // the mesh back from that file.
-void bake_written_and_read_back(const protocol::SceneDocument& document, const protocol::JobSpec& spec, const std::string& name,
-                                solver::Mesh& mesh) {
+void bake_written_and_read_back(const protocol::SceneDocument& document, const protocol::JobSpec& spec,
+                                const std::string& name, solver::Mesh& mesh) {
   const protocol::BakeOutput baked = protocol::bake(document, spec);
   ASSERT_FALSE(baked.glb.empty()) << baked.error;
   const std::string path = ::testing::TempDir() + "/" + name;

@@ -115,7 +115,8 @@ TEST(Gather, VerticesGatheredBeforeTheBudgetRanOutKeepTheirLight) {
     double a = 0.0;
     const glm::dvec3& o = mesh.positions[mesh.boundary[el.boundary_begin]];
     for (uint32_t i = el.boundary_begin + 1; i + 1 < el.boundary_end; ++i)
-      a += 0.5 * glm::length(glm::cross(mesh.positions[mesh.boundary[i]] - o, mesh.positions[mesh.boundary[i + 1]] - o));
+      a += 0.5 * glm::length(
+                     glm::cross(mesh.positions[mesh.boundary[i]] - o, mesh.positions[mesh.boundary[i + 1]] - o));
     return a;
   };
   double largest = 0.0;
@@ -133,7 +134,8 @@ TEST(Gather, VerticesGatheredBeforeTheBudgetRanOutKeepTheirLight) {
   ASSERT_LT(solved.stats.gathers, mesh.positions.size() / 2);
   ASSERT_GT(vertices.size(), 8u);
   std::vector<double> errors;
-  for (uint32_t v : vertices) errors.push_back(std::abs(mesh.radiosity[v].x - exact(mesh.positions[v])) / exact(mesh.positions[v]));
+  for (uint32_t v : vertices)
+    errors.push_back(std::abs(mesh.radiosity[v].x - exact(mesh.positions[v])) / exact(mesh.positions[v]));
   std::sort(errors.begin(), errors.end());
   const double median = errors[errors.size() / 2], worst = errors.back();
   std::printf("those vertices: median error %.4f, worst %.4f\n", median, worst);
@@ -180,7 +182,9 @@ TEST(Gather, WallSeesALampHungJustUnderATiledCeilingWhole) {
   std::sort(errors.begin(), errors.end(), [](double a, double b) { return std::abs(a) < std::abs(b); });
   const double mean = sum / static_cast<double>(errors.size());
   const double median = std::abs(errors[errors.size() / 2]), p90 = std::abs(errors[errors.size() * 9 / 10]);
-  std::printf("wall under the lamp: %llu gathers, %zu vertices; %zu vertex values, mean error %+.4f, |error| median %.4f p90 %.4f\n", static_cast<unsigned long long>(solved.stats.gathers), mesh.positions.size(), errors.size(),
+  std::printf("wall under the lamp: %llu gathers, %zu vertices; %zu vertex values, mean error %+.4f, |error| median %.4f "
+              "p90 %.4f\n",
+              static_cast<unsigned long long>(solved.stats.gathers), mesh.positions.size(), errors.size(),
               mean, median, p90);
   // Compared where each covered part lies: mean -4.7 %, median 1.9 %, p90 13 %. Along one ray:
   // -2.2 %, 0.9 %, 8.9 %. The rest are vertices the budget does not reach (2048 of 2656 points are
