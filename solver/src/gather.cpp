@@ -120,6 +120,7 @@ void Solver::Impl::start_gather() {
   gather_started = true;
   // Children come after their parents: a backward sweep meets every node after its children.
   e_hidden.assign(e_patch.size(), 0);
+  e_settled.assign(e_patch.size(), 0);
   for (size_t i = e_patch.size(); i-- > 0;) {
     if (e_child[i] == kNone) {
       // A leaf covered by a surface just in front of it shows its light to no gather (kCoverGap).
@@ -229,8 +230,15 @@ void Solver::Impl::gather_round() {
   }
   std::vector<uint32_t> next;
   for (uint32_t e : gather_queue) {
-    if (e_area[e] < min_split_area() || leaves.size() + 3 * (1 + next.size() / 4) > params.max_elements) continue;
-    if (e_hidden[e]) continue;  // covered: seen by no one
+    // Settled: too small to split, at the element limit, covered, or compared below.
+    if (e_area[e] < min_split_area() || leaves.size() + 3 * (1 + next.size() / 4) > params.max_elements) {
+      e_settled[e] = 1;
+      continue;
+    }
+    if (e_hidden[e]) {  // covered: seen by no one
+      e_settled[e] = 1;
+      continue;
+    }
     const uint32_t nc = corner_count(e);
     const std::array<uint32_t, 4> c = e_corner[e];
     const glm::dvec3& rho = patches[e_patch[e]].reflectance;
@@ -257,6 +265,7 @@ void Solver::Impl::gather_round() {
       lerp[4] = 0.25 * (v_irr[c[0]] + v_irr[c[1]] + v_irr[c[2]] + v_irr[c[3]]);
     }
     if (!all) continue;
+    e_settled[e] = 1;
     double worst = 0.0;
     for (uint32_t k = 0; k < points; ++k) worst = std::max(worst, mean(rho * glm::abs(got[k] - lerp[k])));
     if (worst <= gather_tolerance) continue;
@@ -281,6 +290,7 @@ void Solver::Impl::gather_round() {
       v_gathered[ctr] = 1;
     }
     e_hidden.resize(e_patch.size(), 0);
+    e_settled.resize(e_patch.size(), 0);
     for (uint32_t k = 0; k < 4; ++k) {
       e_mean[e_child[e] + k] = e_b[e];
       e_low[e_child[e] + k] = e_high[e_child[e] + k] = mean(e_b[e]);

@@ -559,6 +559,7 @@ struct Solver::Impl {
   std::vector<int8_t> e_cov;
   double gap_share = 0.0;
   std::vector<uint8_t> e_hidden;  // per element: all its leaves covered (leaf_covered), for the gather
+  std::vector<uint8_t> e_settled;  // per element: the gather checked it for a split (or it cannot split)
   std::vector<double> e_low, e_high;  // per element: the least and greatest mean(B) of its leaves
   std::vector<glm::dvec3> v_normal, v_inward, v_irr;
   std::vector<uint8_t> v_gathered;
