@@ -136,23 +136,28 @@ Mesh Solver::mesh(bool ambient) const {
   // 2 there too: p90 8.0 % instead of 7.9 %), and at no limit Blender's lights file went from
   // p90 1.4 % to 1.9 %.
   auto gathered = [&](uint32_t v) { return s.gather_done && v < s.v_gathered.size() && s.v_gathered[v]; };
+  // What gathered vertex v shows on element e: its own light (gather.cpp); the lights' direct light
+  // and light from covered pieces (e_gap) as the element's.
+  auto gathered_light = [&](uint32_t e, uint32_t v) {
+    const Patch& patch = s.patches[s.e_patch[e]];
+    return patch.emission + s.e_light[e] + s.e_gap[e] + patch.reflectance * (s.v_irr[v] + amb);
+  };
   std::vector<uint8_t> keep_mean(s.vpos.size(), 0);
   if (s.gather_done)
     for (uint32_t e : leaves) {
       const double factor = e < s.e_settled.size() && s.e_settled[e] ? kCheckedMismatch : kGatheredMismatch;
-      const uint32_t p = s.e_patch[e], nc = s.corner_count(e);
-      const glm::dvec3& rho = s.patches[p].reflectance;
-      const glm::dvec3 base = s.patches[p].emission + s.e_light[e] + s.e_gap[e] + rho * amb;
+      const uint32_t nc = s.corner_count(e);
+      const glm::dvec3 mean_light = s.e_b[e] + s.patches[s.e_patch[e]].reflectance * amb;
       glm::dvec3 shown(0.0);
       bool any = false;
       for (uint32_t k = 0; k < nc; ++k) {
         const uint32_t v = s.e_corner[e][k];
         const bool g = gathered(v);
         any = any || g;
-        shown += g ? base + rho * s.v_irr[v] : s.e_b[e] + rho * amb;
+        shown += g ? gathered_light(e, v) : mean_light;
       }
       if (!any) continue;
-      const double got = mean(shown) / nc, want = mean(s.e_b[e] + rho * amb);
+      const double got = mean(shown) / nc, want = mean(mean_light);
       if (std::abs(got - want) > s.gather_tolerance &&
           (got > factor * want || want > factor * got))
         for (uint32_t k = 0; k < nc; ++k) keep_mean[s.e_corner[e][k]] = 1;
@@ -172,15 +177,10 @@ Mesh Solver::mesh(bool ambient) const {
       hanging(a, b);
     }
     el.boundary_end = static_cast<uint32_t>(m.boundary.size());
-    const glm::dvec3& rho = s.patches[el.patch].reflectance;
     for (uint32_t i = el.boundary_begin; i < el.boundary_end; ++i) {
       const uint32_t v = m.boundary[i];
       if (v >= s.vpos.size()) continue;  // another surface's point: interpolated below
-      // Gathered: the vertex's own light (gather.cpp); the lights' direct light and light from
-      // covered pieces (e_gap) as the element's.
-      const glm::dvec3 b = gathered(v) && !keep_mean[v]
-                               ? s.patches[el.patch].emission + s.e_light[e] + s.e_gap[e] + rho * (s.v_irr[v] + amb)
-                               : el.radiosity;
+      const glm::dvec3 b = gathered(v) && !keep_mean[v] ? gathered_light(e, v) : el.radiosity;
       acc[v] += b * el.area;
       weight[v] += el.area;
     }
