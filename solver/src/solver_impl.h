@@ -98,8 +98,8 @@ constexpr double kClusterCone = 0.9397;
 // double-sided ball's outer faces on one side and its inner faces on the other (the same normals)
 // would shoot the inner faces' light out of the ball from in front of the outer ones.
 constexpr double kClusterDepth = 0.5;
-// A shooting piece with an absorbing back close in front of it that takes at least this share of
-// the light from its centre is refined (absorber_close).
+// A shooting piece whose absorbing backs close in front of it take at least this share of the
+// light from its centre together is refined (absorber_close).
 constexpr double kAbsorberShare = 0.1;
 // ... also a front facing the piece within this cosine of head-on (absorber_close).
 constexpr double kFacingOccluderCos = 0.7;
