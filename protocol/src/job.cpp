@@ -13,8 +13,8 @@ namespace {
 
 using Kind = ParamInfo::Kind;
 
-// The presets (README, "Quality"), measured on the Cornell box against the path tracer: draft
-// 0.2 s, p90 70 %; default 0.6 s, p90 32 %; high (light pools and the final gather) 2.8 s, p90 4.6 %.
+// The presets (README, "Quality"); measured on the Cornell box against the path tracer in the
+// README's table.
 void apply_quality(JobSpec& s, Quality q) {
   const solver::Params defaults = default_solver_params();
   s.quality = q;
@@ -24,17 +24,20 @@ void apply_quality(JobSpec& s, Quality q) {
   s.params.convergence = defaults.convergence;
   s.params.gather = defaults.gather;
   s.params.pools = defaults.pools;
+  s.params.pools_indirect = defaults.pools_indirect;
   switch (q) {
     case Quality::kDraft:
       s.params.resolution = 50;
       s.params.feps = 3e-3;
       s.params.beps = 0.1;
       s.params.convergence = 0.01;
+      s.params.pools = false;
       break;
     case Quality::kDefault: break;
     case Quality::kHigh:
       s.params.gather = true;
       s.params.pools = true;
+      s.params.pools_indirect = true;
       break;
   }
 }
@@ -48,7 +51,7 @@ const ParamInfo kParams[] = {
      [](const JobSpec& s) { return static_cast<double>(s.method); },
      [](JobSpec& s, double v) { s.method = static_cast<Method>(v); }},
     {"quality", "quality", Kind::kQuality, 0, 2,
-     "draft, default or high: a preset of resolution, feps, beps, convergence, pools and gather, which those given with it override",
+     "draft, default or high: a preset of resolution, feps, beps, convergence, pools, pools_indirect and gather, which those given with it override",
      [](const JobSpec& s) { return static_cast<double>(s.quality); },
      [](JobSpec& s, double v) { apply_quality(s, static_cast<Quality>(v)); }},
     {"resolution", "resolution", Kind::kWhole, 4, 4096, "hemicube top face in pixels (even)",
@@ -79,9 +82,13 @@ const ParamInfo kParams[] = {
      [](const JobSpec& s) { return s.params.gather ? 1.0 : 0.0; },
      [](JobSpec& s, double v) { s.params.gather = v != 0.0; }},
     {"pools", "pools", Kind::kFlag, 0, 1,
-     "aa, classical: a first pass finds where light pools on surfaces too large for one shot to split (a floor under small lamps), and the solve starts with them split (off: one pass; on at the high preset; see README)",
+     "aa, classical: a first pass of the emitters' direct light finds where it pools on surfaces too large for one shot to split (a floor under small lamps, a window's light), and the solve starts with them split (off: one pass, as at the draft preset; see README)",
      [](const JobSpec& s) { return s.params.pools ? 1.0 : 0.0; },
      [](JobSpec& s, double v) { s.params.pools = v != 0.0; }},
+    {"pools_indirect", "pools-indirect", Kind::kFlag, 0, 1,
+     "aa, classical, with pools: the first pass follows the reflected light until 98 % of it is out, and finds where that pools too (a block's faces turned from the lamp; on at the high preset)",
+     [](const JobSpec& s) { return s.params.pools_indirect ? 1.0 : 0.0; },
+     [](JobSpec& s, double v) { s.params.pools_indirect = v != 0.0; }},
     {"cluster_size", "cluster-size", Kind::kNumber, 0, kNoLimit,
      "small patches shoot together in clusters up to this times the scene's diagonal wide (0: alone)",
      [](const JobSpec& s) { return s.params.cluster_size; }, [](JobSpec& s, double v) { s.params.cluster_size = v; }},

@@ -128,9 +128,16 @@ TEST(JobParams, QualityPresetIsOverriddenByTheParametersGivenWithIt) {
   ASSERT_EQ(apply_params({{"quality", "high"}}, high), "");
   EXPECT_TRUE(high.params.gather);
   EXPECT_EQ(high.params.beps, defaults.params.beps);
+  // Light pools: found in the emitters' direct light by default, in the reflected light too at
+  // high, not looked for at draft.
+  EXPECT_TRUE(defaults.params.pools);
+  EXPECT_FALSE(defaults.params.pools_indirect);
+  EXPECT_TRUE(high.params.pools);
+  EXPECT_TRUE(high.params.pools_indirect);
   JobSpec draft;
   ASSERT_EQ(apply_params({{"quality", "draft"}}, draft), "");
   EXPECT_FALSE(draft.params.gather);
+  EXPECT_FALSE(draft.params.pools);
   EXPECT_LT(draft.params.resolution, defaults.params.resolution);
   EXPECT_GT(draft.params.beps, defaults.params.beps);
   EXPECT_GT(draft.params.convergence, defaults.params.convergence);

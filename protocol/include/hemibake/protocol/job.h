@@ -24,9 +24,14 @@ enum class Quality : uint8_t { kDraft, kDefault, kHigh };
 const char* to_string(Quality quality);
 std::optional<Quality> quality_from(std::string_view name);
 
-/// The solver's settings at the default preset: the library's defaults (light pools off; the
-/// high preset turns them on).
-inline solver::Params default_solver_params() { return solver::Params{}; }
+/// The solver's settings at the default preset: the library's defaults with light pools found in
+/// the emitters' direct light (the library leaves them off; the high preset follows the reflected
+/// light too, and the draft preset leaves them off).
+inline solver::Params default_solver_params() {
+  solver::Params p;
+  p.pools = true;
+  return p;
+}
 
 struct JobSpec {
   Method method = Method::kAntiAliased;
