@@ -24,7 +24,6 @@ void apply_quality(JobSpec& s, Quality q) {
   s.params.convergence = defaults.convergence;
   s.params.gather = defaults.gather;
   s.params.pools = defaults.pools;
-  s.params.pools_indirect = defaults.pools_indirect;
   switch (q) {
     case Quality::kDraft:
       s.params.resolution = 50;
@@ -36,8 +35,6 @@ void apply_quality(JobSpec& s, Quality q) {
     case Quality::kDefault: break;
     case Quality::kHigh:
       s.params.gather = true;
-      s.params.pools = true;
-      s.params.pools_indirect = true;
       break;
   }
 }
@@ -51,7 +48,7 @@ const ParamInfo kParams[] = {
      [](const JobSpec& s) { return static_cast<double>(s.method); },
      [](JobSpec& s, double v) { s.method = static_cast<Method>(v); }},
     {"quality", "quality", Kind::kQuality, 0, 2,
-     "draft, default or high: a preset of resolution, feps, beps, convergence, pools, pools_indirect and gather, which those given with it override",
+     "draft, default or high: a preset of resolution, feps, beps, convergence, pools and gather, which those given with it override",
      [](const JobSpec& s) { return static_cast<double>(s.quality); },
      [](JobSpec& s, double v) { apply_quality(s, static_cast<Quality>(v)); }},
     {"resolution", "resolution", Kind::kWhole, 4, 4096, "hemicube top face in pixels (even)",
@@ -82,13 +79,9 @@ const ParamInfo kParams[] = {
      [](const JobSpec& s) { return s.params.gather ? 1.0 : 0.0; },
      [](JobSpec& s, double v) { s.params.gather = v != 0.0; }},
     {"pools", "pools", Kind::kFlag, 0, 1,
-     "aa, classical: a first pass of the emitters' direct light finds where it pools on surfaces too large for one shot to split (a floor under small lamps, a window's light), and the solve starts with them split (off: one pass, as at the draft preset; see README)",
+     "aa, classical: a quick first pass finds where light pools on surfaces too large for one shot to split (a floor under small lamps, a window's light, the ceiling over them), and the solve starts with them split (off: one pass, as at the draft preset; see README)",
      [](const JobSpec& s) { return s.params.pools ? 1.0 : 0.0; },
      [](JobSpec& s, double v) { s.params.pools = v != 0.0; }},
-    {"pools_indirect", "pools-indirect", Kind::kFlag, 0, 1,
-     "aa, classical, with pools: the first pass follows the reflected light until 98 % of it is out, and finds where that pools too (a block's faces turned from the lamp; on at the high preset)",
-     [](const JobSpec& s) { return s.params.pools_indirect ? 1.0 : 0.0; },
-     [](JobSpec& s, double v) { s.params.pools_indirect = v != 0.0; }},
     {"cluster_size", "cluster-size", Kind::kNumber, 0, kNoLimit,
      "small patches shoot together in clusters up to this times the scene's diagonal wide (0: alone)",
      [](const JobSpec& s) { return s.params.cluster_size; }, [](JobSpec& s, double v) { s.params.cluster_size = v; }},

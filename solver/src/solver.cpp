@@ -168,10 +168,9 @@ bool Solver::Impl::step() {
   // Lights and the sky shoot first, each once (lights.cpp).
   if (stats.shots < params.max_shots && shoot_next_light()) return true;
   // Once the shots are done, the final gather (gather.cpp), in batches.
-  // The first pass, once every emitter has shot (and with pools_indirect, once most of the light
-  // is out): where it pools (pools.cpp); then the solve proper starts on those elements
-  // (Solver::step).
-  if (first_pass && ((emitters_left == 0 && (!solve.pools_indirect || stats.unshot_fraction < kPoolsPass)) ||
+  // The first pass, once every emitter has shot and most of their light has been given out: where
+  // it pools (pools.cpp); then the solve proper starts on those elements (Solver::step).
+  if (first_pass && ((emitters_left == 0 && stats.unshot_fraction < kPoolsPass) ||
                      stats.unshot_fraction < params.convergence || stats.shots >= params.max_shots ||
                      emitted_power <= 0.0)) {
     const auto t0 = Clock::now();

@@ -79,12 +79,12 @@ constexpr double kCoarseShare = 0.25;
 // Cluster pieces carrying at least this share of the emitted power take a finer hemicube
 // (finer_level, piece_headroom).
 constexpr double kFinePower = 1e-3;
-// pools.cpp: the first pass looks for light pools once every emitter has shot (with
-// Params::pools_indirect, once the unshot power is also below this share of the emitted), or at
-// convergence. An element splits there when the light its points took differs by more than
+// pools.cpp: the first pass looks for light pools once every emitter has shot and the unshot power
+// is below this share of the emitted (or at convergence): the emitters' light and its first
+// reflections. An element splits there when the light its points took differs by more than
 // kPoolShare of their mean and by more than kPoolFloor times the radiosity tolerance: a pool, not
 // the few percent by which an evenly lit wall's points differ before the last shots even them out.
-constexpr double kPoolsPass = 0.02;
+constexpr double kPoolsPass = 0.3;
 constexpr double kPoolShare = 0.3;
 constexpr double kPoolFloor = 0.05;
 // Pieces carrying at least this share of the emitted power refine for receivers whose plane cuts

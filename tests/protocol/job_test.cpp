@@ -128,12 +128,9 @@ TEST(JobParams, QualityPresetIsOverriddenByTheParametersGivenWithIt) {
   ASSERT_EQ(apply_params({{"quality", "high"}}, high), "");
   EXPECT_TRUE(high.params.gather);
   EXPECT_EQ(high.params.beps, defaults.params.beps);
-  // Light pools: found in the emitters' direct light by default, in the reflected light too at
-  // high, not looked for at draft.
+  // Light pools: looked for by default and at high, not at draft.
   EXPECT_TRUE(defaults.params.pools);
-  EXPECT_FALSE(defaults.params.pools_indirect);
   EXPECT_TRUE(high.params.pools);
-  EXPECT_TRUE(high.params.pools_indirect);
   JobSpec draft;
   ASSERT_EQ(apply_params({{"quality", "draft"}}, draft), "");
   EXPECT_FALSE(draft.params.gather);

@@ -24,9 +24,8 @@ enum class Quality : uint8_t { kDraft, kDefault, kHigh };
 const char* to_string(Quality quality);
 std::optional<Quality> quality_from(std::string_view name);
 
-/// The solver's settings at the default preset: the library's defaults with light pools found in
-/// the emitters' direct light (the library leaves them off; the high preset follows the reflected
-/// light too, and the draft preset leaves them off).
+/// The solver's settings at the default preset: the library's defaults with light pools (the
+/// library leaves them off, and so does the draft preset).
 inline solver::Params default_solver_params() {
   solver::Params p;
   p.pools = true;

@@ -102,11 +102,6 @@ struct Params {
   bool pools = false;           ///< a quick first pass finds where the light pools on surfaces too
                                 ///< large for any one shot to split (a floor under small lamps), and
                                 ///< the solve proper starts with those elements split (see README)
-  bool pools_indirect = false;  ///< with pools: the first pass goes on until most of the light is
-                                ///< out, and finds pools of reflected light too (a block's faces
-                                ///< turned from the lamp); false: it ends once every emitter, light
-                                ///< and the sky have shot (their direct light), at a small part of
-                                ///< the cost
   uint32_t shot_cache_mb = 1024; ///< memory for the form factors of earlier shots, replayed when the
                                  ///< same shooter shoots again with no more power and an unchanged
                                  ///< mesh (see README); 0 = every shot projects anew; taken as it
