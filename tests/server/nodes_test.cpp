@@ -63,7 +63,7 @@ class Nodes : public ::testing::Test {
 
 // A small bake (a fraction of a second), different for each `i` so that none is a cache hit.
 std::string small_job(int i) {
-  return "/v1/jobs?max_shots=20&resolution=16&max_elements=200&convergence=" + std::to_string(0.05 + 0.001 * i);
+  return "/v1/jobs?pools=false&max_shots=20&resolution=16&max_elements=200&convergence=" + std::to_string(0.05 + 0.001 * i);
 }
 
 // 20 jobs over three nodes; one node is killed mid-bake. Every job succeeds exactly once (one
@@ -108,7 +108,7 @@ TEST_F(Nodes, SigkillOfANodeMidBakeLosesNoJobAndRunsNoneTwice) {
 // job's events, progress and result stay as the other node left them.
 TEST_F(Nodes, NodePausedPastItsLeaseHasItsLateWritesRefused) {
   auto a = node();
-  const Reply posted = request(a->port(), http::verb::post, "/v1/jobs?convergence=0.0005&resolution=64", cornell(), kGltf);
+  const Reply posted = request(a->port(), http::verb::post, "/v1/jobs?pools=false&convergence=0.0005&resolution=64", cornell(), kGltf);
   ASSERT_EQ(posted.status, 202) << posted.body;
   const std::string id = posted.js()["id"];
   for (int i = 0; i < 200 && sql("SELECT state FROM jobs WHERE id = '" + id + "'") != "running"; ++i) std::this_thread::sleep_for(10ms);

@@ -43,7 +43,7 @@ const std::map<std::string, std::string> kGltf = {{"Content-Type", "model/gltf+j
 TEST(Server, SubmitStreamFetchAndCacheHit) {
   ServerProcess server(temp_dir("submit"), {"--workers", "1"});
   ASSERT_NE(server.port(), 0);
-  const Reply posted = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.05", cornell(), kGltf);
+  const Reply posted = request(server.port(), http::verb::post, "/v1/jobs?pools=false&convergence=0.05", cornell(), kGltf);
   ASSERT_EQ(posted.status, 202) << posted.body;
   const std::string id = posted.js()["id"];
   EXPECT_EQ(posted.headers.at("location"), "/v1/jobs/" + id);
@@ -67,7 +67,7 @@ TEST(Server, SubmitStreamFetchAndCacheHit) {
                               {{"If-None-Match", result.headers.at("etag")}});
   EXPECT_EQ(again.status, 304);
   // The same scene and parameters: answered from the store.
-  const Reply cached = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.05", cornell(), kGltf);
+  const Reply cached = request(server.port(), http::verb::post, "/v1/jobs?pools=false&convergence=0.05", cornell(), kGltf);
   EXPECT_EQ(cached.status, 200);
   EXPECT_EQ(cached.headers.at("x-hemibake-cache"), "hit");
   EXPECT_EQ(cached.js()["id"], id);
@@ -103,8 +103,8 @@ TEST(Server, RefusesBadRequestsWithJsonErrors) {
 TEST(Server, IdempotencyKeyMakesRetriesSafe) {
   ServerProcess server(temp_dir("idem"), {"--workers", "1"});
   const std::map<std::string, std::string> h = {{"Content-Type", "model/gltf+json"}, {"Idempotency-Key", "abc-123"}};
-  const Reply a = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.3", cornell(), h);
-  const Reply b = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.3", cornell(), h);
+  const Reply a = request(server.port(), http::verb::post, "/v1/jobs?pools=false&convergence=0.3", cornell(), h);
+  const Reply b = request(server.port(), http::verb::post, "/v1/jobs?pools=false&convergence=0.3", cornell(), h);
   EXPECT_EQ(a.status, 202);
   EXPECT_EQ(b.status, 200);
   EXPECT_EQ(a.js()["id"], b.js()["id"]);
@@ -133,7 +133,7 @@ TEST(Server, CancelStopsARunningJob) {
   EXPECT_EQ(request(server.port(), http::verb::get, "/v1/jobs/" + id + "/result").status, 409);
   EXPECT_EQ(request(server.port(), http::verb::delete_, "/v1/jobs/" + id).status, 409);
   // The worker is free again: a new job runs to the end.
-  const Reply next = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.2", cornell(), kGltf);
+  const Reply next = request(server.port(), http::verb::post, "/v1/jobs?pools=false&convergence=0.2", cornell(), kGltf);
   EXPECT_EQ(wait_finished(server.port(), next.js()["id"])["state"], "succeeded");
 }
 
@@ -212,7 +212,7 @@ TEST(Server, QueueLimitAnswers429WithRetryAfter) {
   }
   EXPECT_GE(refused_with_keys, 3);
   if (!first_key.empty()) {
-    const Reply again = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.3", cornell(),
+    const Reply again = request(server.port(), http::verb::post, "/v1/jobs?pools=false&convergence=0.3", cornell(),
                                 {{"Content-Type", "model/gltf+json"}, {"Idempotency-Key", first_key}});
     EXPECT_EQ(again.status, 200) << again.body;
   }
@@ -227,7 +227,7 @@ TEST(Server, WarningHeadersCannotBeSplitByMaterialNames) {
   ASSERT_TRUE(scene.contains("materials"));
   scene["materials"][0]["name"] = "wall\r\nSet-Cookie: stolen=1\r\n\r\nHTTP/1.1 200 OK";
   scene["materials"][0]["alphaMode"] = "BLEND";  // baked opaque, with a warning naming the material
-  const Reply r = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.3", scene.dump(), kGltf);
+  const Reply r = request(server.port(), http::verb::post, "/v1/jobs?pools=false&convergence=0.3", scene.dump(), kGltf);
   ASSERT_EQ(r.status, 202) << r.body;
   EXPECT_EQ(r.headers.count("set-cookie"), 0u);
   ASSERT_TRUE(r.headers.count("warning"));
@@ -705,7 +705,7 @@ TEST(Server, BadOptionsAreRefusedClearly) {
 // Many clients at once, bounded in number and time: every request answered, no error.
 TEST(Server, ManyConcurrentClientsAndStreams) {
   ServerProcess server(temp_dir("load"), {"--workers", "2"});
-  const Reply posted = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.01", cornell(), kGltf);
+  const Reply posted = request(server.port(), http::verb::post, "/v1/jobs?pools=false&convergence=0.01", cornell(), kGltf);
   const std::string id = posted.js()["id"];
   std::atomic<int> failures{0};
   std::vector<std::thread> clients;
@@ -920,7 +920,7 @@ TEST(Server, TransferEncodingsThatHideARequestAreRefused) {
   EXPECT_EQ(request(server.port(), http::verb::get, "/v1/jobs/" + slow).js()["state"], "running");
   // Chunked alone is a body like any other.
   const std::string chunked = exchange(server.port(),
-                                       "POST /v1/jobs?convergence=0.3 HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: model/gltf+json\r\n"
+                                       "POST /v1/jobs?pools=false&convergence=0.3 HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: model/gltf+json\r\n"
                                        "Transfer-Encoding: chunked\r\nConnection: close\r\n\r\n" +
                                            [] {
                                              std::ostringstream hex;
@@ -1039,7 +1039,7 @@ TEST(Server, ContinueHeadOnEventsBearerCaseAndBadLastEventId) {
                                        3s, &timed_out);
   EXPECT_EQ(refused.rfind("HTTP/1.1 401", 0), 0u) << refused;
 
-  const Reply posted = request(server.port(), http::verb::post, "/v1/jobs?convergence=0.3", cornell(),
+  const Reply posted = request(server.port(), http::verb::post, "/v1/jobs?pools=false&convergence=0.3", cornell(),
                                {{"Content-Type", "model/gltf+json"}, {"Authorization", "Bearer s3cret"}});
   ASSERT_EQ(posted.status, 202) << posted.body;
   const std::string id = posted.js()["id"];
@@ -1088,7 +1088,7 @@ TEST(Server, FullDiskDuringABakeFailsTheJobAndTheServerRecovers) {
     for (int i = 0; i < 16 && ballast.write(mb.data(), static_cast<std::streamsize>(mb.size())); ++i) {}
   }
   // Full: a submission is refused cleanly, with nothing queued.
-  const Reply refused = request(port, http::verb::post, "/v1/jobs?convergence=0.3", cornell(), kGltf);
+  const Reply refused = request(port, http::verb::post, "/v1/jobs?pools=false&convergence=0.3", cornell(), kGltf);
   EXPECT_EQ(refused.status, 500) << refused.body;
   EXPECT_TRUE(refused.js().contains("error")) << refused.body;
   // Space comes back once the worker has found that the result cannot be written.
@@ -1104,7 +1104,7 @@ TEST(Server, FullDiskDuringABakeFailsTheJobAndTheServerRecovers) {
   const auto evs = events(port, id);  // returns only once the stream has ended
   ASSERT_FALSE(evs.empty());
   EXPECT_EQ(json::parse(std::get<2>(evs.back())).value("state", ""), "failed");
-  const Reply next = request(port, http::verb::post, "/v1/jobs?convergence=0.2", cornell(), kGltf);
+  const Reply next = request(port, http::verb::post, "/v1/jobs?pools=false&convergence=0.2", cornell(), kGltf);
   ASSERT_EQ(next.status, 202) << next.body;
   EXPECT_EQ(wait_finished(port, next.js()["id"])["state"], "succeeded");
   std::filesystem::remove(errors);
@@ -1264,7 +1264,7 @@ TEST(Server, RandomSigkillsLoseNoAcknowledgedJob) {
             // jobs of 4 runs well within the test's time on a loaded machine.
             const double convergence = 0.2 + std::uniform_real_distribution<double>(0, 0.3)(r);
             const Reply posted = request(port, http::verb::post,
-                                         "/v1/jobs?resolution=32&max_shots=30&convergence=" + std::to_string(convergence),
+                                         "/v1/jobs?pools=false&resolution=32&max_shots=30&convergence=" + std::to_string(convergence),
                                          cornell(), kGltf);
             std::string id;
             if (posted.status == 202 || posted.status == 200) {
