@@ -99,6 +99,60 @@ Mesh Solver::mesh(bool ambient) const {
   std::vector<std::array<uint32_t, 2>> lerp_from;  // for extra vertices: the edge they lie on
   std::unordered_map<uint64_t, uint32_t> extra;      // edge key -> extra vertex
 
+  // T-junctions between input patches (PreparedScene::t_neighbours): per patch, the vertices of
+  // its T-neighbours' elements that lie strictly inside one of its edges. Their elements are cut
+  // by halving their own edges, so along a shared line their vertices fall between this patch's.
+  const double on_edge = 1e-7 * s.prep.diagonal;
+  std::vector<std::vector<uint32_t>> t_vertices(s.patches.size());
+  {
+    std::vector<std::pair<size_t, size_t>> range(s.patches.size(), {0, 0});
+    for (size_t i = 0; i < leaves.size();) {
+      size_t j = i;
+      while (j < leaves.size() && s.e_patch[leaves[j]] == s.e_patch[leaves[i]]) ++j;
+      range[s.e_patch[leaves[i]]] = {i, j};
+      i = j;
+    }
+    for (uint32_t p = 0; p < s.patches.size(); ++p) {
+      const Patch& pa = s.patches[p];
+      for (uint32_t q : s.prep.t_neighbours[p])
+        for (size_t i = range[q].first; i < range[q].second; ++i)
+          for (uint32_t c = 0; c < s.corner_count(leaves[i]); ++c) {
+            const uint32_t v = s.e_corner[leaves[i]][c];
+            for (uint32_t k = 0; k < pa.corner_count; ++k) {
+              const glm::dvec3 d = pa.corners[(k + 1) % pa.corner_count] - pa.corners[k];
+              const double len = glm::length(d);
+              const glm::dvec3 r = s.vpos[v] - pa.corners[k];
+              const double t = glm::dot(r, d) / len;
+              if (t > on_edge && t < len - on_edge && glm::length(r - d * (t / len)) <= on_edge) {
+                t_vertices[p].push_back(v);
+                break;
+              }
+            }
+          }
+      std::sort(t_vertices[p].begin(), t_vertices[p].end());
+      t_vertices[p].erase(std::unique(t_vertices[p].begin(), t_vertices[p].end()), t_vertices[p].end());
+    }
+  }
+  // The vertex of t_vertices nearest to a strictly inside edge (a, b), or kNone.
+  uint32_t patch_now = kNone;  // the patch whose element's loop is being collected
+  auto junction_on = [&](uint32_t a, uint32_t b) {
+    uint32_t best = kNone;
+    if (patch_now == kNone || t_vertices[patch_now].empty()) return best;
+    const glm::dvec3& pa = m.positions[a];
+    const glm::dvec3 d = m.positions[b] - pa;
+    const double len = glm::length(d);
+    double nearest = len - on_edge;
+    for (uint32_t v : t_vertices[patch_now]) {
+      if (v == a || v == b) continue;
+      const glm::dvec3 r = s.vpos[v] - pa;
+      const double t = glm::dot(r, d) / len;
+      if (t > on_edge && t < nearest && glm::length(r - d * (t / len)) <= on_edge) {
+        nearest = t;
+        best = v;
+      }
+    }
+    return best;
+  };
   // Collects the vertices strictly inside edge (a, b), in order from a to b.
   std::function<void(uint32_t, uint32_t)> hanging = [&](uint32_t a, uint32_t b) {
     uint32_t mid = kNone;
@@ -106,6 +160,8 @@ Mesh Solver::mesh(bool ambient) const {
       mid = it->second;
     } else if (auto ex = extra.find(edge_key(a, b)); ex != extra.end()) {
       mid = ex->second;
+    } else if (const uint32_t t = junction_on(a, b); t != kNone) {
+      mid = t;
     } else {
       const glm::dvec3 pm = 0.5 * (m.positions[a] + m.positions[b]);
       if (positions.count(pm)) {
@@ -171,6 +227,7 @@ Mesh Solver::mesh(bool ambient) const {
     el.radiosity = s.e_b[e] + s.patches[el.patch].reflectance * amb;
     HEMIBAKE_DCHECK(el.radiosity.x >= 0.0 && el.radiosity.y >= 0.0 && el.radiosity.z >= 0.0);
     el.boundary_begin = static_cast<uint32_t>(m.boundary.size());
+    patch_now = el.patch;
     for (uint32_t k = 0; k < el.corner_count; ++k) {
       const uint32_t a = el.corners[k], b = el.corners[(k + 1) % el.corner_count];
       m.boundary.push_back(a);

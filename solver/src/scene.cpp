@@ -277,8 +277,10 @@ EdgePatches patches_by_edge(const Scene& scene, const PointIds& point_of) {
   return edge_patches;
 }
 
-// Smoothing groups, occlusion groups and the occlusion groups' adjacency.
-void find_groups(const Scene& scene, const EdgePatches& edge_patches, PreparedScene& out) {
+// Smoothing groups, occlusion groups and the occlusion groups' adjacency; `t_pairs` gets the
+// coplanar patches of one material that touch along an edge (for find_t_neighbours).
+void find_groups(const Scene& scene, const EdgePatches& edge_patches, PreparedScene& out,
+                 std::vector<std::pair<uint32_t, uint32_t>>& t_pairs) {
   const size_t n = scene.patches.size();
   UnionFind occl(n), smooth(n);
   std::vector<Touch> neighbours;
@@ -349,8 +351,18 @@ void find_groups(const Scene& scene, const EdgePatches& edge_patches, PreparedSc
   for (size_t i = 0; i < neighbours.size(); ++i) {
     const Touch& t = neighbours[i];
     if (!coplanar(t.a, t.b)) continue;
-    if (junction(t)) split[i] = 1;
-    else occl.unite(t.a, t.b);
+    if (junction(t)) {
+      split[i] = 1;
+      continue;
+    }
+    occl.unite(t.a, t.b);
+    // Coplanar patches of one material meeting along a part of an edge (a T-junction) are one
+    // smooth surface too: a wall cut around a window, whose pieces showed a flat colour each,
+    // with steps where they meet (mesh_export.cpp joins them through out.t_neighbours).
+    if (!t.folded && scene.patches[t.a].material == scene.patches[t.b].material) {
+      smooth.unite(t.a, t.b);
+      t_pairs.emplace_back(t.a, t.b);
+    }
   }
   out.occlusion_group.resize(n);
   out.smoothing_group.resize(n);
@@ -454,6 +466,35 @@ void make_vertices(const Scene& scene, const PointIds& point_of, PreparedScene& 
   }
 }
 
+// PreparedScene::t_neighbours: patches touching along an edge in one smoothing group where a
+// corner of one lies strictly inside an edge of the other.
+void find_t_neighbours(const Scene& scene, const std::vector<std::pair<uint32_t, uint32_t>>& t_pairs,
+                       PreparedScene& out) {
+  out.t_neighbours.assign(scene.patches.size(), {});
+  const double tol = 1e-7 * out.diagonal;
+  auto corner_inside = [&](uint32_t a, uint32_t b) {  // a corner of b inside an edge of a
+    const Patch& pa = scene.patches[a];
+    const Patch& pb = scene.patches[b];
+    for (uint32_t c = 0; c < pb.corner_count; ++c)
+      for (uint32_t k = 0; k < pa.corner_count; ++k) {
+        const glm::dvec3& p = pa.corners[k];
+        const glm::dvec3 d = pa.corners[(k + 1) % pa.corner_count] - p;
+        const double len = glm::length(d);
+        if (len <= tol) continue;
+        const glm::dvec3 r = pb.corners[c] - p;
+        const double s = glm::dot(r, d) / len;
+        if (s > tol && s < len - tol && glm::length(r - d * (s / len)) <= tol) return true;
+      }
+    return false;
+  };
+  for (const auto& [a, b] : t_pairs) {
+    if (out.smoothing_group[a] != out.smoothing_group[b]) continue;
+    if (!corner_inside(a, b) && !corner_inside(b, a)) continue;
+    out.t_neighbours[a].push_back(b);
+    out.t_neighbours[b].push_back(a);
+  }
+}
+
 }  // namespace
 
 PreparedScene prepare(const Scene& scene) {
@@ -461,12 +502,14 @@ PreparedScene prepare(const Scene& scene) {
   measure(scene, out);
   const PointIds point_of = point_ids(scene);
   const EdgePatches edge_patches = patches_by_edge(scene, point_of);
-  find_groups(scene, edge_patches, out);
+  std::vector<std::pair<uint32_t, uint32_t>> t_pairs;
+  find_groups(scene, edge_patches, out, t_pairs);
   out.back_hidden.assign(scene.patches.size(), 0);
   out.twin.assign(scene.patches.size(), kNone);
   hide_twin_backs(scene, point_of, out);
   hide_solid_backs(scene, edge_patches, out);
   make_vertices(scene, point_of, out);
+  find_t_neighbours(scene, t_pairs, out);
   return out;
 }
 

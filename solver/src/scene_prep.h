@@ -16,10 +16,15 @@ struct PreparedScene {
   std::vector<glm::dvec3> normal;             ///< unit normal per patch
   std::vector<double> area;                   ///< per patch
   std::vector<uint32_t> occlusion_group;      ///< per patch: coplanar, edge-connected patches
-  std::vector<uint32_t> smoothing_group;      ///< per patch: edge-connected, same material, no crease
+  std::vector<uint32_t> smoothing_group;      ///< per patch: edge-connected (whole edges, or a part
+                                              ///< of one: a T-junction), same material, no crease
   GroupAdjacency adjacency;                   ///< occlusion groups that share an edge
   std::vector<glm::dvec3> vertex_position;    ///< corner vertices, shared within a smoothing group
   std::vector<std::array<uint32_t, 4>> corner_vertex;  ///< per patch
+  /// Per patch: the patches of its smoothing group that meet it along a part of an edge only
+  /// (T-junctions: a wall piece beside a window, whose edge holds the corners of the pieces above
+  /// and below it); their vertices on its edges are joined into its elements' loops (mesh_export).
+  std::vector<std::vector<uint32_t>> t_neighbours;
   /// Per patch: its back needs no projection, since something else always hides what it would:
   /// another patch with the same corners in reverse order (the other side of a double-sided
   /// surface), or the front faces of the outward-facing solid it belongs to (edge-connected

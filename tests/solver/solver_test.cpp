@@ -72,6 +72,58 @@ TEST(Solver, UniformRadiosityCausesNoSubdivision) {
   EXPECT_EQ(solver.stats().elements, scene.patches.size());
 }
 
+// A floor of three coplanar patches meeting in a T-junction (one patch along one side, two along
+// the other, split at x = 1.1, which no halving of the first one reaches), as a modeller cuts a
+// wall around a window. The output mesh must have no cracks there: no vertex of the floor lies
+// inside an edge of a floor element's loop without being part of that loop. Before, the patches
+// were separate surfaces whose vertices were not shared, and each showed a flat colour with a step
+// where they meet.
+TEST(Solver, TJunctionBetweenInputPatchesIsJoinedInTheMesh) {
+  Scene scene;
+  const glm::dvec3 rho(0.6), dark(0.0);
+  add_quad(scene, {0, 0, 0}, {0, 0, 1}, {3, 0, 1}, {3, 0, 0}, rho, dark, 0);      // A
+  add_quad(scene, {0, 0, 1}, {0, 0, 2}, {1.1, 0, 2}, {1.1, 0, 1}, rho, dark, 0);  // B
+  add_quad(scene, {1.1, 0, 1}, {1.1, 0, 2}, {3, 0, 2}, {3, 0, 1}, rho, dark, 0);  // C
+  add_quad(scene, {0, 2, 0}, {1, 2, 0}, {1, 2, 2}, {0, 2, 2}, rho, glm::dvec3(1.0), 2);  // lamp over one end
+  add_quad(scene, {1, 2, 0}, {3, 2, 0}, {3, 2, 2}, {1, 2, 2}, rho, dark, 1);
+  add_quad(scene, {0, 0, 0}, {0, 2, 0}, {0, 2, 2}, {0, 0, 2}, rho, dark, 1);
+  add_quad(scene, {3, 0, 0}, {3, 0, 2}, {3, 2, 2}, {3, 2, 0}, rho, dark, 1);
+  add_quad(scene, {0, 0, 0}, {3, 0, 0}, {3, 2, 0}, {0, 2, 0}, rho, dark, 1);
+  add_quad(scene, {0, 0, 2}, {0, 2, 2}, {3, 2, 2}, {3, 0, 2}, rho, dark, 1);
+  ASSERT_EQ(validate(scene), "");
+  Params params;
+  params.threads = 2;
+  Solver solver(scene, params);
+  solver.run();
+  ASSERT_TRUE(solver.stats().converged);
+  const Mesh mesh = solver.mesh();
+  std::vector<uint32_t> floor_vertices;
+  for (const auto& el : mesh.elements)
+    if (el.patch <= 2)
+      for (uint32_t i = el.boundary_begin; i < el.boundary_end; ++i) floor_vertices.push_back(mesh.boundary[i]);
+  std::sort(floor_vertices.begin(), floor_vertices.end());
+  floor_vertices.erase(std::unique(floor_vertices.begin(), floor_vertices.end()), floor_vertices.end());
+  uint32_t cracks = 0;
+  bool junction_in_a = false;
+  for (const auto& el : mesh.elements) {
+    if (el.patch > 2) continue;
+    const uint32_t n = el.boundary_end - el.boundary_begin;
+    for (uint32_t k = 0; k < n; ++k) {
+      const uint32_t u = mesh.boundary[el.boundary_begin + k], w = mesh.boundary[el.boundary_begin + (k + 1) % n];
+      if (el.patch == 0 && glm::distance(mesh.positions[u], glm::dvec3(1.1, 0, 1)) < 1e-9) junction_in_a = true;
+      const glm::dvec3 d = mesh.positions[w] - mesh.positions[u];
+      for (uint32_t x : floor_vertices) {
+        if (x == u || x == w) continue;
+        const glm::dvec3 r = mesh.positions[x] - mesh.positions[u];
+        const double t = glm::dot(r, d) / glm::dot(d, d);
+        if (t > 1e-9 && t < 1.0 - 1e-9 && glm::length(r - t * d) < 1e-9) ++cracks;
+      }
+    }
+  }
+  EXPECT_EQ(cracks, 0u);
+  EXPECT_TRUE(junction_in_a) << "the corner of B and C is not on the loop of any element of A";
+}
+
 INSTANTIATE_TEST_SUITE_P(Solver, ClosedBox,
                          ::testing::Values(BoxCase{false, Method::kAntiAliased},
                                            BoxCase{true, Method::kAntiAliased},
