@@ -118,16 +118,11 @@ Mesh Solver::mesh(bool ambient) const {
         for (size_t i = range[q].first; i < range[q].second; ++i)
           for (uint32_t c = 0; c < s.corner_count(leaves[i]); ++c) {
             const uint32_t v = s.e_corner[leaves[i]][c];
-            for (uint32_t k = 0; k < pa.corner_count; ++k) {
-              const glm::dvec3 d = pa.corners[(k + 1) % pa.corner_count] - pa.corners[k];
-              const double len = glm::length(d);
-              const glm::dvec3 r = s.vpos[v] - pa.corners[k];
-              const double t = glm::dot(r, d) / len;
-              if (t > on_edge && t < len - on_edge && glm::length(r - d * (t / len)) <= on_edge) {
+            for (uint32_t k = 0; k < pa.corner_count; ++k)
+              if (along_segment(s.vpos[v], pa.corners[k], pa.corners[(k + 1) % pa.corner_count], on_edge) > 0.0) {
                 t_vertices[p].push_back(v);
                 break;
               }
-            }
           }
       std::sort(t_vertices[p].begin(), t_vertices[p].end());
       t_vertices[p].erase(std::unique(t_vertices[p].begin(), t_vertices[p].end()), t_vertices[p].end());
@@ -138,15 +133,11 @@ Mesh Solver::mesh(bool ambient) const {
   auto junction_on = [&](uint32_t a, uint32_t b) {
     uint32_t best = kNone;
     if (patch_now == kNone || t_vertices[patch_now].empty()) return best;
-    const glm::dvec3& pa = m.positions[a];
-    const glm::dvec3 d = m.positions[b] - pa;
-    const double len = glm::length(d);
-    double nearest = len - on_edge;
+    double nearest = std::numeric_limits<double>::max();
     for (uint32_t v : t_vertices[patch_now]) {
       if (v == a || v == b) continue;
-      const glm::dvec3 r = s.vpos[v] - pa;
-      const double t = glm::dot(r, d) / len;
-      if (t > on_edge && t < nearest && glm::length(r - d * (t / len)) <= on_edge) {
+      const double t = along_segment(s.vpos[v], m.positions[a], m.positions[b], on_edge);
+      if (t > 0.0 && t < nearest) {
         nearest = t;
         best = v;
       }

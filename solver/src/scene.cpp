@@ -1,6 +1,8 @@
 // Input checks and the one-off analysis of a scene: which patches form one surface.
 #include "scene_prep.h"
 
+#include "geometry.h"
+
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
 #include <glm/vec3.hpp>
@@ -476,15 +478,8 @@ void find_t_neighbours(const Scene& scene, const std::vector<std::pair<uint32_t,
     const Patch& pa = scene.patches[a];
     const Patch& pb = scene.patches[b];
     for (uint32_t c = 0; c < pb.corner_count; ++c)
-      for (uint32_t k = 0; k < pa.corner_count; ++k) {
-        const glm::dvec3& p = pa.corners[k];
-        const glm::dvec3 d = pa.corners[(k + 1) % pa.corner_count] - p;
-        const double len = glm::length(d);
-        if (len <= tol) continue;
-        const glm::dvec3 r = pb.corners[c] - p;
-        const double s = glm::dot(r, d) / len;
-        if (s > tol && s < len - tol && glm::length(r - d * (s / len)) <= tol) return true;
-      }
+      for (uint32_t k = 0; k < pa.corner_count; ++k)
+        if (along_segment(pb.corners[c], pa.corners[k], pa.corners[(k + 1) % pa.corner_count], tol) > 0.0) return true;
     return false;
   };
   for (const auto& [a, b] : t_pairs) {
