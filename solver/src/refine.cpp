@@ -16,13 +16,14 @@ namespace hemibake::solver {
 // is by how much the piece's dB could grow before that round would have split something.
 bool Solver::Impl::refine(const Piece& piece, const detail::Shaft& shaft, std::vector<uint32_t>& accepted,
                           std::vector<uint32_t>& seen, double& split_room) {
-  // This piece's share of the emitted power: how much the interaction matters (criterion a).
-  const double weight = piece.power / emitted_power;
+  // This piece's share of the emitted power (times its judge): how much the interaction matters (criterion a).
+  const double weight = piece.judge * piece.power / emitted_power;
+  const glm::dvec3 judged = piece.judge * piece.dB;
   for (int round = 0; round < kMaxRounds; ++round) {
     receiver_form_factors(piece, accepted);
-    spread_shot(piece.dB, accepted);
-    std::vector<uint32_t> to_split = too_coarse(piece.dB, weight, accepted);
-    if (recording != nullptr) split_room = split_headroom(piece.dB, weight, accepted);
+    spread_shot(judged, accepted);
+    std::vector<uint32_t> to_split = too_coarse(judged, weight, accepted);
+    if (recording != nullptr) split_room = split_headroom(judged, weight, accepted);
     reset_spread(accepted);
     if (to_split.empty()) {
       // Nothing passed a criterion, so dB may grow by at least 1 before anything does.

@@ -167,6 +167,7 @@ struct Solver::Impl {
     int depth;                        // hemicube level (each halves the resolution)
     double rear = 0.0;                // a cluster not flat: how far behind `centre` it reaches
     bool may_refine;                  // near receivers are left to sub-pieces
+    double judge = 1.0;               // refine judges the shot as if this many times as strong
     // A volume cluster (cluster node `cluster`): a whole cube at `centre`, each pixel weighted by
     // the cluster's faces that look its way (volume_weights); `normal` only turns the cube.
     bool volume = false;
@@ -184,6 +185,7 @@ struct Solver::Impl {
     int depth;
     uint32_t source;   // `element`, or for a geometric piece the leaf it was cut from
     bool top = false;  // a piece of the unit's own cut, not a near-field part (settles its far share)
+    int extra = 0;     // cuts of a strong emitter below shooter_limit (shooters.cpp)
   };
   // A shot's form factors, kept for a replay (step): per piece, in the order they shot, its
   // sources and the receivers that took light with their F(element -> piece).

@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <numeric>
 #include <random>
 #include <vector>
 
@@ -103,6 +104,57 @@ TEST(Refine, LightOfManySmallShootersAddsUpAcrossAnElement) {
   std::printf("8 x 8 lamp patches: median %.3f, p90 %.3f, %zu elements\n", s.median, s.p90, s.elements);
   EXPECT_LT(s.median, 0.06);
   EXPECT_LT(s.p90, 0.20);
+}
+
+// An area lamp's penumbra. A square lamp (side 0.4 m, 2 m over a floor, facing down) is half
+// covered, as seen from the floor under its middle, by a black plate 1 m over the floor whose edge
+// runs under the lamp's middle (x = 0): a floor point at x sees the part of the lamp with x' > -x,
+// so the floor goes from dark to fully lit across x in [-0.2, 0.2]. Truth: rho E times the
+// point-to-polygon form factor of that part. Error: as a share of the unoccluded lamp's light, at
+// random points of the 0.6 m square around the lamp's foot, two thirds of them in the penumbra.
+// A hemicube at the lamp's centre alone casts the plate's shadow as a point light does, a step at
+// x = 0, a mean error of about 1/4 over the penumbra's ramp and 1/6 over the square. The lamp, a
+// strong emitter, shoots from 4 x 4 pieces (shooters.cpp), which cast four steps a tenth apart: a
+// quarter of that error (1/24 over the square); 2 x 2 pieces would leave half of it (1/12).
+TEST(Refine, AreaLampCastsAPenumbraAcrossAnEdge) {
+  Scene scene;
+  const glm::dvec3 rho(0.6), e(10.0), black(0.0), none(0.0);
+  // The floor in 0.2 m tiles: one 4 m patch would be near the lamp for the near-field rule
+  // (near_field.cpp) and take its light from the lamp's sixteenths, until its first split.
+  for (int i = 0; i < 20; ++i)
+    for (int k = 0; k < 20; ++k) {
+      const double x0 = -2 + 0.2 * i, z0 = -2 + 0.2 * k;
+      add_quad(scene, {x0, 0, z0}, {x0, 0, z0 + 0.2}, {x0 + 0.2, 0, z0 + 0.2}, {x0 + 0.2, 0, z0}, rho, none, 0);
+    }
+  add_quad(scene, {-2, 1, -2}, {-2, 1, 2}, {0, 1, 2}, {0, 1, -2}, black, none, 1);  // plate, up
+  add_quad(scene, {-2, 1, -2}, {0, 1, -2}, {0, 1, 2}, {-2, 1, 2}, black, none, 1);  // plate, down
+  const double h = 0.2;
+  add_quad(scene, {-h, 2, -h}, {h, 2, -h}, {h, 2, h}, {-h, 2, h}, black, e, 2);            // lamp, down
+  ASSERT_EQ(validate(scene), "");
+  // What the part of the lamp with x' >= cut gives the floor at (x, 0, z).
+  auto part = [&](double x, double z, double cut) {
+    if (cut >= h) return 0.0;
+    const std::vector<glm::dvec3> seen{{cut, 2, -h}, {h, 2, -h}, {h, 2, h}, {cut, 2, h}};
+    return rho.x * e.x * point_polygon_form_factor({x, 0, z}, {0, 1, 0}, seen);
+  };
+  auto exact = [&](double x, double z) { return part(x, z, std::clamp(-x, -h, h)); };
+  Solver solver(scene, Params{});
+  ASSERT_TRUE(solver.run().converged);
+  const Mesh mesh = solver.mesh();
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-0.3, 0.3);
+  std::vector<double> errors;
+  for (int i = 0; i < 400; ++i) {
+    const double x = u(rng), z = u(rng);
+    const auto shown = shown_on_floor(mesh, 0, 400, x, z);
+    ASSERT_TRUE(shown.has_value()) << x << " " << z;
+    errors.push_back(std::abs(shown->x - exact(x, z)) / part(x, z, -h));
+  }
+  std::sort(errors.begin(), errors.end());
+  const double mean = std::accumulate(errors.begin(), errors.end(), 0.0) / errors.size();
+  std::printf("penumbra: error / unoccluded light: mean %.3f, p90 %.3f, max %.3f\n", mean, errors[360], errors.back());
+  EXPECT_LT(mean, 0.065);
+  EXPECT_LT(errors[360], 0.15);  // one step 0.4, two steps 0.2
 }
 
 // Evenly lit surfaces have no pools: a uniform closed box (every patch emitting E, reflectance
