@@ -18,8 +18,10 @@ constexpr int kMaxCutLevels = 6;
 // Cornell box's floor and back wall beside the tall block read up to 40 % off on either side of the
 // shadow's edge, and a box in a lamp-lit room cast a blocky shadow. A patch emitting at least
 // kStrongEmitterShare of the scene's emitted power shoots from pieces no wider than
-// kStrongEmitterCut of its own diameter (4 x 4, where shooter_limit does not cut it finer), each
-// with its own hemicube, whose shadows fall apart across the penumbra. The Cornell box's p90 as
+// kStrongEmitterCut of its own diameter (4 x 4), each with its own hemicube, whose shadows fall
+// apart across the penumbra. Only a patch that shooter_limit leaves whole (a lamp, not a glowing
+// wall, which shooter_limit already cuts; cut further, the walls of a uniformly glowing box split
+// at every corner and came out 2.5 % dark there). The Cornell box's p90 as
 // displayed: 12.9 % from one hemicube, 8.1 % from 2 x 2 (its floor's shadow a visible staircase),
 // 7.2 % from 4 x 4 (bench/README.md).
 constexpr double kStrongEmitterShare = 0.05;
@@ -246,8 +248,9 @@ void Solver::Impl::shoot_patch(uint32_t p, const std::vector<uint32_t>& receiver
   stack.push_back({root, p_root[p], glm::dvec3(0.0), 0, p_root[p]});
   // A strong emitter shoots from smaller pieces, judged for refinement as if stronger (judge).
   const double emitted = channel_sum(patches[p].emission) * prep.area[p];
-  const double limit = emitted > 0.0 && emitted >= kStrongEmitterShare * emitted_power
-                           ? std::min(shooter_limit, (kStrongEmitterCut + 1e-4) * polygon_diameter(root, n))
+  const double diameter = polygon_diameter(root, n);
+  const double limit = emitted > 0.0 && emitted >= kStrongEmitterShare * emitted_power && diameter <= shooter_limit
+                           ? (kStrongEmitterCut + 1e-4) * diameter
                            : shooter_limit;
   while (!stack.empty()) {
     ShooterNode node = stack.back();
