@@ -99,12 +99,28 @@ Mesh Solver::mesh(bool ambient) const {
   std::vector<std::array<uint32_t, 2>> lerp_from;  // for extra vertices: the edge they lie on
   std::unordered_map<uint64_t, uint32_t> extra;      // edge key -> extra vertex
 
-  // T-junctions between input patches (PreparedScene::t_neighbours): per patch, the vertices of
-  // its T-neighbours' elements that lie strictly inside one of its edges. Their elements are cut
-  // by halving their own edges, so along a shared line their vertices fall between this patch's.
+  // T-junctions between input patches (PreparedScene::t_neighbours): per patch and edge, the
+  // vertices of its T-neighbours' elements that lie strictly inside that edge, by distance from the
+  // edge's first corner. Their elements are cut by halving their own edges, so along a shared line
+  // their vertices fall between this patch's. Such a vertex lies on its own patch's outline: each
+  // patch's outline vertices are listed once, per edge and in order, and a neighbour's edge takes
+  // those within its extent by binary search (a floor edged with 20 000 tiles took seconds when
+  // every pair scanned every vertex).
   const double on_edge = 1e-7 * s.prep.diagonal;
-  std::vector<std::vector<uint32_t>> t_vertices(s.patches.size());
+  using EdgeList = std::vector<std::pair<double, uint32_t>>;
+  std::vector<std::array<EdgeList, 4>> t_edges(s.patches.size());
   {
+    // Where x lies along edge k of patch p (distance from corner k), if it lies on that edge's
+    // segment, ends included; else -1.
+    auto on_patch_edge = [&](uint32_t p, uint32_t k, const glm::dvec3& x) {
+      const Patch& pa = s.patches[p];
+      const glm::dvec3& a = pa.corners[k];
+      const glm::dvec3 d = pa.corners[(k + 1) % pa.corner_count] - a;
+      const double len = glm::length(d);
+      if (len <= 2.0 * on_edge) return -1.0;
+      const double t = glm::dot(x - a, d) / len;
+      return t >= -on_edge && t <= len + on_edge && glm::length(x - a - d * (t / len)) <= on_edge ? t : -1.0;
+    };
     std::vector<std::pair<size_t, size_t>> range(s.patches.size(), {0, 0});
     for (size_t i = 0; i < leaves.size();) {
       size_t j = i;
@@ -112,37 +128,80 @@ Mesh Solver::mesh(bool ambient) const {
       range[s.e_patch[leaves[i]]] = {i, j};
       i = j;
     }
+    std::vector<std::array<EdgeList, 4>> outline(s.patches.size());
+    for (uint32_t q = 0; q < s.patches.size(); ++q) {
+      if (s.prep.t_neighbours[q].empty()) continue;
+      for (size_t i = range[q].first; i < range[q].second; ++i)
+        for (uint32_t c = 0; c < s.corner_count(leaves[i]); ++c) {
+          const uint32_t v = s.e_corner[leaves[i]][c];
+          for (uint32_t k = 0; k < s.patches[q].corner_count; ++k)
+            if (const double t = on_patch_edge(q, k, s.vpos[v]); t >= 0.0) outline[q][k].emplace_back(t, v);
+        }
+      for (EdgeList& list : outline[q]) {
+        std::sort(list.begin(), list.end());
+        list.erase(std::unique(list.begin(), list.end()), list.end());
+      }
+    }
     for (uint32_t p = 0; p < s.patches.size(); ++p) {
       const Patch& pa = s.patches[p];
       for (uint32_t q : s.prep.t_neighbours[p])
-        for (size_t i = range[q].first; i < range[q].second; ++i)
-          for (uint32_t c = 0; c < s.corner_count(leaves[i]); ++c) {
-            const uint32_t v = s.e_corner[leaves[i]][c];
-            for (uint32_t k = 0; k < pa.corner_count; ++k)
-              if (along_segment(s.vpos[v], pa.corners[k], pa.corners[(k + 1) % pa.corner_count], on_edge) > 0.0) {
-                t_vertices[p].push_back(v);
-                break;
-              }
+        for (uint32_t j = 0; j < s.patches[q].corner_count; ++j) {
+          const EdgeList& theirs = outline[q][j];
+          if (theirs.empty()) continue;
+          const Patch& pq = s.patches[q];
+          const glm::dvec3& q0 = pq.corners[j];
+          const glm::dvec3 dq = pq.corners[(j + 1) % pq.corner_count] - q0;
+          const glm::dvec3 uq = dq / glm::length(dq);
+          auto off_line = [&](const glm::dvec3& x) { return glm::length(x - q0 - uq * glm::dot(x - q0, uq)) > on_edge; };
+          for (uint32_t k = 0; k < pa.corner_count; ++k) {
+            // Edge k of p on the line of q's edge j: the part of q's list within p's edge.
+            const glm::dvec3& a = pa.corners[k];
+            const glm::dvec3& b = pa.corners[(k + 1) % pa.corner_count];
+            if (off_line(a) || off_line(b)) continue;
+            const double sa = glm::dot(a - q0, uq), sb = glm::dot(b - q0, uq);
+            auto it = std::lower_bound(theirs.begin(), theirs.end(), std::make_pair(std::min(sa, sb) - on_edge, uint32_t{0}));
+            for (; it != theirs.end() && it->first <= std::max(sa, sb) + on_edge; ++it)
+              if (const double t = along_segment(s.vpos[it->second], a, b, on_edge); t > 0.0) t_edges[p][k].emplace_back(t, it->second);
           }
-      std::sort(t_vertices[p].begin(), t_vertices[p].end());
-      t_vertices[p].erase(std::unique(t_vertices[p].begin(), t_vertices[p].end()), t_vertices[p].end());
-    }
-  }
-  // The vertex of t_vertices nearest to a strictly inside edge (a, b), or kNone.
-  uint32_t patch_now = kNone;  // the patch whose element's loop is being collected
-  auto junction_on = [&](uint32_t a, uint32_t b) {
-    uint32_t best = kNone;
-    if (patch_now == kNone || t_vertices[patch_now].empty()) return best;
-    double nearest = std::numeric_limits<double>::max();
-    for (uint32_t v : t_vertices[patch_now]) {
-      if (v == a || v == b) continue;
-      const double t = along_segment(s.vpos[v], m.positions[a], m.positions[b], on_edge);
-      if (t > 0.0 && t < nearest) {
-        nearest = t;
-        best = v;
+        }
+      for (EdgeList& list : t_edges[p]) {
+        std::sort(list.begin(), list.end());
+        list.erase(std::unique(list.begin(), list.end(), [](const auto& x, const auto& y) { return x.second == y.second; }),
+                   list.end());
       }
     }
-    return best;
+  }
+  // The T-vertex strictly inside edge (a, b) nearest to a, or kNone: (a, b) lies along an edge of
+  // the patch (both ends on its line) and the vertex between them on that edge's list.
+  uint32_t patch_now = kNone;  // the patch whose element's loop is being collected
+  auto junction_on = [&](uint32_t a, uint32_t b) {
+    if (patch_now == kNone) return kNone;
+    const Patch& pa = s.patches[patch_now];
+    for (uint32_t k = 0; k < pa.corner_count; ++k) {
+      const EdgeList& list = t_edges[patch_now][k];
+      if (list.empty()) continue;
+      const glm::dvec3& c0 = pa.corners[k];
+      const glm::dvec3 d = pa.corners[(k + 1) % pa.corner_count] - c0;
+      const double len = glm::length(d);
+      const glm::dvec3 u = d / len;
+      const glm::dvec3 ra = m.positions[a] - c0, rb = m.positions[b] - c0;
+      const double ta = glm::dot(ra, u), tb = glm::dot(rb, u);
+      if (glm::length(ra - u * ta) > on_edge || glm::length(rb - u * tb) > on_edge) continue;
+      const double lo = std::min(ta, tb) + on_edge, hi = std::max(ta, tb) - on_edge;
+      if (ta < tb) {
+        for (auto it = std::upper_bound(list.begin(), list.end(), std::make_pair(lo, kNone)); it != list.end() && it->first < hi; ++it)
+          if (it->second != a && it->second != b) return it->second;
+      } else {
+        auto it = std::lower_bound(list.begin(), list.end(), std::make_pair(hi, uint32_t{0}));
+        while (it != list.begin()) {
+          --it;
+          if (it->first <= lo) break;
+          if (it->second != a && it->second != b) return it->second;
+        }
+      }
+      return kNone;
+    }
+    return kNone;
   };
   // Collects the vertices strictly inside edge (a, b), in order from a to b.
   std::function<void(uint32_t, uint32_t)> hanging = [&](uint32_t a, uint32_t b) {

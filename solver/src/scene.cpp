@@ -96,29 +96,63 @@ std::vector<Touch> touching_patches(const Scene& scene, double diagonal) {
     to = e.p + u * hi;
     return hi - lo > tol;
   };
-  // A uniform grid over the scene; an edge is listed in every cell its bounding box touches, and
-  // edges that span too many cells are tested against all edges instead.
-  glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
+  // A uniform grid over the scene, its cells twice as wide as the shorter edges (the lower quartile
+  // of their lengths): an edge is listed in the cells along it, piece by piece, so that a long edge
+  // does not fill its bounding box's cells, and a cell holds few edges even where thousands of
+  // small patches crowd one strip (a floor edged with 20 000 tiles: a cell a cube root of the edge
+  // count wide held thousands there, and the tests within cells took seconds). An edge crossing more
+  // than kMaxSteps cells is tested against all edges instead.
+  constexpr size_t kMaxSteps = 4096;
+  glm::dvec3 lo(std::numeric_limits<double>::max());
+  std::vector<double> lengths;
+  lengths.reserve(edges.size());
   for (const Edge& e : edges) {
     lo = glm::min(lo, glm::min(e.p, e.q));
-    hi = glm::max(hi, glm::max(e.p, e.q));
+    lengths.push_back(glm::distance(e.p, e.q));
   }
-  const double cell = std::max(diagonal / std::max(1.0, std::cbrt(static_cast<double>(edges.size()))), tol * 16);
-  const glm::ivec3 dims = glm::clamp(glm::ivec3((hi - lo) / cell) + 1, 1, 1024);
+  double cell = diagonal;
+  if (!lengths.empty()) {
+    std::nth_element(lengths.begin(), lengths.begin() + lengths.size() / 4, lengths.end());
+    cell = 2.0 * lengths[lengths.size() / 4];
+  }
+  cell = std::clamp(cell, std::max(tol * 16, diagonal / 4096), std::max(diagonal, tol * 16));
+  // Long edges among many short ones (a fan of thin triangles) would list each edge in thousands of
+  // cells: wider cells until the listings are at most kListings per edge on average.
+  constexpr double kListings = 64.0;
+  for (;;) {
+    double listed = 0.0;
+    for (const Edge& e : edges) listed += std::min(static_cast<double>(kMaxSteps), glm::distance(e.p, e.q) / cell + 1.0);
+    if (listed <= kListings * static_cast<double>(edges.size()) + 1024.0 || cell >= diagonal) break;
+    cell *= 2.0;
+  }
+  constexpr int64_t kAxis = (int64_t{1} << 21) - 1;
+  using I64Vec3 = glm::vec<3, int64_t>;
+  auto cell_of = [&](const glm::dvec3& x) {
+    return glm::clamp(I64Vec3(glm::floor((x - lo) / cell)), I64Vec3(0), I64Vec3(kAxis));
+  };
   std::unordered_map<uint64_t, std::vector<uint32_t>> cells;
   std::vector<uint32_t> big;
+  std::vector<uint64_t> keys;
   for (uint32_t i = 0; i < edges.size(); ++i) {
-    const glm::ivec3 a = glm::clamp(glm::ivec3((glm::min(edges[i].p, edges[i].q) - lo - tol) / cell), glm::ivec3(0), dims - 1);
-    const glm::ivec3 b = glm::clamp(glm::ivec3((glm::max(edges[i].p, edges[i].q) - lo + tol) / cell), glm::ivec3(0), dims - 1);
-    const glm::ivec3 span = b - a + 1;
-    if (static_cast<int64_t>(span.x) * span.y * span.z > 64) {
+    const glm::dvec3 d = edges[i].q - edges[i].p;
+    const size_t steps = static_cast<size_t>(std::ceil(glm::length(d) / cell)) + 1;
+    if (steps > kMaxSteps) {
       big.push_back(i);
       continue;
     }
-    for (int x = a.x; x <= b.x; ++x)
-      for (int y = a.y; y <= b.y; ++y)
-        for (int z = a.z; z <= b.z; ++z)
-          cells[(static_cast<uint64_t>(x) * 1024 + y) * 1024 + z].push_back(i);
+    keys.clear();
+    for (size_t k = 0; k < steps; ++k) {
+      const glm::dvec3 x0 = edges[i].p + d * (static_cast<double>(k) / steps);
+      const glm::dvec3 x1 = edges[i].p + d * (static_cast<double>(k + 1) / steps);
+      const I64Vec3 a = cell_of(glm::min(x0, x1) - tol), b = cell_of(glm::max(x0, x1) + tol);
+      for (int64_t x = a.x; x <= b.x; ++x)
+        for (int64_t y = a.y; y <= b.y; ++y)
+          for (int64_t z = a.z; z <= b.z; ++z)
+            keys.push_back((static_cast<uint64_t>(x) << 42) | (static_cast<uint64_t>(y) << 21) | static_cast<uint64_t>(z));
+    }
+    std::sort(keys.begin(), keys.end());
+    keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+    for (uint64_t key : keys) cells[key].push_back(i);
   }
   std::vector<Touch> pairs;
   auto test = [&](uint32_t i, uint32_t j) {
@@ -333,13 +367,17 @@ void find_groups(const Scene& scene, const EdgePatches& edge_patches, PreparedSc
   }
   const double tol = 1e-7 * out.diagonal;
   // Whether a patch of another plane than coplanar a and b touches a along their common edge.
+  // A patch touching one of them along the common edge touches the other there too: the one with
+  // fewer touches is searched (a floor edged with 20 000 tiles has 20 000).
   auto junction = [&](const Touch& t) {
     const glm::dvec3 d = t.q - t.p;
     const double len = glm::length(d);
-    for (uint32_t i : touches[t.a]) {
+    const bool by_a = touches[t.a].size() <= touches[t.b].size();
+    const uint32_t self = by_a ? t.a : t.b, other = by_a ? t.b : t.a;
+    for (uint32_t i : touches[self]) {
       const Touch& u = neighbours[i];
-      const uint32_t c = u.a == t.a ? u.b : u.a;
-      if (c == t.b || same_plane(t.a, c)) continue;
+      const uint32_t c = u.a == self ? u.b : u.a;
+      if (c == other || same_plane(t.a, c)) continue;
       const double s0 = glm::dot(u.p - t.p, d) / len, s1 = glm::dot(u.q - t.p, d) / len;
       const bool on_line = glm::length(glm::cross(u.p - t.p, d)) / len <= tol && glm::length(glm::cross(u.q - t.p, d)) / len <= tol;
       if (on_line && std::min(std::max(s0, s1), len) - std::max(std::min(s0, s1), 0.0) > tol) return true;
