@@ -16,7 +16,8 @@ namespace hemibake::solver {
 // is by how much the piece's dB could grow before that round would have split something.
 bool Solver::Impl::refine(const Piece& piece, const detail::Shaft& shaft, std::vector<uint32_t>& accepted,
                           std::vector<uint32_t>& seen, double& split_room) {
-  // This piece's share of the emitted power (times its judge): how much the interaction matters (criterion a).
+  // This piece's share of the emitted power, times its judge (a strong emitter's piece: shooters.cpp):
+  // how much the interaction matters (criterion a). The other criteria judge dB times the judge.
   const double weight = piece.judge * piece.power / emitted_power;
   const glm::dvec3 judged = piece.judge * piece.dB;
   for (int round = 0; round < kMaxRounds; ++round) {

@@ -17,19 +17,18 @@ constexpr int kMaxCutLevels = 6;
 // A hemicube sees its shooter as a point, and an area light's penumbra as a hard shadow: the
 // Cornell box's floor and back wall beside the tall block read up to 40 % off on either side of the
 // shadow's edge, and a box in a lamp-lit room cast a blocky shadow. A patch emitting at least
-// kStrongEmitterShare of the scene's emitted power shoots from pieces no wider than
+// kStrongEmitterShare of the scene's emitted power, and left whole by shooter_limit (a lamp, not a
+// glowing wall, which shooter_limit cuts already), shoots from pieces no wider than
 // kStrongEmitterCut of its own diameter (4 x 4), each with its own hemicube, whose shadows fall
-// apart across the penumbra. Only a patch that shooter_limit leaves whole (a lamp, not a glowing
-// wall, which shooter_limit already cuts; cut further, the walls of a uniformly glowing box split
-// at every corner and came out 2.5 % dark there). The Cornell box's p90 as
-// displayed: 12.9 % from one hemicube, 8.1 % from 2 x 2 (its floor's shadow a visible staircase),
-// 7.2 % from 4 x 4 (bench/README.md).
+// apart across the penumbra. The Cornell box's p90 as displayed: 12.9 % from one hemicube, 8.1 %
+// from 2 x 2 (its floor's shadow a visible staircase), 7.2 % from 4 x 4 (bench/README.md). The
+// walls of a uniformly glowing box, cut so too, split at every corner and came out 2.5 % dark there.
 constexpr double kStrongEmitterShare = 0.05;
 constexpr double kStrongEmitterCut = 0.25;
-// Each cut below shooter_limit (ShooterNode::extra) multiplies a piece's judge (refine.cpp judges its
-// shot as if that many times as strong) by kStrongCutJudge: n pieces whose light varies together across a receiver
-// add up to n times one piece's variation, and where their shadows fall apart to about one; the
-// judge is sqrt(n), between the two. At 1 the pieces left the lamp-lit floors coarser than one
+// Each such cut (ShooterNode::extra) multiplies a piece's judge (refine.cpp judges its shot as if
+// that many times as strong) by kStrongCutJudge: n pieces whose light varies together across a
+// receiver add up to n times one piece's variation, and where their shadows fall apart to about
+// one; the judge is sqrt(n), between the two. At 1 the pieces left lamp-lit floors coarser than one
 // hemicube had (a lamp room's p90 4.9 -> 7.5 % with 2 x 2); at 2.5 a level the Cornell box took
 // three times the elements.
 constexpr double kStrongCutJudge = 2.0;
