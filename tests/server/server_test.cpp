@@ -1079,7 +1079,7 @@ TEST(Server, FullDiskDuringABakeFailsTheJobAndTheServerRecovers) {
   // The server's view of its data directory (its mount namespace).
   const std::string inside = "/proc/" + std::to_string(server.pid()) + "/root" + dir;
   ASSERT_TRUE(std::filesystem::exists(inside + "/hemibake.db"));
-  const std::string id = request(port, http::verb::post, "/v1/jobs?resolution=512&reuse=false&max_shots=10", cornell(), kGltf).js()["id"];
+  const std::string id = request(port, http::verb::post, "/v1/jobs?resolution=512&reuse=false&max_shots=3&pools=false", cornell(), kGltf).js()["id"];
   for (int i = 0; i < 200 && request(port, http::verb::get, "/v1/jobs/" + id).js()["state"] != "running"; ++i)
     std::this_thread::sleep_for(20ms);
   {
