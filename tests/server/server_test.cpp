@@ -1307,9 +1307,10 @@ TEST(Server, RandomSigkillsLoseNoAcknowledgedJob) {
     const std::string state = job.value("state", "");
     ++ends[state];
     // The one way to fail here: killed during each of its --max-attempts runs.
-    if (state == "failed")
+    if (state == "failed") {
       EXPECT_NE(job.value("error", "").find("the server stopped during each of its"), std::string::npos)
           << "job " << id << " failed: " << job.value("error", "");
+    }
     bool succeeded = false, cancelled = false;
     for (const auto& [eid, type, data] : events(port, id)) {
       if (type != "state") continue;
