@@ -403,7 +403,9 @@ Reply follow_events(const Remote& r, const std::string& id, uint64_t& last_event
         }
       }
     }
-    if (ec) break;
+    // A final state is the stream's last event: the server closes it then, and a server that kept
+    // it open until its next heartbeat (15 s, before 2026-11-27) is not waited for.
+    if (ec || ended) break;
   }
   return {};
 }

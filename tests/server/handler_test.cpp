@@ -497,6 +497,33 @@ std::string last_state(const std::vector<Event>& events) {
   return state;
 }
 
+// A stream ends with its job's final state event. A stream that read that event while the worker
+// still had the job registered waited for a next event, which never comes: the stream ended only at
+// the next heartbeat (15 s), and `hemibake bake --server` took 16 s for a job of 1 s. Here every
+// wait is 10 minutes long, so a stream that waits for a heartbeat fails the test's 2 minutes.
+TEST(Handler, EventStreamEndsWithItsJobsFinalEventNotAHeartbeatLater) {
+  Fixture f({}, no_fault);
+  const Response posted = f.call("POST", "/v1/jobs?pools=false&convergence=0.3", cornell(), {{"content-type", "model/gltf+json"}});
+  ASSERT_EQ(posted.status, 202) << posted.body;
+  const std::string id = json::parse(posted.body)["id"];
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::minutes(2);
+  std::vector<Event> all;
+  bool ended = false;
+  while (!ended) {
+    auto got = std::make_shared<std::promise<EventBatch>>();
+    auto next = got->get_future();
+    f.service->events_async(id, all.empty() ? 0 : all.back().seq, std::chrono::minutes(10),
+                            [got](EventBatch b) { got->set_value(std::move(b)); });
+    ASSERT_EQ(next.wait_until(deadline), std::future_status::ready)
+        << "the stream still waited 2 minutes in; events so far end in state " << last_state(all);
+    EventBatch b = next.get();
+    ASSERT_EQ(b.status, 200);
+    all.insert(all.end(), b.events.begin(), b.events.end());
+    ended = b.end;
+  }
+  EXPECT_EQ(last_state(all), "succeeded");
+}
+
 json wait_finished(Fixture& f, const std::string& id) {
   json job;
   for (int i = 0; i < 2400; ++i) {  // 120 s: the instrumented build under a loaded machine is slow
