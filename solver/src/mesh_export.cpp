@@ -110,8 +110,9 @@ Mesh Solver::mesh(bool ambient) const {
   using EdgeList = std::vector<std::pair<double, uint32_t>>;
   std::vector<std::array<EdgeList, 4>> t_edges(s.patches.size());
   {
-    // Where x lies along edge k of patch p (distance from corner k), if it lies on that edge's
-    // segment, ends included; else -1.
+    // Where x lies along edge k of patch p (distance from corner k, at least 0: a corner a rounding
+    // error before the edge's start is on it), if it lies on that edge's segment, ends included;
+    // else -1.
     auto on_patch_edge = [&](uint32_t p, uint32_t k, const glm::dvec3& x) {
       const Patch& pa = s.patches[p];
       const glm::dvec3& a = pa.corners[k];
@@ -119,7 +120,7 @@ Mesh Solver::mesh(bool ambient) const {
       const double len = glm::length(d);
       if (len <= 2.0 * on_edge) return -1.0;
       const double t = glm::dot(x - a, d) / len;
-      return t >= -on_edge && t <= len + on_edge && glm::length(x - a - d * (t / len)) <= on_edge ? t : -1.0;
+      return t >= -on_edge && t <= len + on_edge && glm::length(x - a - d * (t / len)) <= on_edge ? std::max(t, 0.0) : -1.0;
     };
     std::vector<std::pair<size_t, size_t>> range(s.patches.size(), {0, 0});
     for (size_t i = 0; i < leaves.size();) {
