@@ -3,6 +3,7 @@
 // comes from closed forms and from what the one-sided scene must equal.
 #include "hemibake/solver/scenes.h"
 #include "hemibake/solver/solver.h"
+#include "solve_scene.h"
 
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
@@ -75,16 +76,6 @@ Sums mean_over(const Scene& scene, const Mesh& mesh, uint32_t begin, uint32_t en
     s.power += e.area * e.radiosity.x;
   }
   return s;
-}
-
-Mesh solve(const Scene& scene) {
-  EXPECT_EQ(validate(scene), "");
-  Params params;
-  params.threads = 2;
-  Solver solver(scene, params);
-  solver.run();
-  EXPECT_TRUE(solver.stats().converged);
-  return solver.mesh();
 }
 
 // A closed furnace whose every face is double-sided, every patch emitting E with reflectance rho:

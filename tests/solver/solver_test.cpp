@@ -3,6 +3,7 @@
 #include "hemibake/solver/hemicube.h"
 #include "hemibake/solver/scenes.h"
 #include "hemibake/solver/solver.h"
+#include "solve_scene.h"
 
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
@@ -92,13 +93,7 @@ std::pair<uint32_t, bool> floor_cracks(const std::vector<double>& cuts) {
   add_quad(scene, {3, 0, 0}, {3, 0, 2}, {3, 2, 2}, {3, 2, 0}, rho, dark, 1);
   add_quad(scene, {0, 0, 0}, {3, 0, 0}, {3, 2, 0}, {0, 2, 0}, rho, dark, 1);
   add_quad(scene, {0, 0, 2}, {0, 2, 2}, {3, 2, 2}, {3, 0, 2}, rho, dark, 1);
-  EXPECT_EQ(validate(scene), "");
-  Params params;
-  params.threads = 2;
-  Solver solver(scene, params);
-  solver.run();
-  EXPECT_TRUE(solver.stats().converged);
-  const Mesh mesh = solver.mesh();
+  const Mesh mesh = solve(scene);
   std::vector<uint32_t> floor_vertices;
   for (const auto& el : mesh.elements)
     if (el.patch < floor_end)
