@@ -14,16 +14,21 @@
 namespace hemibake::solver::detail {
 
 inline double channel_sum(const glm::dvec3& c) { return c.x + c.y + c.z; }
-// How far along segment (a, b) point x lies, if it lies on the segment (within tol of its line)
-// strictly between its ends (more than tol from either); else -1. T-junctions: a corner of one
-// patch inside another's edge.
-inline double along_segment(const glm::dvec3& x, const glm::dvec3& a, const glm::dvec3& b, double tol) {
+// How far along segment (a, b) point x lies, in [0, |b - a|], if it lies on the segment, ends
+// included (within tol of its line and of its extent); else -1.
+inline double on_segment(const glm::dvec3& x, const glm::dvec3& a, const glm::dvec3& b, double tol) {
   const glm::dvec3 d = b - a;
   const double len = glm::length(d);
   if (len <= 2.0 * tol) return -1.0;
   const glm::dvec3 r = x - a;
   const double t = glm::dot(r, d) / len;
-  return t > tol && t < len - tol && glm::length(r - d * (t / len)) <= tol ? t : -1.0;
+  return t >= -tol && t <= len + tol && glm::length(r - d * (t / len)) <= tol ? std::clamp(t, 0.0, len) : -1.0;
+}
+// The same strictly between the ends (more than tol from either); else -1. T-junctions: a corner
+// of one patch inside another's edge.
+inline double along_segment(const glm::dvec3& x, const glm::dvec3& a, const glm::dvec3& b, double tol) {
+  const double t = on_segment(x, a, b, tol);
+  return t > tol && t < glm::length(b - a) - tol ? t : -1.0;
 }
 inline double mean(const glm::dvec3& c) { return (c.x + c.y + c.z) / 3.0; }
 // Key of the undirected edge (a, b).

@@ -110,17 +110,10 @@ Mesh Solver::mesh(bool ambient) const {
   using EdgeList = std::vector<std::pair<double, uint32_t>>;
   std::vector<std::array<EdgeList, 4>> t_edges(s.patches.size());
   {
-    // Where x lies along edge k of patch p (distance from corner k, at least 0: a corner a rounding
-    // error before the edge's start is on it), if it lies on that edge's segment, ends included;
-    // else -1.
+    // Where x lies along edge k of patch p (distance from corner k), if on it; else -1.
     auto on_patch_edge = [&](uint32_t p, uint32_t k, const glm::dvec3& x) {
       const Patch& pa = s.patches[p];
-      const glm::dvec3& a = pa.corners[k];
-      const glm::dvec3 d = pa.corners[(k + 1) % pa.corner_count] - a;
-      const double len = glm::length(d);
-      if (len <= 2.0 * on_edge) return -1.0;
-      const double t = glm::dot(x - a, d) / len;
-      return t >= -on_edge && t <= len + on_edge && glm::length(x - a - d * (t / len)) <= on_edge ? std::max(t, 0.0) : -1.0;
+      return on_segment(x, pa.corners[k], pa.corners[(k + 1) % pa.corner_count], on_edge);
     };
     std::vector<std::pair<size_t, size_t>> range(s.patches.size(), {0, 0});
     for (size_t i = 0; i < leaves.size();) {
@@ -173,7 +166,7 @@ Mesh Solver::mesh(bool ambient) const {
     }
   }
   // The T-vertex strictly inside edge (a, b) nearest to a, or kNone: (a, b) lies along an edge of
-  // the patch (both ends on its line) and the vertex between them on that edge's list.
+  // the patch (both ends on it) and the vertex between them on that edge's list.
   uint32_t patch_now = kNone;  // the patch whose element's loop is being collected
   auto junction_on = [&](uint32_t a, uint32_t b) {
     if (patch_now == kNone) return kNone;
@@ -182,12 +175,9 @@ Mesh Solver::mesh(bool ambient) const {
       const EdgeList& list = t_edges[patch_now][k];
       if (list.empty()) continue;
       const glm::dvec3& c0 = pa.corners[k];
-      const glm::dvec3 d = pa.corners[(k + 1) % pa.corner_count] - c0;
-      const double len = glm::length(d);
-      const glm::dvec3 u = d / len;
-      const glm::dvec3 ra = m.positions[a] - c0, rb = m.positions[b] - c0;
-      const double ta = glm::dot(ra, u), tb = glm::dot(rb, u);
-      if (glm::length(ra - u * ta) > on_edge || glm::length(rb - u * tb) > on_edge) continue;
+      const glm::dvec3& c1 = pa.corners[(k + 1) % pa.corner_count];
+      const double ta = on_segment(m.positions[a], c0, c1, on_edge), tb = on_segment(m.positions[b], c0, c1, on_edge);
+      if (ta < 0.0 || tb < 0.0) continue;
       const double lo = std::min(ta, tb) + on_edge, hi = std::max(ta, tb) - on_edge;
       if (ta < tb) {
         for (auto it = std::upper_bound(list.begin(), list.end(), std::make_pair(lo, kNone)); it != list.end() && it->first < hi; ++it)

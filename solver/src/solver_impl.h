@@ -29,6 +29,7 @@ namespace hemibake::solver {
 
 // The polygon helpers (geometry.h), unqualified in the Impl's files.
 using detail::along_segment;
+using detail::on_segment;
 using detail::channel_sum;
 using detail::child_corners;
 using detail::Corners;
