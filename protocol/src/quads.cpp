@@ -4,6 +4,7 @@
 #include <glm/geometric.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <optional>
 #include <string>
@@ -78,7 +79,15 @@ std::vector<Outline> merge_triangle_pairs(std::span<const glm::dvec3> points,
     const auto& tv = triangles[t];
     const glm::dvec3 normal = glm::normalize(glm::cross(points[tv[1]] - points[tv[0]], points[tv[2]] - points[tv[0]]));
     Outline outline{{tv[0], tv[1], tv[2], 0}, 3, t, t};
-    for (int k = 0; k < 3 && outline.count == 3; ++k) {
+    // The longest edge first: an exporter splits a quad along a diagonal, its triangles' longest
+    // edge. Taking the edges in order paired a grid's triangles across the grid's lines instead,
+    // into parallelograms two cells wide (a wall of square tiles became slanted elements, whose
+    // splits along a cabinet's outline showed as a sawtooth).
+    std::array<int, 3> order{0, 1, 2};
+    auto length = [&](int k) { return glm::distance(points[tv[k]], points[tv[(k + 1) % 3]]); };
+    std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return length(a) > length(b); });
+    for (int k : order) {
+      if (outline.count != 3) break;
       // Only an edge between exactly two triangles: elsewhere the surface branches or ends.
       const auto& sharing = adj.triangles_of_edge.at(adj.edge(tv[k], tv[(k + 1) % 3]));
       if (sharing.size() != 2) continue;

@@ -17,26 +17,25 @@ namespace hemibake::solver {
 // 30 cm wide beside the lamp (above a double-sided lamp, a bright halo). So does a vertex on the
 // outline of what covers it (on the loop of a covered element): the covered side's light shows only
 // through the gap. Such a vertex shows the mean of the other vertices on the loops of the
-// uncovered elements around it; one with none keeps its own light. `m` holds the mesh's elements
+// uncovered elements around it; one with none keeps its own light. Covered here means within the
+// whole gap (kCoverGap), whatever the element's size: an element in the gap behind a cabinet 5 cm
+// from a wall is seen only through the gap even when smaller than 5 cm, and with its size as the
+// reach (gap_covered) the small elements along the cabinet's outline counted as open, and the
+// wall's vertices beside them 10 to 20 cm inside the gap showed their light. `m` holds the mesh's elements
 // (in the order of `leaves`) and loops, and the radiosity of the solver's own vertices.
 void Solver::Impl::show_uncovered_light(const std::vector<uint32_t>& sorted, Mesh& m) const {
   const size_t n = vpos.size();
   std::vector<uint32_t> patch(n, kNone);
-  std::vector<double> radius(n, std::numeric_limits<double>::infinity());
   for (uint32_t e : sorted)
-    for (uint32_t k = 0; k < corner_count(e); ++k) {
-      const uint32_t v = e_corner[e][k];
-      patch[v] = e_patch[e];
-      radius[v] = std::min(radius[v], e_radius[e]);
-    }
+    for (uint32_t k = 0; k < corner_count(e); ++k) patch[e_corner[e][k]] = e_patch[e];
   std::vector<char> hidden(n, 0), leaf_hidden(sorted.size(), 0);
   bool any = false;
+  const double gap = kCoverGap * prep.diagonal;
   for (size_t v = 0; v < n; ++v)
-    if (patch[v] != kNone && covered(patch[v], vpos[v], std::min(radius[v], kCoverGap * prep.diagonal), true))
-      hidden[v] = any = true;
+    if (patch[v] != kNone && covered(patch[v], vpos[v], gap, true)) hidden[v] = any = true;
   for (size_t i = 0; i < sorted.size(); ++i) {
     const uint32_t e = sorted[i];
-    if (!gap_covered(e_patch[e], e_centre[e], e_radius[e])) continue;
+    if (!covered(e_patch[e], e_centre[e], gap, true)) continue;
     leaf_hidden[i] = 1;
     for (uint32_t a = m.elements[i].boundary_begin; a < m.elements[i].boundary_end; ++a)
       if (m.boundary[a] < n) hidden[m.boundary[a]] = any = true;

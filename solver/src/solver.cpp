@@ -103,7 +103,7 @@ Solver::Impl::Impl(const Scene& scene, const Params& p, const Impl* first, const
   lights = scene.lights;
   sky = scene.sky;
   prepare_lights();
-  split_along_emitter_outlines();
+  split_along_cover_outlines();
   if (first != nullptr) {
     // The first pass's splits that lead to its light pools' elements, in its order; the
     // constructor's own splits came first in both passes and alike. The rest of the first pass's

@@ -131,6 +131,9 @@ constexpr double kCloseFacingLength = 1e-6;
 // hemicube takes a pixel's layers as independent), so such light reaches the mesh as the shots
 // spread it (e_gap), and gathers see covered elements dark.
 constexpr double kCoverGap = 0.01;
+// A cover that emits nothing splits the elements along its outline this many levels under the
+// smallest split (split_along_cover_outlines).
+constexpr int kCoverOutlineLevels = 2;
 // A shot is repeated after splits (refine) at most this many times; one still splitting after them
 // is not recorded for replays.
 constexpr int kMaxRounds = 64;
@@ -368,9 +371,11 @@ struct Solver::Impl {
   bool absorber_close(const Piece& piece) const;
   bool uneven_piece(uint32_t element) const;
   double front_share(const Piece& piece, uint32_t e) const;
+  // Which surfaces may cover a point (covered).
+  enum class Cover : uint8_t { kAny, kEmitters, kNonEmitters };
   bool covered(uint32_t p, const glm::dvec3& x, double gap = 0.0, bool any_facing = false,
-               bool emitters_only = false) const;
-  void split_along_emitter_outlines();
+               Cover by = Cover::kAny) const;
+  void split_along_cover_outlines();
 
   // pools.cpp: where the light an element took varies across it. Each patch large enough to split
   // holds a grid of points; every shot adds to the points of its receivers the light it gave them,

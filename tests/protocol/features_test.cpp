@@ -517,6 +517,40 @@ TEST(QuadMergeFeature, UnindexedTrianglePairBecomesOneQuadPatchLikeTheIndexedOne
   }
 }
 
+// A grid of square tiles sharing their vertices, each split along its diagonal as exporters write
+// quads: every pair merges back into its own square. Taking a triangle's edges in order paired
+// triangles of neighbouring tiles across the grid's lines instead, into slanted parallelograms two
+// tiles wide.
+TEST(QuadMergeFeature, TiledGridMergesBackIntoItsSquares) {
+  constexpr int nx = 4, nz = 3;
+  std::vector<V> points;
+  for (int i = 0; i <= nx; ++i)
+    for (int j = 0; j <= nz; ++j) points.emplace_back(0.5 * i, 0.0, 0.5 * j);
+  auto at = [&](int i, int j) { return static_cast<uint32_t>(i * (nz + 1) + j); };
+  std::vector<uint32_t> indices;
+  for (int i = 0; i < nx; ++i)
+    for (int j = 0; j < nz; ++j) {
+      // As rect(): (x0, z0), (x0, z1), (x1, z1), (x1, z0), facing up.
+      const std::array<uint32_t, 4> q{at(i, j), at(i, j + 1), at(i + 1, j + 1), at(i + 1, j)};
+      for (int k : {0, 1, 2, 0, 2, 3}) indices.push_back(q[static_cast<size_t>(k)]);
+    }
+  Doc d;
+  d.node({{"mesh", d.mesh(json::array({d.primitive(points, indices, kTriangles, d.material(plain_material(V(0.5))))}))}});
+  const LoadResult r = load_gltf_memory(d.gltf_bytes(), ".");
+  ASSERT_TRUE(r.document) << r.error;
+  const auto& patches = scene_of(*r.document).patches;
+  ASSERT_EQ(patches.size(), static_cast<size_t>(nx * nz));
+  for (const auto& p : patches) {
+    ASSERT_EQ(p.corner_count, 4u);
+    for (uint32_t k = 0; k < 4; ++k) {
+      const V e = p.corners[(k + 1) % 4] - p.corners[k];
+      // Every edge runs along x or z and is one tile long.
+      EXPECT_NEAR(std::abs(e.x) + std::abs(e.z), 0.5, 1e-6);
+      EXPECT_NEAR(std::min(std::abs(e.x), std::abs(e.z)), 0.0, 1e-6);
+    }
+  }
+}
+
 // ---- 2. Points and lines ------------------------------------------------------------------------
 
 // A mesh with POINTS, LINES, LINE_LOOP and LINE_STRIP primitives besides a quad: the four are skipped
