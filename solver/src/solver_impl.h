@@ -134,10 +134,6 @@ constexpr double kCoverGap = 0.01;
 // A cover that emits nothing splits the elements along its outline this many levels under the
 // smallest split (split_along_cover_outlines).
 constexpr int kCoverOutlineLevels = 2;
-// A surface standing on an element splits it (contact_crosses) where the stretch of its foot across
-// the element is at least this share of the side of the smallest element an outline splits to: a
-// chair's 3 cm leg does not split a cluttered room's floor.
-constexpr double kContactShare = 0.5;
 // A shot is repeated after splits (refine) at most this many times; one still splitting after them
 // is not recorded for replays.
 constexpr int kMaxRounds = 64;
@@ -380,8 +376,6 @@ struct Solver::Impl {
   bool covered(uint32_t p, const glm::dvec3& x, double gap = 0.0, bool any_facing = false,
                Cover by = Cover::kAny) const;
   void split_along_cover_outlines();
-  bool contact_crosses(uint32_t e) const;
-  double contact_length(uint32_t e, uint32_t q, double inset) const;
 
   // pools.cpp: where the light an element took varies across it. Each patch large enough to split
   // holds a grid of points; every shot adds to the points of its receivers the light it gave them,
@@ -398,7 +392,6 @@ struct Solver::Impl {
   bool gap_covered(uint32_t p, const glm::dvec3& x, double radius) const;
   // mesh_export.cpp: covered vertices show the light of their uncovered neighbours.
   void show_uncovered_light(const std::vector<uint32_t>& leaves, Mesh& m) const;
-  std::vector<std::array<uint32_t, 2>> standing_on(const std::vector<uint32_t>& leaves) const;
   bool leaf_covered(uint32_t e);
   double covered_share(std::span<const uint32_t> sources);
   static double point_piece_form_factor(const Piece& piece, const glm::dvec3& x, const glm::dvec3& n);
