@@ -202,7 +202,7 @@ TEST(CoverNearSurface, WallBehindACabinetFiveCentimetresFromItStaysDark) {
     if (scene.patches[i].corners[0].z == 2.0 && scene.patches[i].corners[1].z == 2.0 && scene.patches[i].corners[2].z == 2.0) wall_patch = i;
   for (int i = 0; i < 60; ++i) {
     SurfacePoint p;
-    p.patch = wall_patch;  // the measure looks the point up by position; the patch only names it
+    p.patch = wall_patch;  // any of the wall's tiles: the reference takes its plane and reflectance, which they share
     p.position = dvec3(-0.5 + uni(rng) * 1.0, 0.1 + uni(rng) * 1.6, 2.0);
     p.normal = dvec3(0.0, 0.0, -1.0);
     behind.push_back(p);
