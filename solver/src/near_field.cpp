@@ -186,8 +186,8 @@ bool Solver::Impl::absorber_close(const Piece& piece) const {
 // With a `gap`, the other surface may also lie up to that far in front of x (a lamp hung just under
 // a ceiling covers the ceiling above it: light there only gets out through the gap). With
 // `any_facing`, a surface facing the same way as p covers it too (a one-sided lamp's back hides
-// the ceiling above it from the room as well as its front would). `by` chooses whether only emitting
-// surfaces count, only the others, or any.
+// the ceiling above it from the room as well as its front would). `by` chooses whether any surface
+// counts or only those that emit nothing.
 bool Solver::Impl::covered(uint32_t p, const glm::dvec3& x, double gap, bool any_facing, Cover by) const {
   const glm::dvec3& n = prep.normal[p];
   const double eps = kCloseFacingLength * prep.diagonal;
@@ -198,7 +198,7 @@ bool Solver::Impl::covered(uint32_t p, const glm::dvec3& x, double gap, bool any
   return find_patch(near, [&](uint32_t q) {
     const double facing = glm::dot(prep.normal[q], n);
     if (prep.twin[q] == p || q == p || (facing > -1.0 + 1e-9 && !(any_facing && facing >= 1.0 - 1e-9))) return false;
-    if (by != Cover::kAny && (channel_sum(patches[q].emission) > 0.0) != (by == Cover::kEmitters)) return false;
+    if (by == Cover::kNonEmitters && channel_sum(patches[q].emission) > 0.0) return false;
     const Patch& pq = patches[q];
     // The distance in front of x along x's normal (the patch's own normal may point either way).
     const double d = facing < 0.0 ? glm::dot(prep.normal[q], x - pq.corners[0]) : glm::dot(prep.normal[q], pq.corners[0] - x);
@@ -268,8 +268,7 @@ void Solver::Impl::split_along_cover_outlines() {
     if (e_area[e] < other_limit || leaves.size() > params.max_elements) continue;
     if (channel_sum(patches[e_patch[e]].emission) > 0.0) continue;
     const double reach = std::min(gap, e_radius[e]);
-    const bool large = e_area[e] >= min_split_area();
-    if (!(large ? mixed(e, reach, Cover::kAny) : mixed(e, reach, Cover::kNonEmitters))) continue;
+    if (!mixed(e, reach, e_area[e] >= min_split_area() ? Cover::kAny : Cover::kNonEmitters)) continue;
     split(e);
     any = true;
     for (uint32_t k = 0; k < 4; ++k) queue.push_back(e_child[e] + k);
