@@ -17,6 +17,7 @@
 #include <map>
 #include <numbers>
 #include <numeric>
+#include <tuple>
 
 namespace hemibake::solver {
 namespace detail {
@@ -147,6 +148,82 @@ std::span<const GroupAdjacency::Link> GroupAdjacency::neighbours(uint32_t a) con
   const auto b = std::lower_bound(links_.begin(), links_.end(), lo, below);
   const auto e = std::lower_bound(b, links_.end(), lo + (uint64_t{1} << 32), below);
   return {links_.data() + (b - links_.begin()), static_cast<size_t>(e - b)};
+}
+
+void GroupAdjacency::add_standing(uint32_t base, uint32_t top, bool on_front) {
+  if (base == top) return;
+  standing_.push_back({(static_cast<uint64_t>(base) << 32) | top, true, on_front});
+  standing_.push_back({(static_cast<uint64_t>(top) << 32) | base, false, on_front});
+}
+
+// Sorted for standing_order's search; a pair listed twice in disagreement (each standing on the
+// other, or on both sides) is dropped, and so is a pair with an edge link.
+void GroupAdjacency::finish_standing() {
+  std::sort(standing_.begin(), standing_.end(), [](const Stand& x, const Stand& y) { return x.key < y.key; });
+  size_t out = 0;
+  bool disagree = false;
+  for (size_t i = 0; i < standing_.size(); ++i) {
+    if (out > 0 && standing_[out - 1].key == standing_[i].key) {
+      disagree = disagree || standing_[out - 1].x_base != standing_[i].x_base || standing_[out - 1].on_front != standing_[i].on_front;
+      continue;
+    }
+    if (disagree) --out;
+    disagree = false;
+    standing_[out++] = standing_[i];
+  }
+  if (disagree) --out;
+  standing_.resize(out);
+  std::erase_if(standing_, [&](const Stand& s) {
+    return find(static_cast<uint32_t>(s.key >> 32), static_cast<uint32_t>(s.key)) != nullptr;
+  });
+  // Indexed by id where ids are dense (a solve's occlusion groups are patch ids).
+  standing_first_.clear();
+  if (standing_.empty() || (standing_.back().key >> 32) > 16 * standing_.size() + 65536) return;
+  standing_first_.assign(static_cast<size_t>(standing_.back().key >> 32) + 2, 0);
+  for (const Stand& s : standing_) ++standing_first_[static_cast<size_t>(s.key >> 32) + 1];
+  for (size_t a = 1; a < standing_first_.size(); ++a) standing_first_[a] += standing_first_[a - 1];
+}
+
+std::span<const GroupAdjacency::Stand> GroupAdjacency::standing_of(uint32_t a) const {
+  if (!standing_first_.empty()) {
+    if (static_cast<size_t>(a) + 1 >= standing_first_.size()) return {};
+    return {standing_.data() + standing_first_[a], static_cast<size_t>(standing_first_[a + 1] - standing_first_[a])};
+  }
+  const uint64_t lo = static_cast<uint64_t>(a) << 32;
+  auto below = [](const Stand& s, uint64_t k) { return s.key < k; };
+  const auto b = std::lower_bound(standing_.begin(), standing_.end(), lo, below);
+  const auto e = std::lower_bound(b, standing_.end(), lo + (uint64_t{1} << 32), below);
+  return {standing_.data() + (b - standing_.begin()), static_cast<size_t>(e - b)};
+}
+
+double foot_within(std::span<const glm::dvec3> base, const glm::dvec3& n, const glm::dvec3& a, const glm::dvec3& b,
+                   double in_plane, double tol) {
+  if (std::abs(glm::dot(n, a - base[0])) > in_plane || std::abs(glm::dot(n, b - base[0])) > in_plane) return 0.0;
+  double t0 = 0.0, t1 = 1.0;
+  for (size_t j = 0; j < base.size() && t0 < t1; ++j) {
+    const glm::dvec3& c = base[j];
+    const glm::dvec3 m = glm::normalize(glm::cross(n, base[(j + 1) % base.size()] - c));  // inward
+    const double da = glm::dot(m, a - c) + tol, db = glm::dot(m, b - c) + tol;
+    if (da < 0.0 && db < 0.0) return 0.0;
+    if (da < 0.0) t0 = std::max(t0, da / (da - db));
+    else if (db < 0.0) t1 = std::min(t1, da / (da - db));
+  }
+  return std::max(0.0, t1 - t0) * glm::distance(a, b);
+}
+
+int GroupAdjacency::standing_order(uint64_t a, uint64_t b, bool* base_behind) const {
+  const std::span<const Stand> of_a = standing_of(static_cast<uint32_t>(a));
+  if (of_a.empty()) return 0;
+  const uint64_t key = (a << 32) | (b & 0xffffffffu);
+  const auto it = std::lower_bound(of_a.begin(), of_a.end(), key, [](const Stand& s, uint64_t k) { return s.key < k; });
+  if (it == of_a.end() || it->key != key) return 0;
+  // The base seen from its front (no back-face bit) has the eye on the side it faces: the top
+  // hides it when the top stands on that side.
+  const uint64_t base = it->x_base ? a : b;
+  const bool base_front_seen = (base >> 32) == 0;
+  const bool top_first = base_front_seen == it->on_front;
+  if (base_behind != nullptr) *base_behind = top_first;
+  return top_first == it->x_base ? 1 : -1;
 }
 
 Hemicube::Hemicube(uint32_t resolution, bool full) : n_(resolution), full_(full), face_count_(full ? 6 : 5) {
@@ -535,6 +612,7 @@ struct GroupSum {
   double area;
   float inv_depth;
   float trans;
+  bool foot;  // a foot standing on the surface meets a fragment's element (kOnFoot)
 };
 
 // The side (bit 32 of a pixel's surface id) on which a neighbour across `link` of a surface on
@@ -578,13 +656,17 @@ class PixelResolver {
  private:
   // A fragment's surface: its occlusion group, with the back faces of a group apart (bit 32).
   uint64_t surface_of(uint32_t element) const {
-    if (element & kBackFace) return (uint64_t{1} << 32) | group_of_[element & ~kBackFace];
-    return group_of_[element];
+    if (element & kBackFace) return (uint64_t{1} << 32) | (group_of_[element & ~kBackFace] & ~kOnFoot);
+    return group_of_[element] & ~kOnFoot;
   }
+  bool on_foot(uint32_t element) const { return (group_of_[element & ~kBackFace] & kOnFoot) != 0; }
   enum class Meet : uint8_t { kApart, kTile, kFold };
   template <class SideOf, class Fn>
   void neighbours_in_pixel(uint32_t i, SideOf side_of, Fn fn);
   Meet meet(uint64_t a, uint64_t b);
+  int standing_order(uint64_t a, uint64_t b, bool* base_behind = nullptr);
+  void order_standing();
+  void share_base_nearest_first();
   void sum_groups(uint32_t lo, uint32_t hi);
   bool merge_neighbours();
   void order_layers(bool any_back);
@@ -613,6 +695,13 @@ class PixelResolver {
   uint64_t asked_a_ = 0, asked_b_ = 0;
   Meet asked_answer_ = Meet::kApart;
   bool asked_any_ = false;
+  uint64_t stood_a_ = 0, stood_b_ = 0;
+  int stood_answer_ = 0;
+  bool stood_base_behind_ = false;
+  bool stood_any_ = false;
+  std::vector<uint8_t> under_top_;  // per group root: a base behind a surface standing on it (order_standing)
+  bool any_under_top_ = false;
+  std::vector<std::tuple<uint32_t, float, uint32_t>> base_frags_;  // (root, -inv_depth, fragment)
   std::vector<std::pair<uint64_t, uint32_t>> by_group_;  // (surface, fragment)
   std::vector<GroupSum> groups_;
   std::vector<uint32_t> layers_;
@@ -672,6 +761,19 @@ PixelResolver::Meet PixelResolver::meet(uint64_t a, uint64_t b) {
   return asked_answer_;
 }
 
+// GroupAdjacency::standing_order, the last answer kept as in meet().
+int PixelResolver::standing_order(uint64_t a, uint64_t b, bool* base_behind) {
+  if (!adjacency_.any_standing()) return 0;
+  if (!stood_any_ || a != stood_a_ || b != stood_b_) {
+    stood_a_ = a;
+    stood_b_ = b;
+    stood_any_ = true;
+    stood_answer_ = adjacency_.standing_order(a, b, &stood_base_behind_);
+  }
+  if (base_behind != nullptr) *base_behind = stood_base_behind_;
+  return stood_answer_;
+}
+
 void PixelResolver::nearest(uint32_t lo, uint32_t hi) {
   uint32_t best = order_[lo];
   for (uint32_t k = lo + 1; k < hi; ++k) {
@@ -689,18 +791,21 @@ bool PixelResolver::two_surfaces(uint32_t lo, uint32_t hi) {
   uint64_t g1 = g0;
   double sum0 = 0.0, sum1 = 0.0;
   float depth0 = std::numeric_limits<float>::lowest(), depth1 = depth0;
+  bool foot0 = false, foot1 = false;
   for (uint32_t k = lo; k < hi; ++k) {
     const Fragment& f = fragments_[order_[k]];
     const uint64_t g = surface_of(f.element);
     if (g == g0) {
       sum0 += f.area;
       depth0 = std::max(depth0, f.inv_depth);
+      foot0 = foot0 || on_foot(f.element);
       continue;
     }
     if (g1 != g0 && g != g1) return false;
     g1 = g;
     sum1 += f.area;
     depth1 = std::max(depth1, f.inv_depth);
+    foot1 = foot1 || on_foot(f.element);
   }
   float trans0, trans1;
   const Meet how = g1 == g0 ? Meet::kTile : meet(g0, g1);
@@ -708,8 +813,13 @@ bool PixelResolver::two_surfaces(uint32_t lo, uint32_t hi) {
     const double total = sum0 + sum1;
     trans0 = trans1 = static_cast<float>(total > 1.0 ? 1.0 / total : 1.0);
   } else {
-    // Nearest first; ties go to the lower id (a back face's is higher: front faces win).
-    const bool first_near = depth0 != depth1 ? depth0 > depth1 : g0 < g1;
+    // Nearest first; ties go to the lower id (a back face's is higher: front faces win). One
+    // standing on the other goes by that (GroupAdjacency::add_standing).
+    bool base_behind = false;
+    const int stand = how == Meet::kApart ? standing_order(g0, g1, &base_behind) : 0;
+    // On the foot of a surface standing on the other, the base's pieces share nearest first: layers().
+    if (stand != 0 && base_behind && (stand < 0 ? foot1 : foot0)) return false;
+    const bool first_near = stand != 0 ? stand < 0 : depth0 != depth1 ? depth0 > depth1 : g0 < g1;
     const double near_sum = first_near ? sum0 : sum1, far_sum = first_near ? sum1 : sum0;
     const float near_trans = static_cast<float>(near_sum > 1.0 ? 1.0 / near_sum : 1.0);
     double t = 1.0 - std::min(near_sum, 1.0);
@@ -748,6 +858,16 @@ bool PixelResolver::front_covers(uint32_t lo, uint32_t hi) {
   for (uint32_t k = lo; k < hi; ++k)
     if (surface_of(fragments_[order_[k]].element) == front) area += fragments_[order_[k]].area;
   if (area < 1.0) return false;
+  // A surface standing on it may lie in front of it (order_standing): left to layers().
+  if (adjacency_.any_standing()) {
+    uint64_t asked = front;
+    for (uint32_t k = lo; k < hi; ++k) {
+      const uint64_t g = surface_of(fragments_[order_[k]].element);
+      if (g == front || g == asked) continue;
+      asked = g;
+      if (standing_order(front, g) > 0) return false;
+    }
+  }
   // A neighbour in the pixel may join its layer (merge_neighbours): left to layers().
   for (const GroupAdjacency::Link& link : adjacency_.neighbours(static_cast<uint32_t>(front))) {
     const uint32_t other = static_cast<uint32_t>(link.key & 0xffffffffu);
@@ -763,15 +883,55 @@ bool PixelResolver::front_covers(uint32_t lo, uint32_t hi) {
 }
 
 void PixelResolver::layers(uint32_t lo, uint32_t hi) {
+  any_under_top_ = false;
   sum_groups(lo, hi);
   const bool any_fold = merge_neighbours();
   order_layers(any_fold);
   share_pixel(any_fold);
   for (uint32_t i = 0; i < groups_.size(); ++i) groups_[i].trans = groups_[root(i)].trans;
+  if (any_under_top_) {
+    share_base_nearest_first();
+    return;
+  }
   size_t gi = 0;
   for (const auto& [g, fi] : by_group_) {
     while (groups_[gi].group != g) ++gi;
     fragments_[fi].trans = groups_[gi].trans;
+  }
+}
+
+// A base behind a surface standing on it (order_standing), in a pixel on the foot (one of the
+// base's elements there meets a foot: kOnFoot): the base's pieces in front of the foot lie beside
+// the standing surface and those behind it under it, so the share the base's layer gets (what the
+// standing one leaves) goes to its nearest pieces first: on a plane, those on the eye's side of the
+// standing surface. Shared in proportion, a thin piece of floor in front of a sunlit wall's foot
+// got that share times its own coverage, and read dark. Other layers' fragments take their
+// layer's share.
+void PixelResolver::share_base_nearest_first() {
+  base_frags_.clear();
+  std::vector<double>& budget = fold_cap_;  // per root: the layer's share of the pixel
+  budget.assign(groups_.size(), 0.0);
+  size_t gi = 0;
+  for (const auto& [g, fi] : by_group_) {
+    while (groups_[gi].group != g) ++gi;
+    const uint32_t r = root(gi);
+    const Fragment& f = fragments_[fi];
+    if (under_top_[r]) {
+      budget[r] += static_cast<double>(f.area) * groups_[gi].trans;
+      base_frags_.emplace_back(r, -f.inv_depth, fi);
+    }
+  }
+  gi = 0;
+  for (const auto& [g, fi] : by_group_) {
+    while (groups_[gi].group != g) ++gi;
+    if (!under_top_[root(gi)]) fragments_[fi].trans = groups_[gi].trans;
+  }
+  std::sort(base_frags_.begin(), base_frags_.end());
+  for (const auto& [r, depth, fi] : base_frags_) {
+    Fragment& f = fragments_[fi];
+    const double take = std::min(static_cast<double>(f.area), budget[r]);
+    budget[r] -= take;
+    f.trans = f.area > 0.0f ? static_cast<float>(take / f.area) : 0.0f;
   }
 }
 
@@ -784,8 +944,9 @@ void PixelResolver::sum_groups(uint32_t lo, uint32_t hi) {
   for (const auto& [g, fi] : by_group_) {
     const Fragment& f = fragments_[fi];
     if (groups_.empty() || groups_.back().group != g) {
-      groups_.push_back({g, static_cast<uint32_t>(groups_.size()), 0.0, f.inv_depth, 1.0f});
+      groups_.push_back({g, static_cast<uint32_t>(groups_.size()), 0.0, f.inv_depth, 1.0f, false});
     }
+    groups_.back().foot = groups_.back().foot || on_foot(f.element);
     groups_.back().area += f.area;
     groups_.back().inv_depth = std::max(groups_.back().inv_depth, f.inv_depth);
   }
@@ -842,6 +1003,7 @@ void PixelResolver::order_layers(bool any_fold) {
       layers_.push_back(i);
     }
   }
+  if (adjacency_.any_standing()) order_standing();
   std::sort(layers_.begin(), layers_.end(), [&](uint32_t a, uint32_t b) {
     if (groups_[a].inv_depth != groups_[b].inv_depth) return groups_[a].inv_depth > groups_[b].inv_depth;
     return groups_[a].group < groups_[b].group;
@@ -849,6 +1011,39 @@ void PixelResolver::order_layers(bool any_fold) {
   if (any_fold) {
     rank_.assign(groups_.size(), 0);
     for (uint32_t li = 0; li < layers_.size(); ++li) rank_[layers_[li]] = li;
+  }
+}
+
+// Of two surfaces in the pixel where one stands on the other (GroupAdjacency::add_standing), the
+// one behind is moved just behind the other's layer. Searched by a surface's standing partners
+// when it has few, by the pixel's surfaces when it has more (a floor under hundreds of boxes).
+void PixelResolver::order_standing() {
+  auto settle = [&](uint32_t i, uint32_t j) {
+    bool base_behind = false;
+    const int o = standing_order(groups_[i].group, groups_[j].group, &base_behind);
+    if (o == 0) return;
+    const uint32_t first = root(o < 0 ? i : j), second = root(o < 0 ? j : i);
+    if (first == second) return;
+    const float behind = std::nextafter(groups_[first].inv_depth, std::numeric_limits<float>::lowest());
+    groups_[second].inv_depth = std::min(groups_[second].inv_depth, behind);
+    if (base_behind && groups_[o < 0 ? j : i].foot) {
+      if (!any_under_top_) under_top_.assign(groups_.size(), 0);
+      under_top_[second] = 1;
+      any_under_top_ = true;
+    }
+  };
+  for (uint32_t i = 0; i < groups_.size(); ++i) {
+    const uint32_t id = static_cast<uint32_t>(groups_[i].group);
+    if (adjacency_.standing_count(id) <= 2 * groups_.size()) {
+      adjacency_.for_standing(id, [&](uint32_t other) {
+        for (uint64_t side : {uint64_t{0}, uint64_t{1} << 32}) {
+          const int64_t j = index_of(side | other);
+          if (j > static_cast<int64_t>(i)) settle(i, static_cast<uint32_t>(j));  // each pair once
+        }
+      });
+    } else {
+      for (uint32_t j = i + 1; j < groups_.size(); ++j) settle(i, j);
+    }
   }
 }
 
@@ -978,6 +1173,36 @@ std::vector<double> visible_shares(const detail::Hemicube& cube, const glm::dvec
         for (size_t y = x + 1; y < list.size(); ++y)
           adjacency.add(group_of[list[x].first], group_of[list[y].first], list[x].second == list[y].second);
     adjacency.finish();
+    // Polygons standing on others (an edge in another's plane, within it), as in a solve; the whole
+    // group of the one standing lies on one side of the plane.
+    std::vector<glm::dvec3> normals(polygons.size());
+    double extent = 0.0;
+    for (uint32_t i = 0; i < polygons.size(); ++i) {
+      if (polygons[i].corners.size() >= 3) normals[i] = glm::normalize(detail::newell_normal(polygons[i].corners));
+      for (const glm::dvec3& c : polygons[i].corners) extent = std::max(extent, glm::length(c - eye));
+    }
+    const double in_plane = 1e-9 * extent, tol = 1e-9 * extent;
+    for (uint32_t q = 0; q < polygons.size(); ++q)
+      for (uint32_t p = 0; p < polygons.size(); ++p) {
+        const auto& base = polygons[p].corners;
+        const auto& top = polygons[q].corners;
+        if (group_of[p] == group_of[q] || base.size() < 3 || top.size() < 3 ||
+            std::abs(glm::dot(normals[p], normals[q])) > 1.0 - 1e-9)
+          continue;
+        double foot = 0.0;
+        for (size_t k = 0; k < top.size(); ++k)
+          foot = std::max(foot, detail::foot_within(base, normals[p], top[k], top[(k + 1) % top.size()], in_plane, tol));
+        if (foot <= tol) continue;
+        double lo = 0.0, hi = 0.0;  // the top's group's reach behind and in front of the plane
+        for (uint32_t r = 0; r < polygons.size(); ++r)
+          if (group_of[r] == group_of[q])
+            for (const glm::dvec3& c : polygons[r].corners) {
+              lo = std::min(lo, glm::dot(normals[p], c - base[0]));
+              hi = std::max(hi, glm::dot(normals[p], c - base[0]));
+            }
+        if ((lo < -in_plane) != (hi > in_plane)) adjacency.add_standing(group_of[p], group_of[q], hi > in_plane);
+      }
+    adjacency.finish_standing();
   }
   detail::ThreadPool pool(1);
   std::vector<uint32_t> order, starts;

@@ -31,6 +31,12 @@ struct Fragment {
 };
 static_assert(sizeof(Fragment) == 16);
 
+/// Set in a group id given to resolve() (group_of) for an element that a surface standing on it
+/// (GroupAdjacency::add_standing) meets with its foot: pixels holding it and the standing surface
+/// lie on the foot, and there the base's pieces share what the standing one leaves nearest first.
+/// Not part of the group's id; callers that leave it out get the base's share in proportion.
+inline constexpr uint32_t kOnFoot = 0x40000000u;
+
 /// Set in Fragment::element for the back of a one-sided surface: an occluder that takes no light.
 /// Its fragments form layers of their own (never merged with front-facing neighbours, whose
 /// projections do not tile with it) and lose depth ties to front faces.
@@ -64,10 +70,48 @@ class GroupAdjacency {
   /// One past the largest id with links when they are indexed by id (dense ids), else 0.
   size_t id_bound() const { return first_.empty() ? 0 : first_.size() - 1; }
 
+  /// Surface `top` stands on surface `base` without sharing an edge with it: an edge of top lies
+  /// in base's plane, within it, and all of top lies on one side of that plane (`on_front`: the
+  /// side base faces). The sides of a box without a bottom on a floor; a wall standing on the seam
+  /// between two floor tiles. Seen from top's side of the plane, top hides base wherever both
+  /// show; seen from the other side, base hides top. In a pixel on the foot their depths, taken at
+  /// the centres of their covered parts, said either, and the floor in front of a foot took the
+  /// foot's share of the pixel. Pairs with an edge link keep that link's rule.
+  void add_standing(uint32_t base, uint32_t top, bool on_front);
+  void finish_standing();  ///< call once after the last add_standing()
+  /// Which of surfaces a and b (occlusion group ids, bit 32 set for a back face: the side seen)
+  /// lies in front where both show in a pixel because one stands on the other: -1 a, 1 b, 0 neither
+  /// stands on the other. `base_behind`, if given, says whether the one behind is the base (the
+  /// eye on the top's side of the base's plane).
+  int standing_order(uint64_t a, uint64_t b, bool* base_behind = nullptr) const;
+  /// How many surfaces stand on a or a stands on (for choosing how to search a pixel).
+  size_t standing_count(uint32_t a) const { return standing_of(a).size(); }
+  /// Calls fn(other) for each surface standing on a or that a stands on.
+  template <class Fn>
+  void for_standing(uint32_t a, Fn fn) const {
+    for (const Stand& s : standing_of(a)) fn(static_cast<uint32_t>(s.key));
+  }
+  bool any_standing() const { return !standing_.empty(); }
+
  private:
+  struct Stand {
+    uint64_t key;   ///< x << 32 | y
+    bool x_base;    ///< x is the one stood on
+    bool on_front;  ///< the other lies on the side x or y (the base) faces
+  };
+  std::vector<Stand> standing_;
+  std::vector<uint32_t> standing_first_;  ///< per a (and one past the last): its first in standing_;
+                                          ///< empty for sparse ids, which search instead
+  std::span<const Stand> standing_of(uint32_t a) const;
   std::vector<Link> links_;
   std::vector<uint32_t> first_;  ///< per a (and one past the last): its first link in links_
 };
+
+/// The length of segment a-b lying in the plane of the convex polygon `base` (unit normal n: both
+/// ends within `in_plane` of it) and within the polygon, its outline included (within `tol`): the
+/// foot of a surface standing on `base` (GroupAdjacency::add_standing). 0 when out of the plane.
+double foot_within(std::span<const glm::dvec3> base, const glm::dvec3& n, const glm::dvec3& a, const glm::dvec3& b,
+                   double in_plane, double tol);
 
 /// A polygon being clipped: at most 4 corners plus one per clip plane.
 struct ClipPolygon {

@@ -268,7 +268,7 @@ void Solver::Impl::split_along_cover_outlines() {
     if (e_area[e] < other_limit || leaves.size() > params.max_elements) continue;
     if (channel_sum(patches[e_patch[e]].emission) > 0.0) continue;
     const double reach = std::min(gap, e_radius[e]);
-    if (!mixed(e, reach, e_area[e] >= min_split_area() ? Cover::kAny : Cover::kNonEmitters)) continue;
+    if (!mixed(e, reach, e_area[e] >= min_split_area() ? Cover::kAny : Cover::kNonEmitters) && !contact_crosses(e)) continue;
     split(e);
     any = true;
     for (uint32_t k = 0; k < 4; ++k) queue.push_back(e_child[e] + k);
@@ -277,6 +277,60 @@ void Solver::Impl::split_along_cover_outlines() {
   replace_split(leaves);
   grow_scratch();
   update_unshot_total();
+}
+
+// How long a stretch of patch q's outline lies in element e's plane within e (its edges moved in by
+// `inset`; a negative inset takes the outline too), if q stands on e's surface: at an angle to it
+// and reaching in front of it. 0 otherwise.
+double Solver::Impl::contact_length(uint32_t e, uint32_t q, double inset) const {
+  const glm::dvec3& n = prep.normal[e_patch[e]];
+  const Corners c = corners_of_copy(e);
+  const uint32_t nc = corner_count(e);
+  // An edge within this of the plane lies in it (written positions are rounded).
+  const double eps = kCloseFacingLength * prep.diagonal;
+  const Patch& pq = patches[q];
+  bool in_front = false;
+  for (uint32_t k = 0; k < pq.corner_count; ++k) in_front = in_front || glm::dot(n, pq.corners[k] - c[0]) > eps;
+  if (!in_front) return 0.0;
+  double longest = 0.0;
+  for (uint32_t k = 0; k < pq.corner_count; ++k) {
+    const glm::dvec3& a = pq.corners[k];
+    const glm::dvec3& b = pq.corners[(k + 1) % pq.corner_count];
+    if (std::abs(glm::dot(n, a - c[0])) > eps || std::abs(glm::dot(n, b - c[0])) > eps) continue;
+    double t0 = 0.0, t1 = 1.0;
+    for (uint32_t j = 0; j < nc && t0 < t1; ++j) {
+      const glm::dvec3 m = glm::normalize(glm::cross(n, c[(j + 1) % nc] - c[j]));
+      const double da = glm::dot(m, a - c[j]) - inset, db = glm::dot(m, b - c[j]) - inset;
+      if (da < 0.0 && db < 0.0) t1 = -1.0;
+      else if (da < 0.0) t0 = std::max(t0, da / (da - db));
+      else if (db < 0.0) t1 = std::min(t1, da / (da - db));
+    }
+    longest = std::max(longest, (t1 - t0) * glm::length(b - a));
+  }
+  return longest;
+}
+
+// Whether a surface standing on element e's patch crosses e's interior (contact_length): the foot
+// of a block without a bottom on a floor. The floor is dark on one side of such a line and lit on
+// the other; an element across it showed the light under the block and the dark outside it.
+bool Solver::Impl::contact_crosses(uint32_t e) const {
+  const uint32_t p = e_patch[e];
+  const glm::dvec3& n = prep.normal[p];
+  const Corners c = corners_of_copy(e);
+  const uint32_t nc = corner_count(e);
+  const double eps = kRoundingLength * prep.diagonal;
+  glm::dvec3 lo = c[0], hi = c[0];
+  for (uint32_t k = 1; k < nc; ++k) {
+    lo = glm::min(lo, c[k]);
+    hi = glm::max(hi, c[k]);
+  }
+  auto near = [&](const glm::dvec3& blo, const glm::dvec3& bhi) {
+    return !glm::any(glm::lessThan(hi + eps, blo)) && !glm::any(glm::greaterThan(lo - eps, bhi));
+  };
+  const double shortest = std::max(eps, kContactShare * std::sqrt(min_split_area() / std::pow(4.0, kCoverOutlineLevels)));
+  return find_patch(near, [&](uint32_t q) {
+    return q != p && prep.twin[q] != p && std::abs(glm::dot(prep.normal[q], n)) <= 1.0 - 1e-6 && contact_length(e, q, eps) > shortest;
+  });
 }
 
 }  // namespace hemibake::solver

@@ -2,8 +2,12 @@
 #include "solver_impl.h"
 
 #include <glm/common.hpp>
+#include <glm/geometric.hpp>
+#include <glm/vector_relational.hpp>
 
+#include <algorithm>
 #include <limits>
+#include <numeric>
 
 namespace hemibake::solver {
 
@@ -22,6 +26,114 @@ void Solver::Impl::build_patch_bvh() {
   }
   tree.emplace_back();
   if (!patches.empty()) build_patch_tree(0, 0, static_cast<uint32_t>(patches.size()));
+}
+
+// Surfaces standing on others (GroupAdjacency::add_standing): an edge of patch q lies in the plane
+// of patch p of another plane, overlapping p, and all of q's occlusion group lies on one side of
+// that plane. The feet (q's edges on p) are kept per p, and p's elements across one are marked
+// (kOnFoot).
+void Solver::Impl::find_standing() {
+  const double in_plane = kCloseFacingLength * prep.diagonal;  // written positions are rounded
+  const double tol = 1e-7 * prep.diagonal;
+  struct Contact {
+    uint64_t key;  // base group << 32 | top group
+    bool front;    // the top on the base's front side
+    uint32_t base_patch, top;
+    glm::dvec3 a, b;  // the top's edge
+  };
+  std::vector<Contact> contacts;
+  for (uint32_t q = 0; q < patches.size(); ++q) {
+    const Patch& pq = patches[q];
+    for (uint32_t k = 0; k < pq.corner_count; ++k) {
+      const glm::dvec3& a = pq.corners[k];
+      const glm::dvec3& b = pq.corners[(k + 1) % pq.corner_count];
+      const glm::dvec3 lo = glm::min(a, b) - in_plane, hi = glm::max(a, b) + in_plane;
+      auto near = [&](const glm::dvec3& blo, const glm::dvec3& bhi) {
+        return !glm::any(glm::lessThan(hi, blo)) && !glm::any(glm::greaterThan(lo, bhi));
+      };
+      find_patch(near, [&](uint32_t p) {
+        const glm::dvec3& n = prep.normal[p];
+        if (p == q || prep.occlusion_group[p] == prep.occlusion_group[q] ||
+            std::abs(glm::dot(n, prep.normal[q])) > 1.0 - 1e-6)
+          return false;
+        const Patch& pp = patches[p];
+        if (detail::foot_within({pp.corners.data(), pp.corner_count}, n, a, b, in_plane, tol) <= tol) return false;
+        double reach = 0.0;  // q's farthest corner from p's plane, signed
+        for (uint32_t c = 0; c < pq.corner_count; ++c) {
+          const double d = glm::dot(n, pq.corners[c] - pp.corners[0]);
+          if (std::abs(d) > std::abs(reach)) reach = d;
+        }
+        if (std::abs(reach) > in_plane)
+          contacts.push_back({(static_cast<uint64_t>(prep.occlusion_group[p]) << 32) | prep.occlusion_group[q], reach > 0.0, p, q, a, b});
+        return false;
+      });
+    }
+  }
+  if (contacts.empty()) return;
+  std::sort(contacts.begin(), contacts.end(), [](const Contact& x, const Contact& y) {
+    return x.key != y.key ? x.key < y.key : x.front < y.front;
+  });
+  // The patches of each group, to check that the whole top lies on one side of the base's plane.
+  std::vector<uint32_t> by_group(patches.size());
+  std::iota(by_group.begin(), by_group.end(), 0u);
+  std::sort(by_group.begin(), by_group.end(), [&](uint32_t x, uint32_t y) {
+    return prep.occlusion_group[x] != prep.occlusion_group[y] ? prep.occlusion_group[x] < prep.occlusion_group[y] : x < y;
+  });
+  for (size_t first = 0, last = 0; first < contacts.size(); first = last) {
+    while (last < contacts.size() && contacts[last].key == contacts[first].key && contacts[last].front == contacts[first].front) ++last;
+    const uint64_t key = contacts[first].key;
+    const bool front = contacts[first].front;
+    const uint32_t base = static_cast<uint32_t>(key >> 32), top = static_cast<uint32_t>(key);
+    const glm::dvec3& n = prep.normal[base];  // a group's root is one of its patches
+    const glm::dvec3& origin = patches[base].corners[0];
+    auto it = std::lower_bound(by_group.begin(), by_group.end(), top,
+                               [&](uint32_t x, uint32_t g) { return prep.occlusion_group[x] < g; });
+    bool one_side = true;
+    for (; it != by_group.end() && prep.occlusion_group[*it] == top && one_side; ++it)
+      for (uint32_t c = 0; c < patches[*it].corner_count; ++c) {
+        const double d = glm::dot(n, patches[*it].corners[c] - origin);
+        one_side = one_side && (front ? d >= -in_plane : d <= in_plane);
+      }
+    if (!one_side) continue;
+    prep.adjacency.add_standing(base, top, front);
+    if (p_feet.empty()) p_feet.resize(patches.size());
+    for (size_t c = first; c < last; ++c) p_feet[contacts[c].base_patch].push_back({contacts[c].a, contacts[c].b, contacts[c].top});
+  }
+  prep.adjacency.finish_standing();
+  for (uint32_t e = 0; e < e_patch.size(); ++e) {
+    bool under = false;
+    if (on_foot(e, &under)) e_group_feet[e] |= detail::kOnFoot;
+    e_under[e] = under;
+  }
+}
+
+// Whether a foot of a surface standing on element e's patch (find_standing) meets e, its outline
+// included; `under`, if given: whether e's centre lies behind a one-sided such surface.
+bool Solver::Impl::on_foot(uint32_t e, bool* under) const {
+  if (under != nullptr) *under = false;
+  if (p_feet.empty() || p_feet[e_patch[e]].empty()) return false;
+  const double in_plane = kCloseFacingLength * prep.diagonal;
+  const double tol = 1e-7 * prep.diagonal;
+  const Corners c = corners_of_copy(e);
+  const uint32_t nc = corner_count(e);
+  glm::dvec3 lo = c[0], hi = c[0];
+  for (uint32_t k = 1; k < nc; ++k) {
+    lo = glm::min(lo, c[k]);
+    hi = glm::max(hi, c[k]);
+  }
+  bool met = false;
+  for (const Foot& foot : p_feet[e_patch[e]]) {
+    const glm::dvec3 &a = foot.a, &b = foot.b;
+    if (glm::any(glm::lessThan(glm::max(a, b) + in_plane, lo)) || glm::any(glm::greaterThan(glm::min(a, b) - in_plane, hi))) continue;
+    if (detail::foot_within({c.data(), nc}, prep.normal[e_patch[e]], a, b, in_plane, tol) <= tol) continue;
+    met = true;
+    if (under == nullptr) return true;
+    if (prep.twin[foot.top] == kNone && glm::dot(prep.normal[foot.top], e_centre[e] - patches[foot.top].corners[0]) < 0.0) {
+      *under = true;
+      return true;
+    }
+  }
+  return met;
 }
 
 // Tree node `id` over tree_patch[begin, end), and its subtree: leaves hold at most four patches.

@@ -45,11 +45,16 @@ bool Solver::Impl::refine(const Piece& piece, const detail::Shaft& shaft, std::v
 }
 
 // This shot's radiosity at every accepted receiver (shot_b), and its spread around every vertex
-// (vmin, vmax).
+// (vmin, vmax). Elements under a surface standing on them (e_under) are left out of the spread: no
+// one sees them, the foot is split along before any shot (contact_crosses), and the mesh leaves them
+// out of the vertices on the foot (Solver::mesh). Counted, the light in front of a sunlit foot
+// against the dark under it split the ground along every foot down to the smallest elements (the
+// lit yard: 5777 splits for the gradient against 3430; the Cornell box 1218 against 999).
 void Solver::Impl::spread_shot(const glm::dvec3& dB, const std::vector<uint32_t>& accepted) {
   for (uint32_t e : accepted) {
     const double v = shot_radiosity(e, dB, f_recv[e]);
     shot_b[e] = v;
+    if (e_under[e]) continue;
     for (uint32_t k = 0; k < corner_count(e); ++k) {
       const uint32_t vert = e_corner[e][k];
       vmin[vert] = std::min(vmin[vert], v);

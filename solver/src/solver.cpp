@@ -70,6 +70,7 @@ Solver::Impl::Impl(const Scene& scene, const Params& p, const Impl* first, const
     leaves.push_back(p_root[i]);
   }
   build_patch_bvh();  // clusters look for other objects' surfaces passing through them
+  find_standing();
   build_clusters();
   u_far_scale.assign(unit_node.size(), 1.0);
   source = scene;

@@ -134,6 +134,10 @@ constexpr double kCoverGap = 0.01;
 // A cover that emits nothing splits the elements along its outline this many levels under the
 // smallest split (split_along_cover_outlines).
 constexpr int kCoverOutlineLevels = 2;
+// A surface standing on an element splits it (contact_crosses) where the stretch of its foot across
+// the element is at least this share of the side of the smallest element an outline splits to: a
+// chair's 3 cm leg does not split a cluttered room's floor.
+constexpr double kContactShare = 0.5;
 // A shot is repeated after splits (refine) at most this many times; one still splitting after them
 // is not recorded for replays.
 constexpr int kMaxRounds = 64;
@@ -297,6 +301,8 @@ struct Solver::Impl {
 
   // patch_bvh.cpp, clusters.cpp: built once.
   void build_patch_bvh();
+  void find_standing();
+  bool on_foot(uint32_t e, bool* under = nullptr) const;
   void build_patch_tree(uint32_t node, uint32_t begin, uint32_t end);
   void patches_meeting(const detail::Shaft& shaft, std::vector<uint32_t>& out);
   void build_clusters();
@@ -376,6 +382,8 @@ struct Solver::Impl {
   bool covered(uint32_t p, const glm::dvec3& x, double gap = 0.0, bool any_facing = false,
                Cover by = Cover::kAny) const;
   void split_along_cover_outlines();
+  bool contact_crosses(uint32_t e) const;
+  double contact_length(uint32_t e, uint32_t q, double inset) const;
 
   // pools.cpp: where the light an element took varies across it. Each patch large enough to split
   // holds a grid of points; every shot adds to the points of its receivers the light it gave them,
@@ -392,6 +400,7 @@ struct Solver::Impl {
   bool gap_covered(uint32_t p, const glm::dvec3& x, double radius) const;
   // mesh_export.cpp: covered vertices show the light of their uncovered neighbours.
   void show_uncovered_light(const std::vector<uint32_t>& leaves, Mesh& m) const;
+  std::vector<std::array<uint32_t, 2>> standing_on(const std::vector<uint32_t>& leaves) const;
   bool leaf_covered(uint32_t e);
   double covered_share(std::span<const uint32_t> sources);
   static double point_piece_form_factor(const Piece& piece, const glm::dvec3& x, const glm::dvec3& n);
@@ -467,6 +476,21 @@ struct Solver::Impl {
   // Elements, structure of arrays. Children of an element are consecutive.
   std::vector<uint32_t> e_patch, e_parent, e_child;
   std::vector<uint32_t> e_group;  // the patch's occlusion group
+  // The same with kOnFoot where a foot meets the element, for the views of lights (lights.cpp):
+  // their pixels are coarse beside the elements at a foot (a sun's parallel view of a yard: 6 cm),
+  // and the floor in front of a foot shares them with the foot (PixelResolver's nearest first).
+  // Shots from patches see the feet through pixels of a centimetre or so, where that sharing
+  // sharpened the Cornell box's contact shadows at 1.6 times the time for a p90 of 7.7 against 8.0 %.
+  std::vector<uint32_t> e_group_feet;
+  // Per patch: the feet of the surfaces standing on it (find_standing); empty if there are none.
+  struct Foot {
+    glm::dvec3 a, b;  // an edge of `top` in the patch's plane
+    uint32_t top;
+  };
+  std::vector<std::vector<Foot>> p_feet;
+  // Per element: it lies under a one-sided surface standing on it (its centre behind the plane of
+  // one whose foot meets it: the floor inside a box without a bottom), where no one sees it.
+  std::vector<uint8_t> e_under;
   std::vector<std::array<uint32_t, 4>> e_corner;
   std::vector<double> e_area;
   std::vector<glm::dvec3> e_centre;  // bounding sphere
