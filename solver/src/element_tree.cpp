@@ -37,9 +37,7 @@ uint32_t Solver::Impl::add_element(uint32_t patch, uint32_t parent,
   for (uint32_t i = 0; i < nc; ++i) radius = std::max(radius, glm::distance(centre, c[i]));
   e_centre.push_back(centre);
   e_radius.push_back(radius);
-  bool under = false;
-  e_group_feet.push_back(e_group.back() | (on_foot(id, &under) ? detail::kOnFoot : 0u));
-  e_under.push_back(under);
+  e_under.push_back(under_foot(id));
   e_b.push_back(b);
   e_unshot.push_back(unshot);
   f_begin.push_back(0);

@@ -17,7 +17,6 @@
 #include <map>
 #include <numbers>
 #include <numeric>
-#include <tuple>
 
 namespace hemibake::solver {
 namespace detail {
@@ -211,7 +210,7 @@ double foot_within(std::span<const glm::dvec3> base, const glm::dvec3& n, const 
   return std::max(0.0, t1 - t0) * glm::distance(a, b);
 }
 
-int GroupAdjacency::standing_order(uint64_t a, uint64_t b, bool* base_behind) const {
+int GroupAdjacency::standing_order(uint64_t a, uint64_t b) const {
   const std::span<const Stand> of_a = standing_of(static_cast<uint32_t>(a));
   if (of_a.empty()) return 0;
   const uint64_t key = (a << 32) | (b & 0xffffffffu);
@@ -222,7 +221,6 @@ int GroupAdjacency::standing_order(uint64_t a, uint64_t b, bool* base_behind) co
   const uint64_t base = it->x_base ? a : b;
   const bool base_front_seen = (base >> 32) == 0;
   const bool top_first = base_front_seen == it->on_front;
-  if (base_behind != nullptr) *base_behind = top_first;
   return top_first == it->x_base ? 1 : -1;
 }
 
@@ -612,7 +610,6 @@ struct GroupSum {
   double area;
   float inv_depth;
   float trans;
-  bool foot;  // a foot standing on the surface meets a fragment's element (kOnFoot)
 };
 
 // The side (bit 32 of a pixel's surface id) on which a neighbour across `link` of a surface on
@@ -656,17 +653,15 @@ class PixelResolver {
  private:
   // A fragment's surface: its occlusion group, with the back faces of a group apart (bit 32).
   uint64_t surface_of(uint32_t element) const {
-    if (element & kBackFace) return (uint64_t{1} << 32) | (group_of_[element & ~kBackFace] & ~kOnFoot);
-    return group_of_[element] & ~kOnFoot;
+    if (element & kBackFace) return (uint64_t{1} << 32) | group_of_[element & ~kBackFace];
+    return group_of_[element];
   }
-  bool on_foot(uint32_t element) const { return (group_of_[element & ~kBackFace] & kOnFoot) != 0; }
   enum class Meet : uint8_t { kApart, kTile, kFold };
   template <class SideOf, class Fn>
   void neighbours_in_pixel(uint32_t i, SideOf side_of, Fn fn);
   Meet meet(uint64_t a, uint64_t b);
-  int standing_order(uint64_t a, uint64_t b, bool* base_behind = nullptr);
+  int standing_order(uint64_t a, uint64_t b);
   void order_standing();
-  void share_base_nearest_first();
   void sum_groups(uint32_t lo, uint32_t hi);
   bool merge_neighbours();
   void order_layers(bool any_back);
@@ -697,11 +692,7 @@ class PixelResolver {
   bool asked_any_ = false;
   uint64_t stood_a_ = 0, stood_b_ = 0;
   int stood_answer_ = 0;
-  bool stood_base_behind_ = false;
   bool stood_any_ = false;
-  std::vector<uint8_t> under_top_;  // per group root: a base behind a surface standing on it (order_standing)
-  bool any_under_top_ = false;
-  std::vector<std::tuple<uint32_t, float, uint32_t>> base_frags_;  // (root, -inv_depth, fragment)
   std::vector<std::pair<uint64_t, uint32_t>> by_group_;  // (surface, fragment)
   std::vector<GroupSum> groups_;
   std::vector<uint32_t> layers_;
@@ -762,15 +753,14 @@ PixelResolver::Meet PixelResolver::meet(uint64_t a, uint64_t b) {
 }
 
 // GroupAdjacency::standing_order, the last answer kept as in meet().
-int PixelResolver::standing_order(uint64_t a, uint64_t b, bool* base_behind) {
+int PixelResolver::standing_order(uint64_t a, uint64_t b) {
   if (!adjacency_.any_standing()) return 0;
   if (!stood_any_ || a != stood_a_ || b != stood_b_) {
     stood_a_ = a;
     stood_b_ = b;
     stood_any_ = true;
-    stood_answer_ = adjacency_.standing_order(a, b, &stood_base_behind_);
+    stood_answer_ = adjacency_.standing_order(a, b);
   }
-  if (base_behind != nullptr) *base_behind = stood_base_behind_;
   return stood_answer_;
 }
 
@@ -791,21 +781,18 @@ bool PixelResolver::two_surfaces(uint32_t lo, uint32_t hi) {
   uint64_t g1 = g0;
   double sum0 = 0.0, sum1 = 0.0;
   float depth0 = std::numeric_limits<float>::lowest(), depth1 = depth0;
-  bool foot0 = false, foot1 = false;
   for (uint32_t k = lo; k < hi; ++k) {
     const Fragment& f = fragments_[order_[k]];
     const uint64_t g = surface_of(f.element);
     if (g == g0) {
       sum0 += f.area;
       depth0 = std::max(depth0, f.inv_depth);
-      foot0 = foot0 || on_foot(f.element);
       continue;
     }
     if (g1 != g0 && g != g1) return false;
     g1 = g;
     sum1 += f.area;
     depth1 = std::max(depth1, f.inv_depth);
-    foot1 = foot1 || on_foot(f.element);
   }
   float trans0, trans1;
   const Meet how = g1 == g0 ? Meet::kTile : meet(g0, g1);
@@ -815,10 +802,7 @@ bool PixelResolver::two_surfaces(uint32_t lo, uint32_t hi) {
   } else {
     // Nearest first; ties go to the lower id (a back face's is higher: front faces win). One
     // standing on the other goes by that (GroupAdjacency::add_standing).
-    bool base_behind = false;
-    const int stand = how == Meet::kApart ? standing_order(g0, g1, &base_behind) : 0;
-    // On the foot of a surface standing on the other, the base's pieces share nearest first: layers().
-    if (stand != 0 && base_behind && (stand < 0 ? foot1 : foot0)) return false;
+    const int stand = how == Meet::kApart ? standing_order(g0, g1) : 0;
     const bool first_near = stand != 0 ? stand < 0 : depth0 != depth1 ? depth0 > depth1 : g0 < g1;
     const double near_sum = first_near ? sum0 : sum1, far_sum = first_near ? sum1 : sum0;
     const float near_trans = static_cast<float>(near_sum > 1.0 ? 1.0 / near_sum : 1.0);
@@ -883,55 +867,15 @@ bool PixelResolver::front_covers(uint32_t lo, uint32_t hi) {
 }
 
 void PixelResolver::layers(uint32_t lo, uint32_t hi) {
-  any_under_top_ = false;
   sum_groups(lo, hi);
   const bool any_fold = merge_neighbours();
   order_layers(any_fold);
   share_pixel(any_fold);
   for (uint32_t i = 0; i < groups_.size(); ++i) groups_[i].trans = groups_[root(i)].trans;
-  if (any_under_top_) {
-    share_base_nearest_first();
-    return;
-  }
   size_t gi = 0;
   for (const auto& [g, fi] : by_group_) {
     while (groups_[gi].group != g) ++gi;
     fragments_[fi].trans = groups_[gi].trans;
-  }
-}
-
-// A base behind a surface standing on it (order_standing), in a pixel on the foot (one of the
-// base's elements there meets a foot: kOnFoot): the base's pieces in front of the foot lie beside
-// the standing surface and those behind it under it, so the share the base's layer gets (what the
-// standing one leaves) goes to its nearest pieces first: on a plane, those on the eye's side of the
-// standing surface. Shared in proportion, a thin piece of floor in front of a sunlit wall's foot
-// got that share times its own coverage, and read dark. Other layers' fragments take their
-// layer's share.
-void PixelResolver::share_base_nearest_first() {
-  base_frags_.clear();
-  std::vector<double>& budget = fold_cap_;  // per root: the layer's share of the pixel
-  budget.assign(groups_.size(), 0.0);
-  size_t gi = 0;
-  for (const auto& [g, fi] : by_group_) {
-    while (groups_[gi].group != g) ++gi;
-    const uint32_t r = root(gi);
-    const Fragment& f = fragments_[fi];
-    if (under_top_[r]) {
-      budget[r] += static_cast<double>(f.area) * groups_[gi].trans;
-      base_frags_.emplace_back(r, -f.inv_depth, fi);
-    }
-  }
-  gi = 0;
-  for (const auto& [g, fi] : by_group_) {
-    while (groups_[gi].group != g) ++gi;
-    if (!under_top_[root(gi)]) fragments_[fi].trans = groups_[gi].trans;
-  }
-  std::sort(base_frags_.begin(), base_frags_.end());
-  for (const auto& [r, depth, fi] : base_frags_) {
-    Fragment& f = fragments_[fi];
-    const double take = std::min(static_cast<double>(f.area), budget[r]);
-    budget[r] -= take;
-    f.trans = f.area > 0.0f ? static_cast<float>(take / f.area) : 0.0f;
   }
 }
 
@@ -944,9 +888,8 @@ void PixelResolver::sum_groups(uint32_t lo, uint32_t hi) {
   for (const auto& [g, fi] : by_group_) {
     const Fragment& f = fragments_[fi];
     if (groups_.empty() || groups_.back().group != g) {
-      groups_.push_back({g, static_cast<uint32_t>(groups_.size()), 0.0, f.inv_depth, 1.0f, false});
+      groups_.push_back({g, static_cast<uint32_t>(groups_.size()), 0.0, f.inv_depth, 1.0f});
     }
-    groups_.back().foot = groups_.back().foot || on_foot(f.element);
     groups_.back().area += f.area;
     groups_.back().inv_depth = std::max(groups_.back().inv_depth, f.inv_depth);
   }
@@ -1017,20 +960,17 @@ void PixelResolver::order_layers(bool any_fold) {
 // Of two surfaces in the pixel where one stands on the other (GroupAdjacency::add_standing), the
 // one behind is moved just behind the other's layer. Searched by a surface's standing partners
 // when it has few, by the pixel's surfaces when it has more (a floor under hundreds of boxes).
+// In a pixel on the foot, seen from the standing one's side, the base keeps the layers' rule: it
+// takes what the standing one leaves times its own coverage, which leaves the floor just in front
+// of a foot dark where the pixel is coarse (bench/README.md, "Surfaces standing on others").
 void PixelResolver::order_standing() {
   auto settle = [&](uint32_t i, uint32_t j) {
-    bool base_behind = false;
-    const int o = standing_order(groups_[i].group, groups_[j].group, &base_behind);
+    const int o = standing_order(groups_[i].group, groups_[j].group);
     if (o == 0) return;
     const uint32_t first = root(o < 0 ? i : j), second = root(o < 0 ? j : i);
     if (first == second) return;
     const float behind = std::nextafter(groups_[first].inv_depth, std::numeric_limits<float>::lowest());
     groups_[second].inv_depth = std::min(groups_[second].inv_depth, behind);
-    if (base_behind && groups_[o < 0 ? j : i].foot) {
-      if (!any_under_top_) under_top_.assign(groups_.size(), 0);
-      under_top_[second] = 1;
-      any_under_top_ = true;
-    }
   };
   for (uint32_t i = 0; i < groups_.size(); ++i) {
     const uint32_t id = static_cast<uint32_t>(groups_[i].group);

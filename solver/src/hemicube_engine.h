@@ -31,12 +31,6 @@ struct Fragment {
 };
 static_assert(sizeof(Fragment) == 16);
 
-/// Set in a group id given to resolve() (group_of) for an element that a surface standing on it
-/// (GroupAdjacency::add_standing) meets with its foot: pixels holding it and the standing surface
-/// lie on the foot, and there the base's pieces share what the standing one leaves nearest first.
-/// Not part of the group's id; callers that leave it out get the base's share in proportion.
-inline constexpr uint32_t kOnFoot = 0x40000000u;
-
 /// Set in Fragment::element for the back of a one-sided surface: an occluder that takes no light.
 /// Its fragments form layers of their own (never merged with front-facing neighbours, whose
 /// projections do not tile with it) and lose depth ties to front faces.
@@ -81,9 +75,8 @@ class GroupAdjacency {
   void finish_standing();  ///< call once after the last add_standing()
   /// Which of surfaces a and b (occlusion group ids, bit 32 set for a back face: the side seen)
   /// lies in front where both show in a pixel because one stands on the other: -1 a, 1 b, 0 neither
-  /// stands on the other. `base_behind`, if given, says whether the one behind is the base (the
-  /// eye on the top's side of the base's plane).
-  int standing_order(uint64_t a, uint64_t b, bool* base_behind = nullptr) const;
+  /// stands on the other.
+  int standing_order(uint64_t a, uint64_t b) const;
   /// How many surfaces stand on a or a stands on (for choosing how to search a pixel).
   size_t standing_count(uint32_t a) const { return standing_of(a).size(); }
   /// Calls fn(other) for each surface standing on a or that a stands on.

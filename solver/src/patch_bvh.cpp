@@ -30,8 +30,8 @@ void Solver::Impl::build_patch_bvh() {
 
 // Surfaces standing on others (GroupAdjacency::add_standing): an edge of patch q lies in the plane
 // of patch p of another plane, overlapping p, and all of q's occlusion group lies on one side of
-// that plane. The feet (q's edges on p) are kept per p, and p's elements across one are marked
-// (kOnFoot).
+// that plane. The feet (q's edges on p) are kept per p, and p's elements under a one-sided one are
+// marked (e_under).
 void Solver::Impl::find_standing() {
   const double in_plane = kCloseFacingLength * prep.diagonal;  // written positions are rounded
   const double tol = 1e-7 * prep.diagonal;
@@ -94,24 +94,20 @@ void Solver::Impl::find_standing() {
         const double d = glm::dot(n, patches[*it].corners[c] - origin);
         one_side = one_side && (front ? d >= -in_plane : d <= in_plane);
       }
-    if (!one_side) continue;
+    // Surfaces that share an edge keep that edge's rule (GroupAdjacency::finish_standing).
+    if (!one_side || prep.adjacency.find(base, top) != nullptr) continue;
     prep.adjacency.add_standing(base, top, front);
     if (p_feet.empty()) p_feet.resize(patches.size());
     for (size_t c = first; c < last; ++c) p_feet[contacts[c].base_patch].push_back({contacts[c].a, contacts[c].b, contacts[c].top});
   }
   prep.adjacency.finish_standing();
-  for (uint32_t e = 0; e < e_patch.size(); ++e) {
-    bool under = false;
-    if (on_foot(e, &under)) e_group_feet[e] |= detail::kOnFoot;
-    e_under[e] = under;
-  }
+  for (uint32_t e = 0; e < e_patch.size(); ++e) e_under[e] = under_foot(e);
 }
 
-// Whether a foot of a surface standing on element e's patch (find_standing) meets e, its outline
-// included; `under`, if given: whether e's centre lies behind a one-sided such surface.
-bool Solver::Impl::on_foot(uint32_t e, bool* under) const {
-  if (under != nullptr) *under = false;
-  if (p_feet.empty() || p_feet[e_patch[e]].empty()) return false;
+// The one-sided surface standing on element e's patch (find_standing) that e lies under: the
+// surface's foot meets e, its outline included, and e's centre lies behind the surface; or kNone.
+uint32_t Solver::Impl::under_foot(uint32_t e) const {
+  if (p_feet.empty() || p_feet[e_patch[e]].empty()) return kNone;
   const double in_plane = kCloseFacingLength * prep.diagonal;
   const double tol = 1e-7 * prep.diagonal;
   const Corners c = corners_of_copy(e);
@@ -121,19 +117,13 @@ bool Solver::Impl::on_foot(uint32_t e, bool* under) const {
     lo = glm::min(lo, c[k]);
     hi = glm::max(hi, c[k]);
   }
-  bool met = false;
   for (const Foot& foot : p_feet[e_patch[e]]) {
+    if (prep.twin[foot.top] != kNone || glm::dot(prep.normal[foot.top], e_centre[e] - patches[foot.top].corners[0]) >= 0.0) continue;
     const glm::dvec3 &a = foot.a, &b = foot.b;
     if (glm::any(glm::lessThan(glm::max(a, b) + in_plane, lo)) || glm::any(glm::greaterThan(glm::min(a, b) - in_plane, hi))) continue;
-    if (detail::foot_within({c.data(), nc}, prep.normal[e_patch[e]], a, b, in_plane, tol) <= tol) continue;
-    met = true;
-    if (under == nullptr) return true;
-    if (prep.twin[foot.top] == kNone && glm::dot(prep.normal[foot.top], e_centre[e] - patches[foot.top].corners[0]) < 0.0) {
-      *under = true;
-      return true;
-    }
+    if (detail::foot_within({c.data(), nc}, prep.normal[e_patch[e]], a, b, in_plane, tol) > tol) return foot.top;
   }
-  return met;
+  return kNone;
 }
 
 // Tree node `id` over tree_patch[begin, end), and its subtree: leaves hold at most four patches.

@@ -54,7 +54,7 @@ void Solver::Impl::spread_shot(const glm::dvec3& dB, const std::vector<uint32_t>
   for (uint32_t e : accepted) {
     const double v = shot_radiosity(e, dB, f_recv[e]);
     shot_b[e] = v;
-    if (e_under[e]) continue;
+    if (e_under[e] != kNone) continue;
     for (uint32_t k = 0; k < corner_count(e); ++k) {
       const uint32_t vert = e_corner[e][k];
       vmin[vert] = std::min(vmin[vert], v);

@@ -302,7 +302,7 @@ struct Solver::Impl {
   // patch_bvh.cpp, clusters.cpp: built once.
   void build_patch_bvh();
   void find_standing();
-  bool on_foot(uint32_t e, bool* under = nullptr) const;
+  uint32_t under_foot(uint32_t e) const;
   void build_patch_tree(uint32_t node, uint32_t begin, uint32_t end);
   void patches_meeting(const detail::Shaft& shaft, std::vector<uint32_t>& out);
   void build_clusters();
@@ -476,21 +476,15 @@ struct Solver::Impl {
   // Elements, structure of arrays. Children of an element are consecutive.
   std::vector<uint32_t> e_patch, e_parent, e_child;
   std::vector<uint32_t> e_group;  // the patch's occlusion group
-  // The same with kOnFoot where a foot meets the element, for the views of lights (lights.cpp):
-  // their pixels are coarse beside the elements at a foot (a sun's parallel view of a yard: 6 cm),
-  // and the floor in front of a foot shares them with the foot (PixelResolver's nearest first).
-  // Shots from patches see the feet through pixels of a centimetre or so, where that sharing
-  // sharpened the Cornell box's contact shadows at 1.6 times the time for a p90 of 7.7 against 8.0 %.
-  std::vector<uint32_t> e_group_feet;
   // Per patch: the feet of the surfaces standing on it (find_standing); empty if there are none.
   struct Foot {
     glm::dvec3 a, b;  // an edge of `top` in the patch's plane
     uint32_t top;
   };
   std::vector<std::vector<Foot>> p_feet;
-  // Per element: it lies under a one-sided surface standing on it (its centre behind the plane of
-  // one whose foot meets it: the floor inside a box without a bottom), where no one sees it.
-  std::vector<uint8_t> e_under;
+  // Per element: the one-sided surface standing on it that it lies under (the surface's foot meets
+  // it and its centre lies behind the surface: the floor inside a box without a bottom), or kNone.
+  std::vector<uint32_t> e_under;
   std::vector<std::array<uint32_t, 4>> e_corner;
   std::vector<double> e_area;
   std::vector<glm::dvec3> e_centre;  // bounding sphere
