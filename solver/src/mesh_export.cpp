@@ -74,16 +74,9 @@ std::vector<std::array<uint32_t, 2>> Solver::Impl::standing_on(const std::vector
     const uint32_t e = sorted[i];
     const uint32_t p = e_patch[e];
     const glm::dvec3& n = prep.normal[p];
-    const Corners c = corners_of_copy(e);
-    const uint32_t nc = corner_count(e);
-    glm::dvec3 lo = c[0], hi = c[0];
-    for (uint32_t k = 1; k < nc; ++k) {
-      lo = glm::min(lo, c[k]);
-      hi = glm::max(hi, c[k]);
-    }
-    auto near = [&](const glm::dvec3& blo, const glm::dvec3& bhi) {
-      return !glm::any(glm::lessThan(hi + eps, blo)) && !glm::any(glm::greaterThan(lo - eps, bhi));
-    };
+    glm::dvec3 lo, hi;
+    element_box(e, lo, hi);
+    auto near = [&](const glm::dvec3& blo, const glm::dvec3& bhi) { return boxes_meet(lo, hi, blo, bhi, eps); };
     uint32_t found = 0;
     find_patch(near, [&](uint32_t q) {
       if (q == p || prep.twin[q] != kNone || std::abs(glm::dot(prep.normal[q], n)) > 1.0 - 1e-6) return false;

@@ -316,17 +316,10 @@ double Solver::Impl::contact_length(uint32_t e, uint32_t q, double inset) const 
 bool Solver::Impl::contact_crosses(uint32_t e) const {
   const uint32_t p = e_patch[e];
   const glm::dvec3& n = prep.normal[p];
-  const Corners c = corners_of_copy(e);
-  const uint32_t nc = corner_count(e);
   const double eps = kRoundingLength * prep.diagonal;
-  glm::dvec3 lo = c[0], hi = c[0];
-  for (uint32_t k = 1; k < nc; ++k) {
-    lo = glm::min(lo, c[k]);
-    hi = glm::max(hi, c[k]);
-  }
-  auto near = [&](const glm::dvec3& blo, const glm::dvec3& bhi) {
-    return !glm::any(glm::lessThan(hi + eps, blo)) && !glm::any(glm::greaterThan(lo - eps, bhi));
-  };
+  glm::dvec3 lo, hi;
+  element_box(e, lo, hi);
+  auto near = [&](const glm::dvec3& blo, const glm::dvec3& bhi) { return boxes_meet(lo, hi, blo, bhi, eps); };
   const double shortest = std::max(eps, kContactShare * std::sqrt(min_split_area() / std::pow(4.0, kCoverOutlineLevels)));
   return find_patch(near, [&](uint32_t q) {
     return q != p && prep.twin[q] != p && std::abs(glm::dot(prep.normal[q], n)) <= 1.0 - 1e-6 && contact_length(e, q, eps) > shortest;

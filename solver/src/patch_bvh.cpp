@@ -3,7 +3,6 @@
 
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
-#include <glm/vector_relational.hpp>
 
 #include <algorithm>
 #include <limits>
@@ -47,10 +46,8 @@ void Solver::Impl::find_standing() {
     for (uint32_t k = 0; k < pq.corner_count; ++k) {
       const glm::dvec3& a = pq.corners[k];
       const glm::dvec3& b = pq.corners[(k + 1) % pq.corner_count];
-      const glm::dvec3 lo = glm::min(a, b) - in_plane, hi = glm::max(a, b) + in_plane;
-      auto near = [&](const glm::dvec3& blo, const glm::dvec3& bhi) {
-        return !glm::any(glm::lessThan(hi, blo)) && !glm::any(glm::greaterThan(lo, bhi));
-      };
+      const glm::dvec3 lo = glm::min(a, b), hi = glm::max(a, b);
+      auto near = [&](const glm::dvec3& blo, const glm::dvec3& bhi) { return boxes_meet(lo, hi, blo, bhi, in_plane); };
       find_patch(near, [&](uint32_t p) {
         const glm::dvec3& n = prep.normal[p];
         if (p == q || prep.occlusion_group[p] == prep.occlusion_group[q] ||
@@ -112,15 +109,12 @@ uint32_t Solver::Impl::under_foot(uint32_t e) const {
   const double tol = 1e-7 * prep.diagonal;
   const Corners c = corners_of_copy(e);
   const uint32_t nc = corner_count(e);
-  glm::dvec3 lo = c[0], hi = c[0];
-  for (uint32_t k = 1; k < nc; ++k) {
-    lo = glm::min(lo, c[k]);
-    hi = glm::max(hi, c[k]);
-  }
+  glm::dvec3 lo, hi;
+  element_box(e, lo, hi);
   for (const Foot& foot : p_feet[e_patch[e]]) {
     if (prep.twin[foot.top] != kNone || glm::dot(prep.normal[foot.top], e_centre[e] - patches[foot.top].corners[0]) >= 0.0) continue;
     const glm::dvec3 &a = foot.a, &b = foot.b;
-    if (glm::any(glm::lessThan(glm::max(a, b) + in_plane, lo)) || glm::any(glm::greaterThan(glm::min(a, b) - in_plane, hi))) continue;
+    if (!boxes_meet(glm::min(a, b), glm::max(a, b), lo, hi, in_plane)) continue;
     if (detail::foot_within({c.data(), nc}, prep.normal[e_patch[e]], a, b, in_plane, tol) > tol) return foot.top;
   }
   return kNone;

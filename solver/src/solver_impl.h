@@ -12,6 +12,7 @@
 #include "shaft.h"
 #include "thread_pool.h"
 
+#include <glm/common.hpp>
 #include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
 #include <glm/vec4.hpp>
@@ -141,6 +142,14 @@ constexpr double kContactShare = 0.5;
 // A shot is repeated after splits (refine) at most this many times; one still splitting after them
 // is not recorded for replays.
 constexpr int kMaxRounds = 64;
+
+// Whether boxes [alo, ahi] and [blo, bhi] meet, each widened by `slack`.
+inline bool boxes_meet(const glm::dvec3& alo, const glm::dvec3& ahi, const glm::dvec3& blo, const glm::dvec3& bhi,
+                       double slack) {
+  for (int k = 0; k < 3; ++k)
+    if (ahi[k] + slack < blo[k] || alo[k] - slack > bhi[k]) return false;
+  return true;
+}
 
 // Lowers `room`, the factor by which a shot's dB may grow, to the factor at which `value` (which
 // scales with dB) reaches `limit`.
@@ -284,6 +293,15 @@ struct Solver::Impl {
     Corners c{};
     corners_of(e, c);
     return c;
+  }
+  // The bounding box of element e's corners.
+  void element_box(uint32_t e, glm::dvec3& lo, glm::dvec3& hi) const {
+    const Corners c = corners_of_copy(e);
+    lo = hi = c[0];
+    for (uint32_t k = 1; k < corner_count(e); ++k) {
+      lo = glm::min(lo, c[k]);
+      hi = glm::max(hi, c[k]);
+    }
   }
   uint32_t midpoint(uint32_t a, uint32_t b);
   uint32_t add_element(uint32_t patch, uint32_t parent, const std::array<uint32_t, 4>& corners,
