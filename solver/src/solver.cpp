@@ -129,7 +129,7 @@ Solver::Impl::Impl(const Scene& scene, const Params& p, const Impl* first, const
 std::unique_ptr<Solver::Impl> Solver::Impl::next_pass(Impl& first) {
   auto next = std::make_unique<Impl>(first.source, first.solve, &first);
   Stats& s = next->stats;
-  s.passes = first.stats.passes + 1;
+  s.passes = first.stats.shots > 0 ? first.stats.passes + 1 : first.stats.passes;  // (one that made no shot is none)
   s.seconds_first_pass = first.stats.seconds;
   s.seconds = first.stats.seconds;  // this pass adds its own
   s.splits_pools = first.stats.splits_pools;
@@ -166,6 +166,13 @@ void Solver::Impl::receive(uint32_t e, const glm::dvec3& dB, double f) {
 // replay is exact, else afresh.
 bool Solver::Impl::step() {
   if (done) return false;
+  // The first pass ends before its first shot when no surface holds a grid (none large enough to
+  // split): it would find nothing.
+  if (first_pass && grid_light.empty()) {
+    pools_looked = true;
+    restart = true;
+    return true;
+  }
   // Lights and the sky shoot first, each once (lights.cpp).
   if (stats.shots < params.max_shots && shoot_next_light()) return true;
   // Once the shots are done, the final gather (gather.cpp), in batches.
@@ -314,7 +321,7 @@ const Stats& Solver::run(const ProgressFn& progress, const CancelToken* cancel) 
       pr.elements = impl_->stats.elements;
       pr.elapsed_seconds = seconds_since(t0);
       pr.pass = impl_->first_pass ? 1 : impl_->stats.passes;
-      pr.passes = impl_->solve.pools ? 2 : 1;
+      pr.passes = impl_->first_pass ? 2 : impl_->stats.passes;
       progress(pr);
     }
   }

@@ -158,7 +158,8 @@ TEST(Refine, AreaLampCastsAPenumbraAcrossAnEdge) {
 }
 
 // Evenly lit surfaces have no pools: a uniform closed box (every patch emitting E, reflectance
-// rho) is not subdivided with pools either, and keeps B = E / (1 - rho).
+// rho) is not subdivided with pools either, and keeps B = E / (1 - rho). Its patches all emit, so
+// none holds a grid and there is no first pass.
 TEST(Refine, UniformClosedBoxHasNoPools) {
   const Scene scene = make_closed_box(1.0, 3, glm::dvec3(0.6), glm::dvec3(1.0), true);
   Params params;
@@ -166,10 +167,56 @@ TEST(Refine, UniformClosedBoxHasNoPools) {
   Solver solver(scene, params);
   const Stats& st = solver.run();
   ASSERT_TRUE(st.converged);
-  EXPECT_EQ(st.passes, 2u);
+  EXPECT_EQ(st.passes, 1u);
   EXPECT_EQ(st.splits, 0u);
   EXPECT_EQ(st.elements, scene.patches.size());
   for (const Mesh::Element& el : solver.mesh().elements) EXPECT_NEAR(el.radiosity.x, 2.5, 0.05);
+}
+
+// The same box emitting nowhere but one wall, which does not count as lit evenly: a 3 x 3 grid of
+// 1/3 m cells (each large enough to split) is looked at in a first pass.
+TEST(Refine, BoxLitByOneWallHasAFirstPass) {
+  Scene scene = make_closed_box(1.0, 3, glm::dvec3(0.6), glm::dvec3(0.0), false);
+  for (uint32_t q = 0; q < 9; ++q) scene.patches[q].emission = glm::dvec3(1.0);
+  Params params;
+  params.pools = true;
+  params.max_shots = 2;  // enough to tell
+  Solver solver(scene, params);
+  EXPECT_EQ(solver.run().passes, 2u);
+}
+
+// A floor of small tiles (none large enough for a grid: room for four of the smallest elements
+// that may split, each of four times AEPS of the scene's area)
+// under a large lamp panel: the only patch a grid could cover is the lamp, which shows its own
+// light. No first pass is made, and the bake is the one-pass solve's, element for element.
+TEST(Refine, NoFirstPassWhereOnlyEmittersAreLargeEnoughToSplit) {
+  Scene scene;
+  const int n = 24;
+  const double step = 1.0 / n;
+  for (int i = 0; i < n; ++i)
+    for (int k = 0; k < n; ++k) {
+      const double x = i * step, z = k * step;
+      add_quad(scene, {x, 0, z}, {x, 0, z + step}, {x + step, 0, z + step}, {x + step, 0, z}, glm::dvec3(0.6),
+               glm::dvec3(0.0), 0);
+    }
+  add_quad(scene, {0.2, 0.5, 0.2}, {0.8, 0.5, 0.2}, {0.8, 0.5, 0.8}, {0.2, 0.5, 0.8}, glm::dvec3(0.5), glm::dvec3(10.0),
+           1);
+  ASSERT_EQ(validate(scene), "");
+  Params params;
+  params.pools = true;
+  ASSERT_LT(step * step, 16.0 * params.aeps * (1.0 + 0.36));  // the floor and the lamp
+  Solver with(scene, params);
+  const Stats& st = with.run();
+  ASSERT_TRUE(st.converged);
+  EXPECT_EQ(st.passes, 1u);
+  EXPECT_EQ(st.splits_pools, 0u);
+  params.pools = false;
+  Solver without(scene, params);
+  ASSERT_TRUE(without.run().converged);
+  const Mesh a = with.mesh(), b = without.mesh();
+  ASSERT_EQ(a.elements.size(), b.elements.size());
+  ASSERT_EQ(a.radiosity.size(), b.radiosity.size());
+  for (size_t v = 0; v < a.radiosity.size(); ++v) ASSERT_EQ(a.radiosity[v], b.radiosity[v]);
 }
 
 }  // namespace

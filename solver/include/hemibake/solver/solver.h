@@ -155,7 +155,8 @@ struct Stats {
   uint64_t splits_visibility = 0;   ///< ... for partial visibility
   uint64_t splits_gradient = 0;     ///< ... for a radiosity jump at a corner
   uint64_t splits_pools = 0;     ///< elements split where the first pass's light pools (not counted in `splits`' kinds)
-  uint32_t passes = 1;           ///< 2: a first pass looked for light pools (Params::pools)
+  uint32_t passes = 1;           ///< 2: a first pass looked for light pools (Params::pools; none where no
+                                 ///< surface but emitters is large enough to split)
   double seconds_first_pass = 0.0;  ///< ... and took this long (not in `seconds`)
   uint64_t gathers = 0;          ///< hemicubes placed at points of the mesh by the final gather
   uint64_t splits_gather = 0;    ///< elements split by the final gather (not counted in `splits`' kinds)
