@@ -608,9 +608,20 @@ struct GroupSum {
   uint64_t group;
   uint32_t root;
   double area;
-  float inv_depth;
+  double depth_sum;  // the fragments' 1/depth times their coverage
+  float inv_depth;   // depth_sum / area: the surface's 1/depth at the centre of what it covers
   float trans;
 };
+
+// A surface's 1/depth in a pixel: the mean of its fragments' by coverage, which (1/depth being
+// affine over a plane) is its value at the centre of the part the surface covers, however the
+// surface is cut into elements there. The nearest fragment's, as before, moved a finely cut
+// surface forward by up to a pixel's depth: a rug 3 mm over a floor, both cut finely under a
+// sun whose 7 cm pixels span 10 cm of depth along the floor, lost the sun in stripes to the
+// floor under it.
+float mean_depth(double depth_sum, double area) {
+  return static_cast<float>(area > 0.0 ? depth_sum / area : 0.0);
+}
 
 // The side (bit 32 of a pixel's surface id) on which a neighbour across `link` of a surface on
 // side `side` is folded behind it, or tiles with it (a back face is projected reversed, so a
@@ -779,21 +790,21 @@ bool PixelResolver::two_surfaces(uint32_t lo, uint32_t hi) {
   // Scalars rather than arrays indexed by the fragment's surface: no store-to-load chain.
   const uint64_t g0 = surface_of(fragments_[order_[lo]].element);
   uint64_t g1 = g0;
-  double sum0 = 0.0, sum1 = 0.0;
-  float depth0 = std::numeric_limits<float>::lowest(), depth1 = depth0;
+  double sum0 = 0.0, sum1 = 0.0, depth_sum0 = 0.0, depth_sum1 = 0.0;
   for (uint32_t k = lo; k < hi; ++k) {
     const Fragment& f = fragments_[order_[k]];
     const uint64_t g = surface_of(f.element);
     if (g == g0) {
       sum0 += f.area;
-      depth0 = std::max(depth0, f.inv_depth);
+      depth_sum0 += static_cast<double>(f.area) * f.inv_depth;
       continue;
     }
     if (g1 != g0 && g != g1) return false;
     g1 = g;
     sum1 += f.area;
-    depth1 = std::max(depth1, f.inv_depth);
+    depth_sum1 += static_cast<double>(f.area) * f.inv_depth;
   }
+  const float depth0 = mean_depth(depth_sum0, sum0), depth1 = mean_depth(depth_sum1, sum1);
   float trans0, trans1;
   const Meet how = g1 == g0 ? Meet::kTile : meet(g0, g1);
   if (how == Meet::kTile) {
@@ -825,8 +836,7 @@ bool PixelResolver::two_surfaces(uint32_t lo, uint32_t hi) {
 }
 
 bool PixelResolver::front_covers(uint32_t lo, uint32_t hi) {
-  // The nearest surface: the one with the nearest fragment (ties to the lower id, as in
-  // order_layers).
+  // The candidate: the surface of the nearest fragment (ties to the lower id, as in order_layers).
   uint64_t front = surface_of(fragments_[order_[lo]].element);
   float depth = fragments_[order_[lo]].inv_depth;
   for (uint32_t k = lo + 1; k < hi; ++k) {
@@ -837,11 +847,23 @@ bool PixelResolver::front_covers(uint32_t lo, uint32_t hi) {
       depth = f.inv_depth;
     }
   }
-  // Its coverage, summed in the order sum_groups sums it.
-  double area = 0.0;
-  for (uint32_t k = lo; k < hi; ++k)
-    if (surface_of(fragments_[order_[k]].element) == front) area += fragments_[order_[k]].area;
+  // Its coverage and mean depth, summed in the order sum_groups sums them.
+  double area = 0.0, depth_sum = 0.0;
+  for (uint32_t k = lo; k < hi; ++k) {
+    const Fragment& f = fragments_[order_[k]];
+    if (surface_of(f.element) != front) continue;
+    area += f.area;
+    depth_sum += static_cast<double>(f.area) * f.inv_depth;
+  }
   if (area < 1.0) return false;
+  // It is the nearest surface (as order_layers orders them, by mean depth) if every other
+  // fragment lies behind its mean: another surface's mean is no nearer than its nearest fragment.
+  const float mean = mean_depth(depth_sum, area);
+  for (uint32_t k = lo; k < hi; ++k) {
+    const Fragment& f = fragments_[order_[k]];
+    const uint64_t g = surface_of(f.element);
+    if (g != front && (f.inv_depth > mean || (f.inv_depth == mean && g < front))) return false;
+  }
   // A surface standing on it may lie in front of it (order_standing): left to layers().
   if (adjacency_.any_standing()) {
     uint64_t asked = front;
@@ -888,11 +910,12 @@ void PixelResolver::sum_groups(uint32_t lo, uint32_t hi) {
   for (const auto& [g, fi] : by_group_) {
     const Fragment& f = fragments_[fi];
     if (groups_.empty() || groups_.back().group != g) {
-      groups_.push_back({g, static_cast<uint32_t>(groups_.size()), 0.0, f.inv_depth, 1.0f});
+      groups_.push_back({g, static_cast<uint32_t>(groups_.size()), 0.0, 0.0, 0.0f, 1.0f});
     }
     groups_.back().area += f.area;
-    groups_.back().inv_depth = std::max(groups_.back().inv_depth, f.inv_depth);
+    groups_.back().depth_sum += static_cast<double>(f.area) * f.inv_depth;
   }
+  for (GroupSum& g : groups_) g.inv_depth = mean_depth(g.depth_sum, g.area);
   if (slot_count_ == 0) return;
   if (++*stamp_ == 0) {  // wrapped: no slot may look current
     for (size_t i = 0; i < slot_count_; ++i) slots_[i].stamp = 0;
@@ -941,7 +964,8 @@ void PixelResolver::order_layers(bool any_fold) {
     const uint32_t r = root(i);
     if (r != i) {
       groups_[r].area += groups_[i].area;
-      groups_[r].inv_depth = std::max(groups_[r].inv_depth, groups_[i].inv_depth);
+      groups_[r].depth_sum += groups_[i].depth_sum;
+      groups_[r].inv_depth = mean_depth(groups_[r].depth_sum, groups_[r].area);
     } else {
       layers_.push_back(i);
     }
