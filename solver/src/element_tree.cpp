@@ -38,6 +38,8 @@ uint32_t Solver::Impl::add_element(uint32_t patch, uint32_t parent,
   e_centre.push_back(centre);
   e_radius.push_back(radius);
   e_under.push_back(under_foot(id));
+  e_rested.push_back(rests_on(id));
+  any_rested = any_rested || e_rested.back() != 0;
   e_b.push_back(b);
   e_unshot.push_back(unshot);
   f_begin.push_back(0);

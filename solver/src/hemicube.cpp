@@ -638,8 +638,9 @@ uint64_t tile_side(uint64_t side, const GroupAdjacency::Link& link) {
 class PixelResolver {
  public:
   PixelResolver(std::span<Fragment> fragments, std::span<const uint32_t> order,
-                std::span<const uint32_t> group_of, const GroupAdjacency& adjacency)
-      : fragments_(fragments), order_(order), group_of_(group_of), adjacency_(adjacency) {
+                std::span<const uint32_t> group_of, std::span<const uint8_t> covered_of,
+                const GroupAdjacency& adjacency)
+      : fragments_(fragments), order_(order), group_of_(group_of), covered_of_(covered_of), adjacency_(adjacency) {
     thread_local std::vector<Slot> slots;
     thread_local uint32_t stamp = 0;
     if (slots.size() < adjacency.id_bound()) slots.resize(adjacency.id_bound());
@@ -660,6 +661,10 @@ class PixelResolver {
   bool front_covers(uint32_t lo, uint32_t hi);
   // Any number of surfaces: E_k = A_k (1 - f_{k-1}) over the pixel's layers, nearest first.
   void layers(uint32_t lo, uint32_t hi);
+  // After one of the rules above: where a nearer layer took part of the pixel, a surface's fragments
+  // that a surface on or just in front of it covers take none of its share, which goes to its
+  // uncovered fragments (each at most its whole coverage).
+  void open_share(uint32_t lo, uint32_t hi);
 
  private:
   // A fragment's surface: its occlusion group, with the back faces of a group apart (bit 32).
@@ -693,10 +698,21 @@ class PixelResolver {
     return it != groups_.end() && it->group == id ? it - groups_.begin() : -1;
   }
 
+  bool covered(uint32_t element) const {
+    return !covered_of_.empty() && !(element & kBackFace) && covered_of_[element] != 0;
+  }
+
   std::span<Fragment> fragments_;
   std::span<const uint32_t> order_;
   std::span<const uint32_t> group_of_;
+  std::span<const uint8_t> covered_of_;
   const GroupAdjacency& adjacency_;
+  // open_share: per surface of the pixel, its share and its uncovered coverage.
+  struct OpenShare {
+    uint64_t surface;
+    double share, area, open;
+  };
+  std::vector<OpenShare> open_;
   // Neighbouring pixels mostly ask about the same two surfaces: the last answer is kept.
   uint64_t asked_a_ = 0, asked_b_ = 0;
   Meet asked_answer_ = Meet::kApart;
@@ -888,6 +904,44 @@ bool PixelResolver::front_covers(uint32_t lo, uint32_t hi) {
   return true;
 }
 
+// The floor along the foot of a wall box standing on it: in a pixel on the foot, seen from the
+// room, the wall hides the strip of floor under it and the floor shows beside it. The layers'
+// rule takes them as independent, and gave the covered strip part of the floor's share, light
+// that no one sees and that its elements shot into the box (a closed room built of wall boxes
+// kept 0.965 of its light, of a closed form, a Blender room 0.96 of the path tracer's), and the
+// visible floor beside the foot that much less. Likewise the ceiling beside a lamp hung 1 mm
+// under it, seen past the lamp's outline (14 % dark 1 to 3 cm outside it). The surface's share
+// is kept, and given to its uncovered fragments alone; not where nothing lies in front of it (the
+// lamp's top lighting the ceiling above it).
+void PixelResolver::open_share(uint32_t lo, uint32_t hi) {
+  if (covered_of_.empty()) return;
+  bool any = false;
+  for (uint32_t k = lo; k < hi && !any; ++k) any = covered(fragments_[order_[k]].element);
+  if (!any) return;
+  open_.clear();
+  auto entry = [&](uint64_t surface) -> OpenShare& {
+    for (OpenShare& o : open_)
+      if (o.surface == surface) return o;
+    open_.push_back({surface, 0.0, 0.0, 0.0});
+    return open_.back();
+  };
+  for (uint32_t k = lo; k < hi; ++k) {
+    const Fragment& f = fragments_[order_[k]];
+    OpenShare& o = entry(surface_of(f.element));
+    o.share += static_cast<double>(f.area) * f.trans;
+    o.area += f.area;
+    if (!covered(f.element)) o.open += f.area;
+  }
+  for (uint32_t k = lo; k < hi; ++k) {
+    Fragment& f = fragments_[order_[k]];
+    const OpenShare& o = entry(surface_of(f.element));
+    // Nothing nearer took any of the pixel: the surface keeps all it covers. Nothing of it here is
+    // uncovered (the floor under a box seen through the gap under its bottom): as it is.
+    if (o.share >= std::min(o.area, 1.0) * (1.0 - 1e-6) || o.open <= 0.0) continue;
+    f.trans = covered(f.element) ? 0.0f : static_cast<float>(std::min(1.0, o.share / o.open));
+  }
+}
+
 void PixelResolver::layers(uint32_t lo, uint32_t hi) {
   sum_groups(lo, hi);
   const bool any_fold = merge_neighbours();
@@ -1042,8 +1096,8 @@ void PixelResolver::share_pixel(bool any_fold) {
 }  // namespace
 
 void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
-             std::span<const uint32_t> group_of, const GroupAdjacency& adjacency, ThreadPool& pool,
-             std::vector<uint32_t>& order,
+             std::span<const uint32_t> group_of, std::span<const uint8_t> covered_of,
+             const GroupAdjacency& adjacency, ThreadPool& pool, std::vector<uint32_t>& order,
              std::vector<uint32_t>& pixel_start) {
   // Counting sort of fragment indices by pixel (stable: ties keep projection order).
   pixel_start.assign(static_cast<size_t>(pixel_count) + 1, 0);
@@ -1055,17 +1109,20 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
     for (uint32_t i = 0; i < fragments.size(); ++i) order[cursor[fragments[i].pixel]++] = i;
   }
   pool.parallel_for(pixel_count, [&](size_t begin, size_t end, size_t) {
-    PixelResolver pixel(fragments, order, group_of, adjacency);
+    PixelResolver pixel(fragments, order, group_of, covered_of, adjacency);
     for (size_t p = begin; p < end; ++p) {
       const uint32_t lo = pixel_start[p], hi = pixel_start[p + 1];
       if (lo == hi) continue;
       if (method == Method::kClassical) {
         pixel.nearest(lo, hi);
-      } else if (hi - lo == 1) {
+        continue;
+      }
+      if (hi - lo == 1) {
         fragments[order[lo]].trans = 1.0f;
       } else if (!pixel.two_surfaces(lo, hi) && !pixel.front_covers(lo, hi)) {
         pixel.layers(lo, hi);
       }
+      pixel.open_share(lo, hi);
     }
   });
   // A fragment sees at most all of its pixel share, and nearer layers take at most all of it.
@@ -1170,7 +1227,7 @@ std::vector<double> visible_shares(const detail::Hemicube& cube, const glm::dvec
   }
   detail::ThreadPool pool(1);
   std::vector<uint32_t> order, starts;
-  detail::resolve(frags, cube.pixel_count(), method, group_of, adjacency, pool, order, starts);
+  detail::resolve(frags, cube.pixel_count(), method, group_of, {}, adjacency, pool, order, starts);
   std::vector<double> ff(polygons.size(), 0.0);
   const auto& dff = cube.delta_form_factors();
   for (const auto& f : frags) ff[f.element] += static_cast<double>(f.area) * f.trans * dff[f.pixel];

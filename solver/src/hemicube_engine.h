@@ -201,10 +201,13 @@ class Hemicube {
 /// f_k = f_{k-1} + A_k (1 - f_{k-1}) (the paper's E_k = A_k (1 - f_{k-1})). Groups that share an
 /// edge are merged first (their areas add). `group_of[element]` is an element's occlusion group:
 /// fragments of one group never hide each other. Back-face fragments (kBackFace) are grouped by
-/// their surface too, apart from its front-facing fragments. `order` and `pixel_start` are scratch.
+/// their surface too, apart from its front-facing fragments. `covered_of[element]` (may be empty:
+/// none) marks elements under a surface resting on theirs (a box's bottom on a floor): their
+/// surface's share of a pixel goes to its fragments that are not covered. `order` and
+/// `pixel_start` are scratch.
 void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
-             std::span<const uint32_t> group_of, const GroupAdjacency& adjacency, ThreadPool& pool,
-             std::vector<uint32_t>& order,
+             std::span<const uint32_t> group_of, std::span<const uint8_t> covered_of,
+             const GroupAdjacency& adjacency, ThreadPool& pool, std::vector<uint32_t>& order,
              std::vector<uint32_t>& pixel_start);
 
 }  // namespace hemibake::solver::detail

@@ -101,6 +101,20 @@ void Solver::Impl::find_standing() {
   for (uint32_t e = 0; e < e_patch.size(); ++e) e_under[e] = under_foot(e);
 }
 
+// Whether a surface lies on element e or just in front of it, over its centre (gap_covered): 0
+// before the patch tree is built (find_rests marks the first elements).
+uint8_t Solver::Impl::rests_on(uint32_t e) const {
+  return !tree.empty() && gap_covered(e_patch[e], e_centre[e], e_radius[e]) ? 1 : 0;
+}
+
+void Solver::Impl::find_rests() {
+  any_rested = false;
+  for (uint32_t e = 0; e < e_patch.size(); ++e) {
+    e_rested[e] = rests_on(e);
+    any_rested = any_rested || e_rested[e] != 0;
+  }
+}
+
 // The one-sided surface standing on element e's patch (find_standing) that e lies under: the
 // surface's foot meets e, its outline included, and e's centre lies behind the surface; or kNone.
 uint32_t Solver::Impl::under_foot(uint32_t e) const {

@@ -270,9 +270,14 @@ void Solver::Impl::receiver_form_factors(const Piece& piece, const std::vector<u
         // the piece is in front: a floor piece under a block's face) is taken as unoccluded from
         // the part in front, which lies within a diameter of it, and that part shoots its own
         // unshot radiosity (front_share: the floor under a block that stands on it is dark).
+        // The exact form factor is to the part of the piece in front of the receiver, whose light is
+        // that part's own (front_share): beside a wall box standing on a floor, the floor piece
+        // reaching under the wall holds its light in front of the wall alone, and the wall's foot
+        // took the piece's mean, diluted by the covered strip (a closed room of wall boxes lost 3 %
+        // of the light at each of its floor's shots).
         const double f = exact_form_factor(piece, e, size < 0.5 * piece.diameter ? 1 : size < piece.diameter ? 2 : 3);
-        f_recv[e] = seen_here ? f * (e_ff[e] / e_ff_open[e]) : f * front_share(piece, e);
-        f_open[e] = f;
+        f_open[e] = std::min(1.0, f * front_share(piece, e));
+        f_recv[e] = seen_here ? f_open[e] * (e_ff[e] / e_ff_open[e]) : f_open[e];
       }
       // Visible shares are at most the unoccluded ones, and both form factors at most 1.
       HEMIBAKE_DCHECK(f_recv[e] >= 0.0 && f_recv[e] <= f_open[e] && f_open[e] <= 1.0);
@@ -281,7 +286,8 @@ void Solver::Impl::receiver_form_factors(const Piece& piece, const std::vector<u
 }
 
 // The unshot radiosity of the part of `piece` in front of receiver e's plane, as a share of the
-// piece's: its leaves there, by their centres (1 for a piece of uniform radiosity).
+// piece's mean: its leaves there, by their centres (1 for a piece of uniform radiosity; more where
+// the part behind holds less, as a floor piece reaching under a wall box does).
 double Solver::Impl::front_share(const Piece& piece, uint32_t e) const {
   if (piece.src.size() != 1 || e_child[piece.src[0]] == kNone || piece.src_area != piece.area) return 1.0;
   const glm::dvec3& nq = prep.normal[e_patch[e]];
@@ -293,7 +299,7 @@ double Solver::Impl::front_share(const Piece& piece, uint32_t e) const {
     area += e_area[x];
   });
   const double mean = channel_sum(piece.dB);
-  return area > 0.0 && mean > 0.0 ? std::min(1.0, power / area / mean) : 0.0;
+  return area > 0.0 && mean > 0.0 ? power / area / mean : 0.0;
 }
 
 // The share of the hemicube's view that its receivers take, sum of F(piece -> receiver): at most 1

@@ -321,6 +321,8 @@ struct Solver::Impl {
   void build_patch_bvh();
   void find_standing();
   uint32_t under_foot(uint32_t e) const;
+  uint8_t rests_on(uint32_t e) const;
+  void find_rests();
   void build_patch_tree(uint32_t node, uint32_t begin, uint32_t end);
   void patches_meeting(const detail::Shaft& shaft, std::vector<uint32_t>& out);
   void build_clusters();
@@ -503,6 +505,15 @@ struct Solver::Impl {
   // Per element: the one-sided surface standing on it that it lies under (the surface's foot meets
   // it and its centre lies behind the surface: the floor inside a box without a bottom), or kNone.
   std::vector<uint32_t> e_under;
+  // Per element: whether a surface lies on it or just in front of it over its centre (gap_covered: a
+  // box's bottom on a floor, a wall box's end against another wall's face, a lamp hung 1 mm under a
+  // ceiling, a rug over a floor), and whether any does. Where something nearer shares a pixel with
+  // them, hemicubes give their share of it to their surface's uncovered elements (resolve).
+  std::vector<uint8_t> e_rested;
+  bool any_rested = false;
+  std::span<const uint8_t> covered_span() const {
+    return any_rested ? std::span<const uint8_t>(e_rested) : std::span<const uint8_t>();
+  }
   std::vector<std::array<uint32_t, 4>> e_corner;
   std::vector<double> e_area;
   std::vector<glm::dvec3> e_centre;  // bounding sphere
@@ -662,6 +673,7 @@ struct Solver::Impl::GatherWorker {
   detail::ProjectScratch scratch;
   std::vector<Fragment> frags;
   std::vector<uint32_t> list, stack, group_of, order, pixel_start;
+  std::vector<uint8_t> covered_of;
   std::vector<uint8_t> inside;  // per solid: its box holds the point
   std::vector<double> seen, open;  // per listed node: visible and unoccluded share of the view
 };
