@@ -24,6 +24,7 @@ uint32_t Solver::Impl::add_element(uint32_t patch, uint32_t parent,
   HEMIBAKE_DCHECK(parent == kNone || (parent < id && e_patch[parent] == patch));
   for (uint32_t i = 0; i < patches[patch].corner_count; ++i) HEMIBAKE_DCHECK(corners[i] < vpos.size());
   e_patch.push_back(patch);
+  HEMIBAKE_DCHECK(prep.occlusion_group[patch] < kCoveredBit);
   e_group.push_back(prep.occlusion_group[patch]);
   e_parent.push_back(parent);
   e_child.push_back(kNone);
@@ -38,8 +39,7 @@ uint32_t Solver::Impl::add_element(uint32_t patch, uint32_t parent,
   e_centre.push_back(centre);
   e_radius.push_back(radius);
   e_under.push_back(under_foot(id));
-  e_rested.push_back(rests_on(id));
-  any_rested = any_rested || e_rested.back() != 0;
+  set_rested(id, rests_on(id) != 0);
   e_b.push_back(b);
   e_unshot.push_back(unshot);
   f_begin.push_back(0);

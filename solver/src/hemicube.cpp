@@ -638,9 +638,9 @@ uint64_t tile_side(uint64_t side, const GroupAdjacency::Link& link) {
 class PixelResolver {
  public:
   PixelResolver(std::span<Fragment> fragments, std::span<const uint32_t> order,
-                std::span<const uint32_t> group_of, std::span<const uint8_t> covered_of,
-                const GroupAdjacency& adjacency)
-      : fragments_(fragments), order_(order), group_of_(group_of), covered_of_(covered_of), adjacency_(adjacency) {
+                std::span<const uint32_t> group_of, uint32_t covered_bit, const GroupAdjacency& adjacency)
+      : fragments_(fragments), order_(order), group_of_(group_of), covered_bit_(covered_bit),
+        group_mask_(~covered_bit), adjacency_(adjacency) {
     thread_local std::vector<Slot> slots;
     thread_local uint32_t stamp = 0;
     if (slots.size() < adjacency.id_bound()) slots.resize(adjacency.id_bound());
@@ -669,8 +669,16 @@ class PixelResolver {
  private:
   // A fragment's surface: its occlusion group, with the back faces of a group apart (bit 32).
   uint64_t surface_of(uint32_t element) const {
-    if (element & kBackFace) return (uint64_t{1} << 32) | group_of_[element & ~kBackFace];
-    return group_of_[element];
+    if (element & kBackFace) return (uint64_t{1} << 32) | (group_of_[element & ~kBackFace] & group_mask_);
+    return group_of_[element] & group_mask_;
+  }
+  // surface_of, noting a covered fragment for open_share (each rule's first pass over the pixel
+  // meets every fragment).
+  uint64_t surface_noting(uint32_t element) {
+    if (element & kBackFace) return (uint64_t{1} << 32) | (group_of_[element & ~kBackFace] & group_mask_);
+    const uint32_t g = group_of_[element];
+    saw_covered_ = saw_covered_ || (g & covered_bit_) != 0;
+    return g & group_mask_;
   }
   enum class Meet : uint8_t { kApart, kTile, kFold };
   template <class SideOf, class Fn>
@@ -699,13 +707,14 @@ class PixelResolver {
   }
 
   bool covered(uint32_t element) const {
-    return !covered_of_.empty() && !(element & kBackFace) && covered_of_[element] != 0;
+    return !(element & kBackFace) && (group_of_[element] & covered_bit_) != 0;
   }
 
   std::span<Fragment> fragments_;
   std::span<const uint32_t> order_;
   std::span<const uint32_t> group_of_;
-  std::span<const uint8_t> covered_of_;
+  uint32_t covered_bit_, group_mask_;
+  bool saw_covered_ = false;  // a rule's pass over this pixel met a covered fragment
   const GroupAdjacency& adjacency_;
   // open_share: per surface of the pixel, its share and its uncovered coverage.
   struct OpenShare {
@@ -809,7 +818,7 @@ bool PixelResolver::two_surfaces(uint32_t lo, uint32_t hi) {
   double sum0 = 0.0, sum1 = 0.0, depth_sum0 = 0.0, depth_sum1 = 0.0;
   for (uint32_t k = lo; k < hi; ++k) {
     const Fragment& f = fragments_[order_[k]];
-    const uint64_t g = surface_of(f.element);
+    const uint64_t g = surface_noting(f.element);
     if (g == g0) {
       sum0 += f.area;
       depth_sum0 += static_cast<double>(f.area) * f.inv_depth;
@@ -853,11 +862,11 @@ bool PixelResolver::two_surfaces(uint32_t lo, uint32_t hi) {
 
 bool PixelResolver::front_covers(uint32_t lo, uint32_t hi) {
   // The candidate: the surface of the nearest fragment (ties to the lower id, as in order_layers).
-  uint64_t front = surface_of(fragments_[order_[lo]].element);
+  uint64_t front = surface_noting(fragments_[order_[lo]].element);
   float depth = fragments_[order_[lo]].inv_depth;
   for (uint32_t k = lo + 1; k < hi; ++k) {
     const Fragment& f = fragments_[order_[k]];
-    const uint64_t g = surface_of(f.element);
+    const uint64_t g = surface_noting(f.element);
     if (f.inv_depth > depth || (f.inv_depth == depth && g < front)) {
       front = g;
       depth = f.inv_depth;
@@ -914,10 +923,8 @@ bool PixelResolver::front_covers(uint32_t lo, uint32_t hi) {
 // is kept, and given to its uncovered fragments alone; not where nothing lies in front of it (the
 // lamp's top lighting the ceiling above it).
 void PixelResolver::open_share(uint32_t lo, uint32_t hi) {
-  if (covered_of_.empty()) return;
-  bool any = false;
-  for (uint32_t k = lo; k < hi && !any; ++k) any = covered(fragments_[order_[k]].element);
-  if (!any) return;
+  if (!saw_covered_) return;
+  saw_covered_ = false;
   open_.clear();
   auto entry = [&](uint64_t surface) -> OpenShare& {
     for (OpenShare& o : open_)
@@ -958,7 +965,7 @@ void PixelResolver::layers(uint32_t lo, uint32_t hi) {
 // Sums the coverage of each occlusion group: pieces of one surface never hide each other.
 void PixelResolver::sum_groups(uint32_t lo, uint32_t hi) {
   by_group_.clear();
-  for (uint32_t k = lo; k < hi; ++k) by_group_.emplace_back(surface_of(fragments_[order_[k]].element), order_[k]);
+  for (uint32_t k = lo; k < hi; ++k) by_group_.emplace_back(surface_noting(fragments_[order_[k]].element), order_[k]);
   std::sort(by_group_.begin(), by_group_.end());
   groups_.clear();
   for (const auto& [g, fi] : by_group_) {
@@ -1096,9 +1103,8 @@ void PixelResolver::share_pixel(bool any_fold) {
 }  // namespace
 
 void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
-             std::span<const uint32_t> group_of, std::span<const uint8_t> covered_of,
-             const GroupAdjacency& adjacency, ThreadPool& pool, std::vector<uint32_t>& order,
-             std::vector<uint32_t>& pixel_start) {
+             std::span<const uint32_t> group_of, uint32_t covered_bit, const GroupAdjacency& adjacency,
+             ThreadPool& pool, std::vector<uint32_t>& order, std::vector<uint32_t>& pixel_start) {
   // Counting sort of fragment indices by pixel (stable: ties keep projection order).
   pixel_start.assign(static_cast<size_t>(pixel_count) + 1, 0);
   for (const Fragment& f : fragments) ++pixel_start[f.pixel + 1];
@@ -1109,7 +1115,7 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
     for (uint32_t i = 0; i < fragments.size(); ++i) order[cursor[fragments[i].pixel]++] = i;
   }
   pool.parallel_for(pixel_count, [&](size_t begin, size_t end, size_t) {
-    PixelResolver pixel(fragments, order, group_of, covered_of, adjacency);
+    PixelResolver pixel(fragments, order, group_of, covered_bit, adjacency);
     for (size_t p = begin; p < end; ++p) {
       const uint32_t lo = pixel_start[p], hi = pixel_start[p + 1];
       if (lo == hi) continue;
@@ -1118,10 +1124,10 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
         continue;
       }
       if (hi - lo == 1) {
-        fragments[order[lo]].trans = 1.0f;
-      } else if (!pixel.two_surfaces(lo, hi) && !pixel.front_covers(lo, hi)) {
-        pixel.layers(lo, hi);
+        fragments[order[lo]].trans = 1.0f;  // alone: nothing nearer
+        continue;
       }
+      if (!pixel.two_surfaces(lo, hi) && !pixel.front_covers(lo, hi)) pixel.layers(lo, hi);
       pixel.open_share(lo, hi);
     }
   });
@@ -1227,7 +1233,7 @@ std::vector<double> visible_shares(const detail::Hemicube& cube, const glm::dvec
   }
   detail::ThreadPool pool(1);
   std::vector<uint32_t> order, starts;
-  detail::resolve(frags, cube.pixel_count(), method, group_of, {}, adjacency, pool, order, starts);
+  detail::resolve(frags, cube.pixel_count(), method, group_of, 0, adjacency, pool, order, starts);
   std::vector<double> ff(polygons.size(), 0.0);
   const auto& dff = cube.delta_form_factors();
   for (const auto& f : frags) ff[f.element] += static_cast<double>(f.area) * f.trans * dff[f.pixel];

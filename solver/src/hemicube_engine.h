@@ -201,13 +201,12 @@ class Hemicube {
 /// f_k = f_{k-1} + A_k (1 - f_{k-1}) (the paper's E_k = A_k (1 - f_{k-1})). Groups that share an
 /// edge are merged first (their areas add). `group_of[element]` is an element's occlusion group:
 /// fragments of one group never hide each other. Back-face fragments (kBackFace) are grouped by
-/// their surface too, apart from its front-facing fragments. `covered_of[element]` (may be empty:
-/// none) marks elements under a surface resting on theirs (a box's bottom on a floor): their
-/// surface's share of a pixel goes to its fragments that are not covered. `order` and
-/// `pixel_start` are scratch.
+/// their surface too, apart from its front-facing fragments. With a `covered_bit` (0: none), that
+/// bit of `group_of[element]` marks elements with a surface on them or just in front of them (a
+/// box's bottom on a floor): where something nearer took part of a pixel, their surface's share of
+/// it goes to its fragments that are not covered. `order` and `pixel_start` are scratch.
 void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
-             std::span<const uint32_t> group_of, std::span<const uint8_t> covered_of,
-             const GroupAdjacency& adjacency, ThreadPool& pool, std::vector<uint32_t>& order,
-             std::vector<uint32_t>& pixel_start);
+             std::span<const uint32_t> group_of, uint32_t covered_bit, const GroupAdjacency& adjacency,
+             ThreadPool& pool, std::vector<uint32_t>& order, std::vector<uint32_t>& pixel_start);
 
 }  // namespace hemibake::solver::detail

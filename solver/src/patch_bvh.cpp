@@ -109,10 +109,7 @@ uint8_t Solver::Impl::rests_on(uint32_t e) const {
 
 void Solver::Impl::find_rests() {
   any_rested = false;
-  for (uint32_t e = 0; e < e_patch.size(); ++e) {
-    e_rested[e] = rests_on(e);
-    any_rested = any_rested || e_rested[e] != 0;
-  }
+  for (uint32_t e = 0; e < e_patch.size(); ++e) set_rested(e, rests_on(e) != 0);
 }
 
 // The one-sided surface standing on element e's patch (find_standing) that e lies under: the

@@ -495,7 +495,7 @@ struct Solver::Impl {
 
   // Elements, structure of arrays. Children of an element are consecutive.
   std::vector<uint32_t> e_patch, e_parent, e_child;
-  std::vector<uint32_t> e_group;  // the patch's occlusion group
+  std::vector<uint32_t> e_group;  // the patch's occlusion group, and kCoveredBit (set_rested)
   // Per patch: the feet of the surfaces standing on it (find_standing); empty if there are none.
   struct Foot {
     glm::dvec3 a, b;  // an edge of `top` in the patch's plane
@@ -509,11 +509,14 @@ struct Solver::Impl {
   // box's bottom on a floor, a wall box's end against another wall's face, a lamp hung 1 mm under a
   // ceiling, a rug over a floor), and whether any does. Where something nearer shares a pixel with
   // them, hemicubes give their share of it to their surface's uncovered elements (resolve).
-  std::vector<uint8_t> e_rested;
+  // The flag is kept in e_group, as resolve() reads it.
+  static constexpr uint32_t kCoveredBit = 1u << 30;
   bool any_rested = false;
-  std::span<const uint8_t> covered_span() const {
-    return any_rested ? std::span<const uint8_t>(e_rested) : std::span<const uint8_t>();
+  void set_rested(uint32_t e, bool rested) {
+    e_group[e] = rested ? e_group[e] | kCoveredBit : e_group[e] & ~kCoveredBit;
+    any_rested = any_rested || rested;
   }
+  uint32_t covered_bit() const { return any_rested ? kCoveredBit : 0u; }
   std::vector<std::array<uint32_t, 4>> e_corner;
   std::vector<double> e_area;
   std::vector<glm::dvec3> e_centre;  // bounding sphere
@@ -673,7 +676,6 @@ struct Solver::Impl::GatherWorker {
   detail::ProjectScratch scratch;
   std::vector<Fragment> frags;
   std::vector<uint32_t> list, stack, group_of, order, pixel_start;
-  std::vector<uint8_t> covered_of;
   std::vector<uint8_t> inside;  // per solid: its box holds the point
   std::vector<double> seen, open;  // per listed node: visible and unoccluded share of the view
 };
