@@ -88,6 +88,9 @@ constexpr double kFinePower = 1e-3;
 // kPoolShare of their mean and by more than kPoolFloor times the radiosity tolerance: a pool, not
 // the few percent by which an evenly lit wall's points differ before the last shots even them out.
 constexpr double kPoolsPass = 0.3;
+// ... and once the patches the lights lit that hold at least this share of the light have shot
+// (count_lit_as_emitters; at most 1 / kPoolsUnit of them).
+constexpr double kPoolsUnit = 0.01;
 constexpr double kPoolShare = 0.3;
 constexpr double kPoolFloor = 0.05;
 // Pieces carrying at least this share of the emitted power refine for receivers whose plane cuts
@@ -411,6 +414,7 @@ struct Solver::Impl {
   // leaves whose points differ by more than the radiosity tolerance split, their light shared out
   // as the points say.
   void build_light_grids();
+  void count_lit_as_emitters();
   ShooterShape shape_of(const Piece& piece) const;
   double shooter_light(const ShooterShape& s, const glm::dvec3& x, const glm::dvec3& n) const;
   void take_on_grid(uint32_t e, double radiosity);

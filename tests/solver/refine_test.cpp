@@ -9,6 +9,7 @@
 #include "hemibake/solver/solver.h"
 #include "shown_on_floor.h"
 
+#include <glm/geometric.hpp>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -155,6 +156,57 @@ TEST(Refine, AreaLampCastsAPenumbraAcrossAnEdge) {
   std::printf("penumbra: error / unoccluded light: mean %.3f, p90 %.3f, max %.3f\n", mean, errors[360], errors.back());
   EXPECT_LT(mean, 0.065);
   EXPECT_LT(errors[360], 0.15);  // one step 0.4, two steps 0.2
+}
+
+// A room lit only by a sun through a skylight: most of the sun falls on the roof's outside and
+// leaves into the empty sky when the roof shoots, the sun's patch on the floor holds the light
+// that reaches the end walls. The first pass waits for the patches the lights lit to shoot (those
+// holding at least a hundredth of the light): the end wall, lit only by that floor's light and
+// brighter in the middle than at its sides, is refined where that light varies. When the pass
+// ended on 70 % of all the light given out, it ended before the floor shot, and the end wall
+// stayed one flat element (a Blender gallery's, 18 % median error).
+TEST(Refine, EndWallOfARoomLitThroughASkylightIsRefined) {
+  Scene scene;
+  const glm::dvec3 rho(0.7), none(0.0);
+  const double w = 8.0, h = 3.0, d = 4.0, t = 0.2;
+  add_quad(scene, {0, 0, 0}, {0, 0, d}, {w, 0, d}, {w, 0, 0}, rho, none, 0);   // floor, up
+  add_quad(scene, {0, 0, 0}, {0, h, 0}, {0, h, d}, {0, 0, d}, rho, none, 0);   // x = 0, +x: the end wall
+  add_quad(scene, {w, 0, 0}, {w, 0, d}, {w, h, d}, {w, h, 0}, rho, none, 0);   // x = w, -x
+  add_quad(scene, {0, 0, 0}, {w, 0, 0}, {w, h, 0}, {0, h, 0}, rho, none, 0);   // z = 0, +z
+  add_quad(scene, {0, 0, d}, {0, h, d}, {w, h, d}, {w, 0, d}, rho, none, 0);   // z = d, -z
+  // The ceiling (facing down) and the roof's top (facing up) around an opening x 3..5, z 1.5..2.5,
+  // with its four jambs.
+  const double x0 = 3.0, x1 = 5.0, z0 = 1.5, z1 = 2.5;
+  auto ring = [&](double y, bool up) {
+    auto q = [&](double ax, double az, double bx, double bz) {
+      if (up) add_quad(scene, {ax, y, az}, {ax, y, bz}, {bx, y, bz}, {bx, y, az}, rho, none, 0);
+      else add_quad(scene, {ax, y, az}, {bx, y, az}, {bx, y, bz}, {ax, y, bz}, rho, none, 0);
+    };
+    q(0, 0, x0, d);
+    q(x1, 0, w, d);
+    q(x0, 0, x1, z0);
+    q(x0, z1, x1, d);
+  };
+  ring(h, false);
+  ring(h + t, true);
+  add_quad(scene, {x0, h, z0}, {x0, h + t, z0}, {x0, h + t, z1}, {x0, h, z1}, rho, none, 0);  // jambs, facing in
+  add_quad(scene, {x1, h, z0}, {x1, h, z1}, {x1, h + t, z1}, {x1, h + t, z0}, rho, none, 0);
+  add_quad(scene, {x0, h, z0}, {x1, h, z0}, {x1, h + t, z0}, {x0, h + t, z0}, rho, none, 0);
+  add_quad(scene, {x0, h, z1}, {x0, h + t, z1}, {x1, h + t, z1}, {x1, h, z1}, rho, none, 0);
+  Light sun;
+  sun.type = Light::Type::kDirectional;
+  sun.direction = glm::normalize(glm::dvec3(0.2, -1.0, 0.1));
+  sun.intensity = glm::dvec3(3.0);
+  scene.lights.push_back(sun);
+  ASSERT_EQ(validate(scene), "");
+  Params params;
+  params.pools = true;
+  Solver solver(scene, params);
+  ASSERT_TRUE(solver.run().converged);
+  const Mesh mesh = solver.mesh();
+  size_t end_wall = 0;
+  for (const auto& el : mesh.elements) end_wall += el.patch == 1;
+  EXPECT_GT(end_wall, 4u);
 }
 
 // Evenly lit surfaces have no pools: a uniform closed box (every patch emitting E, reflectance
