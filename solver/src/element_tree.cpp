@@ -39,7 +39,7 @@ uint32_t Solver::Impl::add_element(uint32_t patch, uint32_t parent,
   e_centre.push_back(centre);
   e_radius.push_back(radius);
   e_under.push_back(under_foot(id));
-  set_rested(id, rests_on(id) != 0);
+  set_covered(id, covered_at_centre(id) != 0);
   e_b.push_back(b);
   e_unshot.push_back(unshot);
   f_begin.push_back(0);

@@ -102,14 +102,14 @@ void Solver::Impl::find_standing() {
 }
 
 // Whether a surface lies on element e or just in front of it, over its centre (gap_covered): 0
-// before the patch tree is built (find_rests marks the first elements).
-uint8_t Solver::Impl::rests_on(uint32_t e) const {
+// before the patch tree is built (mark_covered marks the first elements).
+uint8_t Solver::Impl::covered_at_centre(uint32_t e) const {
   return !tree.empty() && gap_covered(e_patch[e], e_centre[e], e_radius[e]) ? 1 : 0;
 }
 
-void Solver::Impl::find_rests() {
-  any_rested = false;
-  for (uint32_t e = 0; e < e_patch.size(); ++e) set_rested(e, rests_on(e) != 0);
+void Solver::Impl::mark_covered() {
+  any_covered = false;
+  for (uint32_t e = 0; e < e_patch.size(); ++e) set_covered(e, covered_at_centre(e) != 0);
 }
 
 // The one-sided surface standing on element e's patch (find_standing) that e lies under: the

@@ -268,13 +268,12 @@ void Solver::Impl::receiver_form_factors(const Piece& piece, const std::vector<u
           glm::distance(piece.centre, e_centre[e]) - e_radius[e] < piece.diameter && is_close(piece, e)) {
         // A receiver the hemicube did not see (the piece's centre lies behind it, though part of
         // the piece is in front: a floor piece under a block's face) is taken as unoccluded from
-        // the part in front, which lies within a diameter of it, and that part shoots its own
-        // unshot radiosity (front_share: the floor under a block that stands on it is dark).
-        // The exact form factor is to the part of the piece in front of the receiver, whose light is
-        // that part's own (front_share): beside a wall box standing on a floor, the floor piece
-        // reaching under the wall holds its light in front of the wall alone, and the wall's foot
-        // took the piece's mean, diluted by the covered strip (a closed room of wall boxes lost 3 %
-        // of the light at each of its floor's shots).
+        // the part in front, which lies within a diameter of it. The exact form factor is to that
+        // part, and the light is that part's own unshot radiosity (front_share): the floor under a
+        // block that stands on it is dark; and beside a wall box standing on a floor, the floor
+        // piece reaching under the wall holds its light in front of the wall alone, where the
+        // wall's foot took the piece's mean, diluted by the covered strip (a closed room of wall
+        // boxes lost 3 % of the light at each of its floor's shots).
         const double f = exact_form_factor(piece, e, size < 0.5 * piece.diameter ? 1 : size < piece.diameter ? 2 : 3);
         f_open[e] = std::min(1.0, f * front_share(piece, e));
         f_recv[e] = seen_here ? f_open[e] * (e_ff[e] / e_ff_open[e]) : f_open[e];

@@ -71,7 +71,7 @@ Solver::Impl::Impl(const Scene& scene, const Params& p, const Impl* first, const
   }
   build_patch_bvh();  // clusters look for other objects' surfaces passing through them
   find_standing();
-  find_rests();
+  mark_covered();
   build_clusters();
   u_far_scale.assign(unit_node.size(), 1.0);
   source = scene;

@@ -324,8 +324,8 @@ struct Solver::Impl {
   void build_patch_bvh();
   void find_standing();
   uint32_t under_foot(uint32_t e) const;
-  uint8_t rests_on(uint32_t e) const;
-  void find_rests();
+  uint8_t covered_at_centre(uint32_t e) const;
+  void mark_covered();
   void build_patch_tree(uint32_t node, uint32_t begin, uint32_t end);
   void patches_meeting(const detail::Shaft& shaft, std::vector<uint32_t>& out);
   void build_clusters();
@@ -499,7 +499,7 @@ struct Solver::Impl {
 
   // Elements, structure of arrays. Children of an element are consecutive.
   std::vector<uint32_t> e_patch, e_parent, e_child;
-  std::vector<uint32_t> e_group;  // the patch's occlusion group, and kCoveredBit (set_rested)
+  std::vector<uint32_t> e_group;  // the patch's occlusion group, and kCoveredBit (set_covered)
   // Per patch: the feet of the surfaces standing on it (find_standing); empty if there are none.
   struct Foot {
     glm::dvec3 a, b;  // an edge of `top` in the patch's plane
@@ -515,12 +515,12 @@ struct Solver::Impl {
   // them, hemicubes give their share of it to their surface's uncovered elements (resolve).
   // The flag is kept in e_group, as resolve() reads it.
   static constexpr uint32_t kCoveredBit = 1u << 30;
-  bool any_rested = false;
-  void set_rested(uint32_t e, bool rested) {
-    e_group[e] = rested ? e_group[e] | kCoveredBit : e_group[e] & ~kCoveredBit;
-    any_rested = any_rested || rested;
+  bool any_covered = false;
+  void set_covered(uint32_t e, bool is_covered) {
+    e_group[e] = is_covered ? e_group[e] | kCoveredBit : e_group[e] & ~kCoveredBit;
+    any_covered = any_covered || is_covered;
   }
-  uint32_t covered_bit() const { return any_rested ? kCoveredBit : 0u; }
+  uint32_t covered_bit() const { return any_covered ? kCoveredBit : 0u; }
   std::vector<std::array<uint32_t, 4>> e_corner;
   std::vector<double> e_area;
   std::vector<glm::dvec3> e_centre;  // bounding sphere
