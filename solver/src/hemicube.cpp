@@ -93,6 +93,56 @@ glm::dvec3 newell_normal(std::span<const glm::dvec3> p) {
 
 }  // namespace
 
+namespace {
+
+// Pair lists keyed (a << 32) | b: sorts `pairs` by key, keeps one entry per key, and drops a key
+// whose entries disagree (`agree`).
+template <class T, class Agree>
+void sort_and_drop_disagreeing(std::vector<T>& pairs, Agree agree) {
+  std::sort(pairs.begin(), pairs.end(), [](const T& x, const T& y) { return x.key < y.key; });
+  size_t out = 0;
+  bool disagree = false;  // the entries merged into pairs[out - 1] disagree
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    if (out > 0 && pairs[out - 1].key == pairs[i].key) {
+      disagree = disagree || !agree(pairs[out - 1], pairs[i]);
+      continue;
+    }
+    if (disagree) --out;
+    disagree = false;
+    pairs[out++] = pairs[i];
+  }
+  if (disagree) --out;
+  pairs.resize(out);
+}
+
+// Where each a's entries start in sorted `pairs`, so that a pixel's resolve looks them up by index
+// instead of searching; left empty where ids are sparse (a caller's own, from 2^31 on).
+template <class T>
+void index_by_first(const std::vector<T>& pairs, std::vector<uint32_t>& first) {
+  first.clear();
+  const size_t ids = pairs.empty() ? 0 : static_cast<size_t>(pairs.back().key >> 32) + 1;
+  if (ids > 16 * pairs.size() + 65536) return;
+  first.assign(ids + 1, 0);
+  for (const T& x : pairs) ++first[static_cast<size_t>(x.key >> 32) + 1];
+  for (size_t a = 1; a < first.size(); ++a) first[a] += first[a - 1];
+}
+
+// a's entries in sorted `pairs`: by the index where there is one, else by search.
+template <class T>
+std::span<const T> entries_of(const std::vector<T>& pairs, const std::vector<uint32_t>& first, uint32_t a) {
+  if (!first.empty()) {
+    if (static_cast<size_t>(a) + 1 >= first.size()) return {};
+    return {pairs.data() + first[a], static_cast<size_t>(first[a + 1] - first[a])};
+  }
+  const uint64_t lo = static_cast<uint64_t>(a) << 32;
+  auto below = [](const T& x, uint64_t k) { return x.key < k; };
+  const auto b = std::lower_bound(pairs.begin(), pairs.end(), lo, below);
+  const auto e = std::lower_bound(b, pairs.end(), lo + (uint64_t{1} << 32), below);
+  return {pairs.data() + (b - pairs.begin()), static_cast<size_t>(e - b)};
+}
+
+}  // namespace
+
 void GroupAdjacency::add(uint32_t a, uint32_t b, bool folded) {
   if (a == b) return;
   links_.push_back({(static_cast<uint64_t>(a) << 32) | b, folded});
@@ -105,29 +155,8 @@ void GroupAdjacency::add(uint32_t a, uint32_t b, bool folded) {
 // shared every pixel where both showed, half each: a wall on such a floor took two thirds of its
 // sky, and light went through it to the floor beyond.
 void GroupAdjacency::finish() {
-  std::sort(links_.begin(), links_.end(), [](const Link& x, const Link& y) { return x.key < y.key; });
-  size_t out = 0;
-  bool disagree = false;  // the links merged into links_[out - 1] disagree
-  for (size_t i = 0; i < links_.size(); ++i) {
-    if (out > 0 && links_[out - 1].key == links_[i].key) {
-      disagree = disagree || links_[out - 1].folded != links_[i].folded;
-      continue;
-    }
-    if (disagree) --out;
-    disagree = false;
-    links_[out++] = links_[i];
-  }
-  if (disagree) --out;
-  links_.resize(out);
-  // Where each a's links start (links are sorted by a): a pixel's resolve looks its surfaces'
-  // neighbours up by index instead of searching all links. Sparse ids (a caller's own, from 2^31
-  // on) keep the search.
-  first_.clear();
-  const size_t ids = links_.empty() ? 0 : static_cast<size_t>(links_.back().key >> 32) + 1;
-  if (ids > 16 * links_.size() + 65536) return;
-  first_.assign(ids + 1, 0);
-  for (const Link& l : links_) ++first_[static_cast<size_t>(l.key >> 32) + 1];
-  for (size_t a = 1; a < first_.size(); ++a) first_[a] += first_[a - 1];
+  sort_and_drop_disagreeing(links_, [](const Link& x, const Link& y) { return x.folded == y.folded; });
+  index_by_first(links_, first_);
 }
 
 const GroupAdjacency::Link* GroupAdjacency::find(uint32_t a, uint32_t b) const {
@@ -138,15 +167,7 @@ const GroupAdjacency::Link* GroupAdjacency::find(uint32_t a, uint32_t b) const {
 }
 
 std::span<const GroupAdjacency::Link> GroupAdjacency::neighbours(uint32_t a) const {
-  if (!first_.empty()) {
-    if (static_cast<size_t>(a) + 1 >= first_.size()) return {};
-    return {links_.data() + first_[a], static_cast<size_t>(first_[a + 1] - first_[a])};
-  }
-  const uint64_t lo = static_cast<uint64_t>(a) << 32;
-  auto below = [](const Link& l, uint64_t k) { return l.key < k; };
-  const auto b = std::lower_bound(links_.begin(), links_.end(), lo, below);
-  const auto e = std::lower_bound(b, links_.end(), lo + (uint64_t{1} << 32), below);
-  return {links_.data() + (b - links_.begin()), static_cast<size_t>(e - b)};
+  return entries_of(links_, first_, a);
 }
 
 void GroupAdjacency::add_standing(uint32_t base, uint32_t top, bool on_front) {
@@ -158,41 +179,17 @@ void GroupAdjacency::add_standing(uint32_t base, uint32_t top, bool on_front) {
 // Sorted for standing_order's search; a pair listed twice in disagreement (each standing on the
 // other, or on both sides) is dropped, and so is a pair with an edge link.
 void GroupAdjacency::finish_standing() {
-  std::sort(standing_.begin(), standing_.end(), [](const Stand& x, const Stand& y) { return x.key < y.key; });
-  size_t out = 0;
-  bool disagree = false;
-  for (size_t i = 0; i < standing_.size(); ++i) {
-    if (out > 0 && standing_[out - 1].key == standing_[i].key) {
-      disagree = disagree || standing_[out - 1].x_base != standing_[i].x_base || standing_[out - 1].on_front != standing_[i].on_front;
-      continue;
-    }
-    if (disagree) --out;
-    disagree = false;
-    standing_[out++] = standing_[i];
-  }
-  if (disagree) --out;
-  standing_.resize(out);
+  sort_and_drop_disagreeing(standing_, [](const Stand& x, const Stand& y) {
+    return x.x_base == y.x_base && x.on_front == y.on_front;
+  });
   std::erase_if(standing_, [&](const Stand& s) {
     return find(static_cast<uint32_t>(s.key >> 32), static_cast<uint32_t>(s.key)) != nullptr;
   });
-  // Indexed by id where ids are dense (a solve's occlusion groups are patch ids).
-  standing_first_.clear();
-  if (standing_.empty() || (standing_.back().key >> 32) > 16 * standing_.size() + 65536) return;
-  standing_first_.assign(static_cast<size_t>(standing_.back().key >> 32) + 2, 0);
-  for (const Stand& s : standing_) ++standing_first_[static_cast<size_t>(s.key >> 32) + 1];
-  for (size_t a = 1; a < standing_first_.size(); ++a) standing_first_[a] += standing_first_[a - 1];
+  index_by_first(standing_, standing_first_);
 }
 
 std::span<const GroupAdjacency::Stand> GroupAdjacency::standing_of(uint32_t a) const {
-  if (!standing_first_.empty()) {
-    if (static_cast<size_t>(a) + 1 >= standing_first_.size()) return {};
-    return {standing_.data() + standing_first_[a], static_cast<size_t>(standing_first_[a + 1] - standing_first_[a])};
-  }
-  const uint64_t lo = static_cast<uint64_t>(a) << 32;
-  auto below = [](const Stand& s, uint64_t k) { return s.key < k; };
-  const auto b = std::lower_bound(standing_.begin(), standing_.end(), lo, below);
-  const auto e = std::lower_bound(b, standing_.end(), lo + (uint64_t{1} << 32), below);
-  return {standing_.data() + (b - standing_.begin()), static_cast<size_t>(e - b)};
+  return entries_of(standing_, standing_first_, a);
 }
 
 double foot_within(std::span<const glm::dvec3> base, const glm::dvec3& n, const glm::dvec3& a, const glm::dvec3& b,
