@@ -5,28 +5,12 @@ off the long walls, canvases 5 mm in front of the frames), five columns (16-side
 four benches on legs. A scene for the bench that nothing was tuned on. The tests do not need
 Blender. Run: blender -b --factory-startup --python scripts/make_blender_gallery.py -- tests/data/blender/gallery.glb"""
 import bpy, math, random, sys
+import os
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from blender_scene import box, light, material
 out = sys.argv[sys.argv.index('--') + 1]
 random.seed(3)
 bpy.ops.wm.read_factory_settings(use_empty=True)
-mats = {}
-def material(name, base, emission=None, strength=0.0):
-    if name in mats: return mats[name]
-    m = bpy.data.materials.new(name); m.use_nodes = True
-    b = m.node_tree.nodes['Principled BSDF']
-    b.inputs['Base Color'].default_value = (*base, 1.0)
-    if emission:
-        b.inputs['Emission'].default_value = (*emission, 1.0)
-        b.inputs['Emission Strength'].default_value = strength
-    mats[name] = m
-    return m
-def box(name, lo, hi, mat):
-    c = [(a + b) / 2 for a, b in zip(lo, hi)]
-    bpy.ops.mesh.primitive_cube_add(size=1.0, location=c)
-    o = bpy.context.active_object; o.name = name
-    o.scale = [b - a for a, b in zip(lo, hi)]
-    bpy.ops.object.transform_apply(location=False, rotation=False, scale=True)
-    o.data.materials.append(mat)
-    return o
 wall = material('Wall', (0.8, 0.8, 0.78)); floor = material('Stone', (0.5, 0.48, 0.45))
 frame = material('Frame', (0.25, 0.15, 0.08)); bench = material('Bench', (0.35, 0.2, 0.1))
 # Gallery 12 x 6 x 4 m; roof with a 2 x 8 m skylight opening in the middle (roof boxes around it).
@@ -53,13 +37,8 @@ for i in range(4):
     box('BenchTop', (x, 2.6, 0.42), (x + 0.8, 3.4, 0.46), bench)
     for lx in (x + 0.05, x + 0.72):
         box('BenchLeg', (lx, 2.65, 0.0), (lx + 0.03, 3.35, 0.42), bench)
-def light(kind, name, energy, loc, rot=(0, 0, 0), color=(1, 1, 1)):
-    bpy.ops.object.light_add(type=kind, location=loc, rotation=rot)
-    o = bpy.context.active_object; o.name = name; o.data.name = name
-    o.data.energy = energy; o.data.color = color
-    return o
-light('SUN', 'Sun', 3.0, (6, 3, 10), rot=(math.radians(25), math.radians(10), 0), color=(1, 0.96, 0.9))
+light('SUN', 'Sun', 3.0, (6, 3, 10), rotation=(math.radians(25), math.radians(10), 0), color=(1, 0.96, 0.9))
 for i in range(5):
-    s = light('SPOT', 'Spot%d' % i, 60.0, (1.8 + 2.3 * i, 1.2, 3.8), rot=(math.radians(-40), 0, 0))
+    s = light('SPOT', 'Spot%d' % i, 60.0, (1.8 + 2.3 * i, 1.2, 3.8), rotation=(math.radians(-40), 0, 0))
     s.data.spot_size = math.radians(40); s.data.spot_blend = 0.3
 bpy.ops.export_scene.gltf(filepath=out, export_format='GLB', export_lights=True)

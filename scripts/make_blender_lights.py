@@ -7,35 +7,19 @@ at (-1, 1, 2) pointing down (size 60 degrees, blend 0.25). blender-point.glb: th
 Run: blender -b --factory-startup --python scripts/make_blender_lights.py -- \
        tests/data/blender-lights.glb tests/data/blender-point.glb"""
 import bpy, math, sys
+import os
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from blender_scene import light, material
 out_all, out_point = sys.argv[sys.argv.index('--') + 1:]
 
 def reset():
     bpy.ops.wm.read_factory_settings(use_empty=True)
-
-def material(name, base, emission=None, strength=0.0):
-    m = bpy.data.materials.new(name)
-    m.use_nodes = True
-    b = m.node_tree.nodes['Principled BSDF']
-    b.inputs['Base Color'].default_value = (*base, 1.0)
-    if emission:
-        b.inputs['Emission'].default_value = (*emission, 1.0)
-        b.inputs['Emission Strength'].default_value = strength
-    return m
 
 def floor():
     bpy.ops.mesh.primitive_plane_add(size=4, location=(0, 0, 0))
     o = bpy.context.active_object
     o.name = 'Floor'
     o.data.materials.append(material('Ground', (0.6, 0.6, 0.6)))
-
-def light(kind, name, energy, location, rotation=(0, 0, 0), color=(1, 1, 1)):
-    bpy.ops.object.light_add(type=kind, location=location, rotation=rotation)
-    o = bpy.context.active_object
-    o.name = name
-    o.data.name = name
-    o.data.energy = energy
-    o.data.color = color
-    return o
 
 reset()
 floor()

@@ -6,19 +6,12 @@ spheres; tests/bench/display_error_test.cpp bakes it with and without Params::po
 read the committed file; they do not need Blender.
 Run: blender -b --factory-startup --python scripts/make_blender_pools.py -- tests/data/blender/glowing-spheres.glb"""
 import bpy, sys
+import os
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from blender_scene import material
 out = sys.argv[sys.argv.index('--') + 1]
 
 bpy.ops.wm.read_factory_settings(use_empty=True)
-
-def material(name, base, emission=None, strength=0.0):
-    m = bpy.data.materials.new(name)
-    m.use_nodes = True
-    b = m.node_tree.nodes['Principled BSDF']
-    b.inputs['Base Color'].default_value = (*base, 1.0)
-    if emission:
-        b.inputs['Emission'].default_value = (*emission, 1.0)
-        b.inputs['Emission Strength'].default_value = strength
-    return m
 
 def add(obj_op, mat, **kw):
     obj_op(**kw)

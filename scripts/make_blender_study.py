@@ -7,39 +7,12 @@ books, mugs (cylinders) and a ball (UV sphere), and a textured rug 3 mm above th
 sizes come from a fixed seed. The tests read the committed file; they do not need Blender.
 Run: blender -b --factory-startup --python scripts/make_blender_study.py -- tests/data/blender/study.glb"""
 import bpy, math, random, sys
+import os
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from blender_scene import box, light, material
 out = sys.argv[sys.argv.index('--') + 1]
 random.seed(7)
 bpy.ops.wm.read_factory_settings(use_empty=True)
-
-materials = {}
-
-def material(name, base, emission=None, strength=0.0, image=None):
-    if name in materials:
-        return materials[name]
-    m = bpy.data.materials.new(name)
-    m.use_nodes = True
-    b = m.node_tree.nodes['Principled BSDF']
-    b.inputs['Base Color'].default_value = (*base, 1.0)
-    if emission:
-        b.inputs['Emission'].default_value = (*emission, 1.0)
-        b.inputs['Emission Strength'].default_value = strength
-    if image is not None:
-        t = m.node_tree.nodes.new('ShaderNodeTexImage')
-        t.image = image
-        m.node_tree.links.new(t.outputs['Color'], b.inputs['Base Color'])
-    materials[name] = m
-    return m
-
-def box(name, lo, hi, mat):
-    """An axis-aligned box from corner lo to corner hi (metres, Z up)."""
-    centre = [(a + b) / 2 for a, b in zip(lo, hi)]
-    bpy.ops.mesh.primitive_cube_add(size=1.0, location=centre)
-    o = bpy.context.active_object
-    o.name = name
-    o.scale = [b - a for a, b in zip(lo, hi)]
-    bpy.ops.object.transform_apply(location=False, rotation=False, scale=True)
-    o.data.materials.append(mat)
-    return o
 
 wall = material('Plaster', (0.75, 0.72, 0.68))
 floor = material('Oak', (0.45, 0.3, 0.18))
@@ -116,15 +89,6 @@ rug.name = 'Rug'
 rug.scale = (2.0, 1.4, 1.0)
 bpy.ops.object.transform_apply(location=False, rotation=False, scale=True)
 rug.data.materials.append(material('Rug', (1, 1, 1), image=image))
-
-def light(kind, name, energy, location, rotation=(0, 0, 0), color=(1, 1, 1)):
-    bpy.ops.object.light_add(type=kind, location=location, rotation=rotation)
-    o = bpy.context.active_object
-    o.name = name
-    o.data.name = name
-    o.data.energy = energy
-    o.data.color = color
-    return o
 
 # The sun from the south (-y), 35 degrees above the horizon, through the window onto the floor.
 light('SUN', 'Sun', 4.0, (2.2, -3.0, 4.0), rotation=(math.radians(55), 0, math.radians(0)), color=(1.0, 0.95, 0.85))
