@@ -453,6 +453,8 @@ struct Solver::Impl {
   void reset_spread(const std::vector<uint32_t>& accepted);
   std::vector<uint32_t> too_coarse(const glm::dvec3& dB, double weight, const std::vector<uint32_t>& accepted);
   double split_headroom(const glm::dvec3& dB, double weight, const std::vector<uint32_t>& accepted) const;
+  bool covered_emitter(uint32_t e);
+  bool emits(uint32_t e) const { return channel_sum(patches[e_patch[e]].emission) > 0.0; }
   bool trim_to_element_limit(std::vector<uint32_t>& to_split);
   void split_receivers(const std::vector<uint32_t>& to_split, const detail::Shaft& shaft,
                        std::vector<uint32_t>& accepted, std::vector<uint32_t>& seen);
