@@ -337,6 +337,7 @@ void Solver::Impl::shoot_light(const Light& light) {
   ++stamp;
   const glm::dvec3 dB = light.intensity;
   const double weight = channel_sum(dB) / emitted_power;
+  shooting_light = &light;
   for (int round = 0; round < kMaxRounds; ++round) {
     light_factors(&light, views, accepted);
     spread_shot(dB, accepted);
@@ -350,6 +351,7 @@ void Solver::Impl::shoot_light(const Light& light) {
     grow_scratch();
     for (LightView& v : views) project_light_children(v, to_split);
   }
+  shooting_light = nullptr;
   light_factors(&light, views, accepted);
   for (uint32_t e : accepted)
     if (f_recv[e] > 0.0) {

@@ -120,6 +120,10 @@ constexpr double kSharpJump = 10.0;
 // ... and only where the light on one side is at least this many times the other's: an edge, not a
 // steep but smooth falloff (a spot's cone), which graded elements would only make uneven.
 constexpr double kSharpRatio = 4.0;
+// A punctual light's shot splits elements under AEPS too (down to AEPS / kSharpAreaFactor) where
+// an element's radius exceeds this share of its distance to the light: the light's pool on a
+// surface near it is about as wide as that distance, however small the surface is in the scene.
+constexpr double kLightPoolReach = 0.1;
 // Lengths under this share of the scene's diagonal are rounding. An eye that near a patch's plane
 // sees it edge-on: project() leaves such patches out and projects backs beyond it, and
 // absorber_close, which predicts which absorbing backs the hemicube will see, must draw the same
@@ -424,6 +428,7 @@ struct Solver::Impl {
   bool gap_covered(uint32_t p, const glm::dvec3& x, double radius) const;
   // mesh_export.cpp: covered vertices show the light of their uncovered neighbours.
   void show_uncovered_light(const std::vector<uint32_t>& leaves, Mesh& m) const;
+  void extrapolate_to_outline(const std::vector<uint32_t>& leaves, const std::vector<char>& fixed, Mesh& m) const;
   std::vector<std::array<uint32_t, 2>> standing_on(const std::vector<uint32_t>& leaves) const;
   bool leaf_covered(uint32_t e);
   double covered_share(std::span<const uint32_t> sources);
@@ -454,6 +459,8 @@ struct Solver::Impl {
   std::vector<uint32_t> too_coarse(const glm::dvec3& dB, double weight, const std::vector<uint32_t>& accepted);
   double split_headroom(const glm::dvec3& dB, double weight, const std::vector<uint32_t>& accepted) const;
   bool covered_emitter(uint32_t e);
+  bool in_light_pool(uint32_t e) const;
+  const Light* shooting_light = nullptr;  // shoot_light's light while it refines
   bool emits(uint32_t e) const { return channel_sum(patches[e_patch[e]].emission) > 0.0; }
   bool trim_to_element_limit(std::vector<uint32_t>& to_split);
   void split_receivers(const std::vector<uint32_t>& to_split, const detail::Shaft& shaft,
