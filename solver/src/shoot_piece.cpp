@@ -254,6 +254,19 @@ void Solver::Impl::receiver_form_factors(const Piece& piece, const std::vector<u
   // fraction of the receiver the hemicube found visible: reciprocity from the piece's centre errs
   // by the piece's size against the distance, the receiver's points by the receiver's.
   const bool exact_close = !piece.may_refine && piece.points.size() <= 4;
+  auto near_piece = [&](uint32_t e) {
+    return 2.0 * e_radius[e] < 2.0 * piece.diameter && glm::distance(piece.centre, e_centre[e]) - e_radius[e] < piece.diameter;
+  };
+  // front_share per receiving patch near the piece, once per call (it walks the piece's leaves).
+  std::vector<std::pair<uint32_t, double>> shares;
+  if (exact_close) {
+    for (uint32_t e : accepted)
+      if (near_piece(e)) shares.emplace_back(e_patch[e], 0.0);
+    std::sort(shares.begin(), shares.end());
+    shares.erase(std::unique(shares.begin(), shares.end()), shares.end());
+    for (auto& [q, share] : shares) share = front_share(piece, q);
+  }
+  auto share_of = [&](uint32_t q) { return std::lower_bound(shares.begin(), shares.end(), std::make_pair(q, 0.0))->second; };
   pool.parallel_for(accepted.size(), [&](size_t begin, size_t end, size_t) {
     for (size_t i = begin; i < end; ++i) {
       const uint32_t e = accepted[i];
@@ -264,8 +277,7 @@ void Solver::Impl::receiver_form_factors(const Piece& piece, const std::vector<u
         f_open[e] = by_reciprocity(piece, e, e_ff_open[e]);
       }
       const double size = 2.0 * e_radius[e];
-      if (exact_close && size < 2.0 * piece.diameter &&
-          glm::distance(piece.centre, e_centre[e]) - e_radius[e] < piece.diameter && is_close(piece, e)) {
+      if (exact_close && near_piece(e) && is_close(piece, e)) {
         // A receiver the hemicube did not see (the piece's centre lies behind it, though part of
         // the piece is in front: a floor piece under a block's face) is taken as unoccluded from
         // the part in front, which lies within a diameter of it. The exact form factor is to that
@@ -275,7 +287,7 @@ void Solver::Impl::receiver_form_factors(const Piece& piece, const std::vector<u
         // wall's foot took the piece's mean, diluted by the covered strip (a closed room of wall
         // boxes lost 3 % of the light at each of its floor's shots).
         const double f = exact_form_factor(piece, e, size < 0.5 * piece.diameter ? 1 : size < piece.diameter ? 2 : 3);
-        f_open[e] = std::min(1.0, f * front_share(piece, e));
+        f_open[e] = std::min(1.0, f * share_of(e_patch[e]));
         f_recv[e] = seen_here ? f_open[e] * (e_ff[e] / e_ff_open[e]) : f_open[e];
       }
       // Visible shares are at most the unoccluded ones, and both form factors at most 1.
@@ -284,13 +296,13 @@ void Solver::Impl::receiver_form_factors(const Piece& piece, const std::vector<u
   });
 }
 
-// The unshot radiosity of the part of `piece` in front of receiver e's plane, as a share of the
-// piece's mean: its leaves there, by their centres (1 for a piece of uniform radiosity; more where
-// the part behind holds less, as a floor piece reaching under a wall box does).
-double Solver::Impl::front_share(const Piece& piece, uint32_t e) const {
+// The unshot radiosity of the part of `piece` in front of the plane of receiving patch q, as a
+// share of the piece's mean: its leaves there, by their centres (1 for a piece of uniform
+// radiosity; more where the part behind holds less, as a floor piece reaching under a wall box does).
+double Solver::Impl::front_share(const Piece& piece, uint32_t q) const {
   if (piece.src.size() != 1 || e_child[piece.src[0]] == kNone || piece.src_area != piece.area) return 1.0;
-  const glm::dvec3& nq = prep.normal[e_patch[e]];
-  const glm::dvec3& oq = patches[e_patch[e]].corners[0];
+  const glm::dvec3& nq = prep.normal[q];
+  const glm::dvec3& oq = patches[q].corners[0];
   double power = 0.0, area = 0.0;
   for_leaves(piece.src[0], [&](uint32_t x) {
     if (glm::dot(nq, e_centre[x] - oq) <= 0.0) return;

@@ -403,7 +403,7 @@ struct Solver::Impl {
   double near_error(const Piece& piece, uint32_t e) const;
   bool absorber_close(const Piece& piece) const;
   bool uneven_piece(uint32_t element) const;
-  double front_share(const Piece& piece, uint32_t e) const;
+  double front_share(const Piece& piece, uint32_t q) const;
   // Which surfaces may cover a point (covered): any, or only those that emit nothing.
   enum class Cover : uint8_t { kAny, kNonEmitters };
   bool covered(uint32_t p, const glm::dvec3& x, double gap = 0.0, bool any_facing = false,
