@@ -213,16 +213,24 @@ void Solver::Impl::take_on_grid(uint32_t e, double radiosity) {
   });
 }
 
-// Splits the leaves whose grid points differ by more than the radiosity tolerance, and their
-// children likewise, down to the smallest element that may split. Returns whether any split.
+// Splits the elements whose grid points differ by more than the radiosity tolerance, and their
+// children likewise, down to the smallest element that may split; from each surface's root down,
+// so that an element this pass split for another reason is noted too (pool_splits: the solve
+// proper makes only those splits). Walked from the leaves, a pool that this pass had split
+// finely for its own shots was found in none of its small leaves, and the solve proper started
+// without it: a floor under a glowing sphere 5 cm above it kept four 2.5 m elements under the
+// sphere, each shot of the sphere's 1 104 faces too weak alone to split them. Returns whether
+// anything split.
 bool Solver::Impl::find_pools() {
   pools_looked = true;
-  std::vector<uint32_t> todo = leaves;
+  std::vector<uint32_t> todo;
+  for (uint32_t p = 0; p < patches.size(); ++p)
+    if (p_grid_n[p] != 0) todo.push_back(p_root[p]);
   bool any = false;
   while (!todo.empty()) {
     const uint32_t e = todo.back();
     todo.pop_back();
-    if (p_grid_n[e_patch[e]] == 0 || e_area[e] < min_split_area()) continue;
+    if (e_area[e] < min_split_area()) continue;
     double lo = std::numeric_limits<double>::max(), hi = std::numeric_limits<double>::lowest();
     uint32_t count = 0;
     double sum = 0.0;
@@ -233,14 +241,16 @@ bool Solver::Impl::find_pools() {
       ++count;
     });
     if (count < 4 || hi - lo <= kPoolFloor * pool_tolerance || hi - lo <= kPoolShare * sum / count) continue;
-    if (patches.size() + 3 * (stats.splits + 1) > params.max_elements) {
-      stats.element_limit = true;
-      break;
+    if (e_child[e] == kNone) {
+      if (patches.size() + 3 * (stats.splits + 1) > params.max_elements) {
+        stats.element_limit = true;
+        break;
+      }
+      split(e);  // `leaves` holds it or an ancestor: replace_split below expands them
+      any = true;
     }
-    split(e);  // `leaves` holds it or an ancestor: replace_split below expands them
     pool_splits.push_back(e);
     ++stats.splits_pools;
-    any = true;
     for (uint32_t k = 0; k < 4; ++k) todo.push_back(e_child[e] + k);
   }
   if (any) {

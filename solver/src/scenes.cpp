@@ -331,9 +331,6 @@ Scene make_cluttered_room(uint32_t small_boxes, uint32_t seed) {
   return s;
 }
 
-namespace {
-
-// A UV sphere of triangles, facing outward, `rings` x `segments`.
 void add_uv_sphere(Scene& s, const glm::dvec3& centre, double radius, int rings, int segments,
                    const glm::dvec3& rho, const glm::dvec3& e, uint32_t material) {
   auto at = [&](int i, int j) {
@@ -355,8 +352,6 @@ void add_uv_sphere(Scene& s, const glm::dvec3& centre, double radius, int rings,
       if (i < rings - 1) tri(at(i, j), at(i + 1, j), at(i + 1, j + 1));
     }
 }
-
-}  // namespace
 
 Scene make_lava_field() {
   using V = glm::dvec3;

@@ -151,8 +151,8 @@ void Solver::Impl::receive(uint32_t e, const glm::dvec3& dB, double f) {
   const glm::dvec3 gain = patches[q].reflectance * dB * f;
   e_b[e] += gain;
   e_gap[e] += gap_share * gain;
-  // (find_pools reads no point of a leaf too small to split)
-  if (shooter_shape != nullptr && p_grid_n[q] != 0 && e_area[e] >= min_split_area())
+  // (find_pools reads the points of leaves too small to split through their ancestors)
+  if (shooter_shape != nullptr && p_grid_n[q] != 0)
     take_on_grid(e, mean(patches[q].reflectance * dB));
   if (p_unit[q] == shooting_unit) {
     held.emplace_back(e, gain);  // the shooting unit's own: unshot once it has shot (clear_unshot)

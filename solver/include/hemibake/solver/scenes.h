@@ -54,4 +54,8 @@ void add_quad(Scene& scene, const glm::dvec3& a, const glm::dvec3& b, const glm:
               const glm::dvec3& d, const glm::dvec3& reflectance, const glm::dvec3& emission,
               uint32_t material);
 
+/// Appends a UV sphere of `rings` x `segments` triangles facing outward, one patch each.
+void add_uv_sphere(Scene& scene, const glm::dvec3& centre, double radius, int rings, int segments,
+                   const glm::dvec3& reflectance, const glm::dvec3& emission, uint32_t material);
+
 }  // namespace hemibake::solver
