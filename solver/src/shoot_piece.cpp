@@ -28,7 +28,7 @@ constexpr uint32_t kMaxVolumeResolution = 256;
 
 // Returns the receivers this piece's sub-pieces must serve instead (near-field): the caller's
 // recursion shoots them from the quarters.
-std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, std::vector<uint32_t> receivers, bool whole_scene) {
+std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, const std::vector<uint32_t>& receivers, bool whole_scene) {
   mark_shooting_patches(piece);
   std::vector<uint32_t> accepted, near;
   classify_receivers(piece, current_leaves(receivers), accepted, near);

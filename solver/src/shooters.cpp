@@ -38,7 +38,7 @@ constexpr double kStrongCutJudge = 2.0;
 // Shoots a piece of patch p (an element of its quadtree, or a geometric piece of a leaf) to
 // `receivers`; the receivers too close for its hemicube go on to its quarters, down to
 // kMaxShooterDepth levels, each quarter's unshot radiosity its own where the tree has it.
-void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers,
+void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, const std::vector<uint32_t>& receivers,
                               bool whole_scene) {
   const uint32_t n = patches[p].corner_count;
   Piece piece;
@@ -116,7 +116,7 @@ void Solver::Impl::shoot_node(uint32_t p, const ShooterNode& node, std::vector<u
   piece.may_refine = node.depth + node.extra < kMaxShooterDepth && piece.power >= params.feps * emitted_power;
   // A top piece that may refine holds its far receivers' light until its parts have shot (settle_far).
   defer_far = node.top && piece.may_refine;
-  const std::vector<uint32_t> near = shoot_piece(piece, std::move(receivers), whole_scene);
+  const std::vector<uint32_t> near = shoot_piece(piece, receivers, whole_scene);
   defer_far = false;
   std::unique_ptr<FarShare> far = std::move(far_pending);
   const double before = delivered;
@@ -159,7 +159,7 @@ bool Solver::Impl::uneven_piece(uint32_t element) const {
 
 // Shoots cluster node c to `receivers` as one piece along its mean normal, or from a whole cube (a
 // volume cluster whose faces look several ways); `depth` counts the halvings from the unit's root.
-void Solver::Impl::shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bool whole_scene, int depth) {
+void Solver::Impl::shoot_cluster(uint32_t c, const std::vector<uint32_t>& receivers, bool whole_scene, int depth) {
   if (receivers.empty()) return;
   const ClusterNode& node = c_nodes[c];
   if (node.end - node.begin == 1) {
@@ -208,7 +208,7 @@ void Solver::Impl::shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bo
   // The near receivers take from its parts what those, where they stand, send their way (the floor
   // under a cluster of boxes, seen from above it): its far receivers wait for the rest (settle_far).
   defer_far = depth == 0;
-  std::vector<uint32_t> near = shoot_piece(piece, std::move(receivers), whole_scene);
+  std::vector<uint32_t> near = shoot_piece(piece, receivers, whole_scene);
   defer_far = false;
   std::unique_ptr<FarShare> far = std::move(far_pending);
   const double before = delivered;

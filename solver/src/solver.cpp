@@ -231,11 +231,12 @@ void Solver::Impl::fresh_shot(uint32_t unit) {
   keep_record(unit, {});
   recording = params.shot_cache_mb > 0 ? &record : nullptr;
   record_broken = false;
+  const std::vector<uint32_t> receivers = leaves;  // the shot splits leaves as it goes
   if (unit_node[unit] == kNone) {
-    shoot_patch(unit_patch[unit], leaves, true);
+    shoot_patch(unit_patch[unit], receivers, true);
   } else {
     grow_scratch();
-    shoot_cluster(unit_node[unit], leaves, true, 0);
+    shoot_cluster(unit_node[unit], receivers, true, 0);
   }
   recording = nullptr;
   if (params.shot_cache_mb > 0 && !record_broken) {

@@ -349,14 +349,14 @@ struct Solver::Impl {
 
   // shooters.cpp: a unit breaks into pieces, each of which shoot_piece shoots.
   void shoot_patch(uint32_t p, const std::vector<uint32_t>& receivers, bool whole_scene);
-  void shoot_node(uint32_t p, const ShooterNode& node, std::vector<uint32_t> receivers, bool whole_scene);
+  void shoot_node(uint32_t p, const ShooterNode& node, const std::vector<uint32_t>& receivers, bool whole_scene);
   void shoot_tops(uint32_t p, const std::vector<ShooterNode>& tops, const std::vector<uint32_t>& receivers,
                   bool whole_scene);
-  void shoot_cluster(uint32_t c, std::vector<uint32_t> receivers, bool whole_scene, int depth);
+  void shoot_cluster(uint32_t c, const std::vector<uint32_t>& receivers, bool whole_scene, int depth);
   void shoot_parts(uint32_t c, const std::vector<uint32_t>& near, int depth);
 
   // shoot_piece.cpp: one hemicube, stage by stage.
-  std::vector<uint32_t> shoot_piece(const Piece& piece, std::vector<uint32_t> receivers, bool whole_scene);
+  std::vector<uint32_t> shoot_piece(const Piece& piece, const std::vector<uint32_t>& receivers, bool whole_scene);
   void mark_shooting_patches(const Piece& piece);
   std::vector<uint32_t> current_leaves(const std::vector<uint32_t>& receivers) const;
   void classify_receivers(const Piece& piece, const std::vector<uint32_t>& current,
