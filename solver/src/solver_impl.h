@@ -425,6 +425,7 @@ struct Solver::Impl {
   template <typename Fn>
   void for_grid_points(uint32_t e, Fn&& fn) const;
   bool find_pools();
+  bool near_emitter(uint32_t e) const;
   bool gap_covered(uint32_t p, const glm::dvec3& x, double radius) const;
   // mesh_export.cpp: covered vertices show the light of their uncovered neighbours.
   void show_uncovered_light(const std::vector<uint32_t>& leaves, Mesh& m) const;
