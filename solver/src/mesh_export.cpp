@@ -61,19 +61,9 @@ void Solver::Impl::show_uncovered_light(const std::vector<uint32_t>& sorted, Mes
     if (count[v] > 0) m.radiosity[v] = sum[v] / static_cast<double>(count[v]);
 }
 
-// A vertex on a surface's outline averages only the elements on one side of it, whose centres lie
-// inward: where the light changes across them, the outline showed the light half an element in (a
-// lamp's pool on a wall of 12.5 cm elements: the wall's edges 12 to 15 % too bright, 5 % over the
-// outer half of the wall). An element with corners both inside the surface and on its outline fits
-// a linear light to its mean (at its centre) and to its inside corners' values, by least squares in
-// its plane (along one direction when they lie on one line), and gives its outline corners that
-// light, at least 0; an outline vertex shows the area-weighted mean of what its elements give it.
-// A vertex is on the outline when the angles of the elements around it (pi where it hangs on a
-// larger element's edge) fall short of a full turn. `fixed` vertices keep their value (gathered,
-// or beside a patch standing on the surface). `m` holds the elements (in the order of `sorted`),
-// loops and vertex radiosity.
-void Solver::Impl::extrapolate_to_outline(const std::vector<uint32_t>& sorted, const std::vector<char>& fixed,
-                                          Mesh& m) const {
+// Per vertex of the solver's own: whether it lies on its surface's outline, where the angles of
+// the elements around it (pi where it hangs on a larger element's edge) fall short of a full turn.
+std::vector<char> Solver::Impl::outline_vertices(const Mesh& m) const {
   const size_t n = vpos.size();
   std::vector<double> turn(n, 0.0);
   for (const Mesh::Element& el : m.elements) {
@@ -92,7 +82,26 @@ void Solver::Impl::extrapolate_to_outline(const std::vector<uint32_t>& sorted, c
       turn[v] += std::acos(std::clamp(glm::dot(to_prev, to_next) / (glm::length(to_prev) * glm::length(to_next)), -1.0, 1.0));
     }
   }
-  auto on_outline = [&](uint32_t v) { return turn[v] > 0.0 && turn[v] < 2.0 * std::numbers::pi - 0.1; };
+  std::vector<char> out(n, 0);
+  for (size_t v = 0; v < n; ++v) out[v] = turn[v] > 0.0 && turn[v] < 2.0 * std::numbers::pi - 0.1;
+  return out;
+}
+
+// A vertex on a surface's outline averages only the elements on one side of it, whose centres lie
+// inward: where the light changes across them, the outline showed the light half an element in (a
+// lamp's pool on a wall of 12.5 cm elements: the wall's edges 12 to 15 % too bright, 5 % over the
+// outer half of the wall). An element with corners both inside the surface and on its outline fits
+// a linear light to its mean (at its centre) and to its inside corners' values, by least squares in
+// its plane (along one direction when they lie on one line), and gives its outline corners that
+// light, at least 0; an outline vertex shows the area-weighted mean of what its elements give it.
+// The outline is outline_vertices'. `fixed` vertices keep their value (gathered, or beside a patch
+// standing on the surface). `m` holds the elements (in the order of `sorted`), loops and vertex
+// radiosity.
+void Solver::Impl::extrapolate_to_outline(const std::vector<uint32_t>& sorted, const std::vector<char>& fixed,
+                                          Mesh& m) const {
+  const size_t n = vpos.size();
+  const std::vector<char> outline = outline_vertices(m);
+  auto on_outline = [&](uint32_t v) { return outline[v] != 0; };
   std::vector<glm::dvec3> sum(n, glm::dvec3(0.0));
   std::vector<double> weight(n, 0.0);
   for (size_t i = 0; i < sorted.size(); ++i) {

@@ -429,6 +429,7 @@ struct Solver::Impl {
   bool gap_covered(uint32_t p, const glm::dvec3& x, double radius) const;
   // mesh_export.cpp: covered vertices show the light of their uncovered neighbours.
   void show_uncovered_light(const std::vector<uint32_t>& leaves, Mesh& m) const;
+  std::vector<char> outline_vertices(const Mesh& m) const;
   void extrapolate_to_outline(const std::vector<uint32_t>& leaves, const std::vector<char>& fixed, Mesh& m) const;
   std::vector<std::array<uint32_t, 2>> standing_on(const std::vector<uint32_t>& leaves) const;
   bool leaf_covered(uint32_t e);
