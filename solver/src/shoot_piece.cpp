@@ -255,7 +255,7 @@ void Solver::Impl::receiver_form_factors(const Piece& piece, const std::vector<u
   // by the piece's size against the distance, the receiver's points by the receiver's.
   const bool exact_close = !piece.may_refine && piece.points.size() <= 4;
   auto near_piece = [&](uint32_t e) {
-    return 2.0 * e_radius[e] < 2.0 * piece.diameter && glm::distance(piece.centre, e_centre[e]) - e_radius[e] < piece.diameter;
+    return e_radius[e] < piece.diameter && glm::distance(piece.centre, e_centre[e]) - e_radius[e] < piece.diameter;
   };
   // front_share per receiving patch near the piece, once per call (it walks the piece's leaves).
   std::vector<std::pair<uint32_t, double>> shares;
