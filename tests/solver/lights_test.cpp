@@ -130,6 +130,13 @@ Errors relative_errors(const std::vector<Sample>& samples, const std::function<d
   return e;
 }
 
+// The irradiance a point light of intensity I gives a point x of a plane at distance h from the
+// light (facing it, unoccluded): I cos(theta) / d^2 = I h / d^3.
+double point_irradiance(const Light& light, double intensity, double h, const V& x) {
+  const double d = glm::length(light.position - x);
+  return intensity * h / (d * d * d);
+}
+
 Mesh solve(const Scene& scene, Params params = {}) {
   EXPECT_EQ(validate(scene), "");
   Solver solver(scene, params);
@@ -153,10 +160,7 @@ TEST(PointLight, OpenFloorMatchesIrradianceIHOverDCubed) {
   scene.lights.push_back(light);
   const Mesh mesh = solve(scene);
   const auto samples = sample_mesh(mesh, 4000, rng, [](uint32_t) { return true; });
-  auto truth = [&](const V& x) {
-    const double d = glm::length(light.position - x);
-    return rho * intensity * h / (d * d * d);
-  };
+  auto truth = [&](const V& x) { return rho * point_irradiance(light, intensity, h, x); };
   const Errors e = relative_errors(samples, truth, [](const Sample&) { return true; });
   EXPECT_LE(e.median, 0.02) << test::seed_note(seed) << " elements " << mesh.elements.size();
   EXPECT_LE(e.p90, 0.05) << test::seed_note(seed);
@@ -186,10 +190,7 @@ TEST(PointLight, PoolOnASmallWallOfABigSceneFollowsTheLight) {
   scene.lights.push_back(light);
   const Mesh mesh = solve(scene);
   const auto samples = sample_mesh(mesh, 4000, rng, [](uint32_t p) { return p == 0; });
-  auto truth = [&](const V& x) {
-    const double d = glm::length(light.position - x);
-    return rho * intensity * h / (d * d * d);
-  };
+  auto truth = [&](const V& x) { return rho * point_irradiance(light, intensity, h, x); };
   const Errors e = relative_errors(samples, truth, [](const Sample&) { return true; });
   EXPECT_LE(e.median, 0.02) << test::seed_note(seed) << " elements " << mesh.elements.size();
   EXPECT_LE(e.p90, 0.05) << test::seed_note(seed);
@@ -238,10 +239,7 @@ TEST(PointLight, RangeWindowFollowsTheExtensionsFormula) {
   const Mesh mesh = solve(scene);
   const auto samples = sample_mesh(mesh, 4000, rng, [](uint32_t) { return true; });
   auto window = [&](double d) { return std::clamp(1.0 - std::pow(d / range, 4.0), 0.0, 1.0); };
-  auto truth = [&](const V& x) {
-    const double d = glm::length(light.position - x);
-    return rho * 4.0 * h / (d * d * d) * window(d);
-  };
+  auto truth = [&](const V& x) { return rho * point_irradiance(light, 4.0, h, x) * window(glm::length(light.position - x)); };
   // Where the window is well above zero, and beyond the range nothing at all.
   const Errors e = relative_errors(samples, truth, [&](const Sample& s) { return window(glm::length(light.position - s.position)) > 0.2; });
   EXPECT_GT(e.count, 500u);
@@ -278,10 +276,7 @@ TEST(SpotLight, ConeProfileFollowsTheSmoothFalloffAndIsDarkOutside) {
     const double t = std::clamp((c - cos_outer) / (cos_inner - cos_outer), 0.0, 1.0);
     return t * t;
   };
-  auto truth = [&](const V& x) {
-    const double d = glm::length(light.position - x);
-    return rho * 5.0 * h / (d * d * d) * falloff(x);
-  };
+  auto truth = [&](const V& x) { return rho * point_irradiance(light, 5.0, h, x) * falloff(x); };
   // Inside the cone, away from its outer edge (where the truth goes to zero).
   const Errors e = relative_errors(samples, truth, [&](const Sample& s) { return falloff(s.position) > 0.25; });
   EXPECT_GT(e.count, 500u);
@@ -590,8 +585,7 @@ TEST(PointLight, AddsToAnEmissivePanelInTheSameUnits) {
   const Mesh mesh = solve(scene);
   const std::vector<V> panel = {V(-0.5, ph, -0.5), V(0.5, ph, -0.5), V(0.5, ph, 0.5), V(-0.5, ph, 0.5)};
   auto truth = [&](const V& x) {
-    const double d = glm::length(light.position - x);
-    return rho * (m * lambert(x, V(0, 1, 0), panel) + light.intensity.x * light.position.y / (d * d * d));
+    return rho * (m * lambert(x, V(0, 1, 0), panel) + point_irradiance(light, light.intensity.x, light.position.y, x));
   };
   const auto samples = sample_mesh(mesh, 4000, rng, [](uint32_t p) { return p == 0; });
   const Errors e = relative_errors(samples, truth, [](const Sample&) { return true; });
