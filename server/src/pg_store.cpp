@@ -248,7 +248,14 @@ class PgStore final : public Store {
     owned_.erase(id);
   }
 
+  // A job reads as running from the moment its claim's update commits, before the claim names it in
+  // owned_: a job not named there waits for a claim under way to name it.
   bool runs_here(const std::string& id) override {
+    {
+      std::lock_guard lock(mutex_);
+      if (owned_.count(id) > 0) return true;
+    }
+    std::lock_guard claiming(claim_mutex_);
     std::lock_guard lock(mutex_);
     return owned_.count(id) > 0;
   }
@@ -341,6 +348,7 @@ class PgStore final : public Store {
       for (const auto& [job, attempt] : owned_) held += (held.size() > 1 ? "," : "") + job;
     }
     held += "}";
+    std::unique_lock claiming(claim_mutex_);
     Result r = exec(std::string("WITH c AS (SELECT id FROM jobs WHERE state = 'queued' AND NOT (id = ANY($3::text[]))"
                                 " ORDER BY created, id LIMIT 1 FOR UPDATE SKIP LOCKED)"
                                 " UPDATE jobs j SET state = 'running', owner = $1, attempts = j.attempts + 1, started = ") + kNow +
@@ -355,6 +363,7 @@ class PgStore final : public Store {
       std::lock_guard lock(mutex_);
       owned_[id] = attempt;
     }
+    claiming.unlock();
     Result s = exec("SELECT data FROM scenes WHERE job = $1", {text(id)}, true);
     scene = s.rows() == 1 ? s.get(0, 0) : std::string();
     if (!s.ok()) {
@@ -682,11 +691,7 @@ class PgStore final : public Store {
       while (PGnotify* n = PQnotifies(c)) {
         const std::string channel = n->relname, payload = n->extra;
         PQfreemem(n);
-        bool mine = false;
-        {
-          std::lock_guard lock(mutex_);
-          mine = owned_.count(payload) > 0;
-        }
+        const bool mine = (channel == "hemibake_cancel" || channel == "hemibake_preview_ask") && runs_here(payload);
         tell([&](const StoreListener& l) {
           if (channel == "hemibake_job" && l.job_queued) l.job_queued();
           else if (channel == "hemibake_event" && l.event) l.event(payload);
@@ -706,6 +711,7 @@ class PgStore final : public Store {
   std::condition_variable stop_wake_;
   bool stopping_ = false;
   std::map<std::string, int> owned_;  ///< jobs this node claimed, with their attempt numbers
+  std::mutex claim_mutex_;            ///< held by a claim from its update until owned_ names the job
   std::mutex pool_mutex_;
   std::condition_variable pool_wake_;
   std::vector<PGconn*> free_, all_;

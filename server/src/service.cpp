@@ -329,6 +329,9 @@ std::unique_ptr<Service> Service::start(const ServiceOptions& options, std::uniq
     if (auto it = p->active_.find(id); it != p->active_.end()) {
       it->second.preview_wanted = true;
       it->second.remote_wanted = true;
+    } else {
+      p->remote_asks_[id] = std::chrono::steady_clock::now() + kRegisterWait;
+      p->clock_wake_.notify_one();
     }
   };
   listener.preview_ready = [p = s.get()](const std::string& id) {
@@ -390,6 +393,7 @@ void Service::stop() {
     for (auto& [id, waits] : unregistered_)
       for (auto& w : waits) waiting.push_back(std::move(w.reply));
     unregistered_.clear();
+    remote_asks_.clear();
     for (auto& [id, waits] : remote_previews_)
       for (auto& w : waits) waiting.push_back(std::move(w.reply));
     remote_previews_.clear();
@@ -446,6 +450,14 @@ void Service::clock_loop() {
         return not_running(running);
       });
       it = it->second.empty() ? unregistered_.erase(it) : std::next(it);
+    }
+    for (auto it = remote_asks_.begin(); it != remote_asks_.end();) {
+      if (it->second <= now) {
+        it = remote_asks_.erase(it);
+      } else {
+        next = std::min(next, it->second);
+        ++it;
+      }
     }
     // Event streams that waited long enough: time for a heartbeat.
     std::vector<std::function<void(EventBatch)>> heartbeats;
@@ -1051,6 +1063,11 @@ bool Service::register_job(const std::string& id, solver::CancelToken* token) {
       for (auto& w : u->second) a.waits.push_back({until, std::move(w.reply)});
       unregistered_.erase(u);
       a.preview_wanted = !a.waits.empty();
+    }
+    // Asked for by another node meanwhile: made after the first shot, for the store.
+    if (auto r = remote_asks_.find(id); r != remote_asks_.end()) {
+      a.preview_wanted = a.remote_wanted = true;
+      remote_asks_.erase(r);
     }
   }
   clock_wake_.notify_one();

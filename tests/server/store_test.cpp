@@ -124,6 +124,36 @@ TEST_P(StoreTest, JobLifecycleKeepsScenesEventsAndResultsExactly) {
   EXPECT_FALSE(store_->find_cached("cache2"));
 }
 
+// A job that this node's claim made running is this node's from the moment anyone can read it as
+// running: a preview asked for in between was sent to "another node" that never answered (the
+// handler test waited 30 s for it once, on a loaded machine). A reader follows the claims job by job.
+TEST_P(StoreTest, JobReadAsRunningRunsHereAtOnce) {
+  std::vector<std::string> ids;
+  for (int i = 0; i < 200; ++i) ids.push_back(store_->create("s", "t", "{}", "k" + std::to_string(i), "").id);
+  std::atomic<bool> done{false};
+  std::thread claimer([&] {
+    std::string id, scene, params;
+    while (store_->claim(id, scene, params)) {
+    }
+    done = true;
+  });
+  int seen = 0, elsewhere = 0;
+  for (size_t i = 0; i < ids.size();) {
+    const auto rec = store_->get(ids[i]);
+    ASSERT_TRUE(rec);
+    if (rec->state == JobState::kRunning) {
+      if (!store_->runs_here(ids[i])) ++elsewhere;
+      ++seen;
+      ++i;
+    } else if (done) {
+      break;
+    }
+  }
+  claimer.join();
+  EXPECT_EQ(seen, 200);
+  EXPECT_EQ(elsewhere, 0);
+}
+
 TEST_P(StoreTest, IdempotencyKeyNamesTheJobThatHoldsIt) {
   const Created a = store_->create("s", "t", "{}", "k1", "key");
   const Created b = store_->create("s2", "t", "{}", "k2", "key");

@@ -204,6 +204,9 @@ class Service {
                                  // checks that none came between the two
   // Previews of jobs claimed by a worker that has not registered them yet.
   std::map<std::string, std::vector<PreviewWait>> unregistered_;
+  // Another node's asks for a preview of a job of this node that has not registered yet: taken up
+  // by register_job, or dropped by the clock after kRegisterWait.
+  std::map<std::string, std::chrono::steady_clock::time_point> remote_asks_;
   std::condition_variable clock_wake_;  // a new deadline, or the stop
   std::thread clock_;                   // answers previews whose time is up
   std::unique_ptr<Pool> checks_;        // loads and checks submitted scenes
