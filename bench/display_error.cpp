@@ -189,10 +189,12 @@ DisplayError displayed_error(const std::vector<SurfacePoint>& points, const solv
     const double ref = channel_sum(points[i].reference), denom = std::max(ref, floor);
     out.worst_std_error = std::max(out.worst_std_error, points[i].std_error / denom);
     ref_sum += ref;
+    // A point no baked triangle covers shows nothing: the writer leaves out the insides of closed
+    // meshes, which no one outside them sees (their reference is dark); anywhere else it is the
+    // whole reference wrong.
     if (!hit[i]) {
       ++out.missed;
-      out.errors[i] = 1.0;
-      continue;
+      out.missed_light += ref;
     }
     bake_sum += channel_sum(shown[i]);
     out.errors[i] = std::abs(channel_sum(shown[i]) - ref) / denom;
@@ -204,6 +206,7 @@ DisplayError displayed_error(const std::vector<SurfacePoint>& points, const solv
   out.p90 = quantile(0.9);
   out.max = sorted.back();
   out.mean_ratio = ref_sum > 0.0 ? bake_sum / ref_sum : 0.0;
+  out.missed_light = ref_sum > 0.0 ? out.missed_light / ref_sum : 0.0;
   return out;
 }
 

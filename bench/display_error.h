@@ -45,7 +45,8 @@ struct DisplayError {
   double max = 0.0;
   double mean_ratio = 0.0;  ///< sum of bake / sum of reference over the points (overall brightness)
   double worst_std_error = 0.0;  ///< largest relative standard error of the reference
-  uint32_t missed = 0;   ///< points no baked triangle covers (counted as 100 % error)
+  uint32_t missed = 0;   ///< points no baked triangle covers (shown as 0: an unwritten closed mesh's inside)
+  double missed_light = 0.0;  ///< the reference's light on those, as a share of its light on all points
   std::vector<double> errors;  ///< per point, in the order of the points
 };
 

@@ -10,11 +10,15 @@
 #include <glm/geometric.hpp>
 #include <glm/mat3x3.hpp>
 #include <glm/matrix.hpp>
+#include <glm/vector_relational.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <limits>
 #include <cstring>
 #include <map>
+#include <set>
 #include <sstream>
 #include <tuple>
 #include <unordered_map>
@@ -151,6 +155,116 @@ Groups group_elements(const SceneDocument& doc, const solver::Mesh& mesh) {
     groups[{s.node, s.primitive, s.back}].push_back(i);
   }
   return groups;
+}
+
+// The inside of a closed double-sided mesh is not written unless a light lies within it. Blender's
+// and most engines' exporters mark every material double-sided, so each closed object (a cabinet, a
+// wall built as a box, a chair's leg) comes with the faces of its inside, which no one outside can
+// see: hidden behind its outside, except along its edges, where an inside face behind and an outside
+// face in front meet at one depth and a viewer's depth test lets the dark one through in dots (the
+// study's table and room corners in three.js, every few pixels). A primitive's side is its inside
+// when the primitive's own triangles close up, every edge met twice and once each way, around a
+// volume (its sign says which side looks in). A room built as one closed box keeps both sides when
+// a punctual light or another object's emitting surface lies in it; an open mesh (a plate, a wall
+// between two rooms) always does.
+
+using Corner = std::array<double, 3>;
+
+Corner corner_key(const glm::dvec3& p) { return {p.x, p.y, p.z}; }
+
+// Of the primitive's front patches: 1 when they enclose a volume with their fronts facing out, -1
+// facing in, 0 when they do not close up (an edge met other than once each way, or no volume).
+int closed_side(const SceneDocument& doc, const std::vector<uint32_t>& fronts) {
+  std::map<std::pair<Corner, Corner>, int> edges;  // directed
+  glm::dvec3 lo(std::numeric_limits<double>::max()), hi(std::numeric_limits<double>::lowest());
+  for (uint32_t p : fronts) {
+    const solver::Patch& patch = doc.scene.patches[p];
+    for (uint32_t k = 0; k < patch.corner_count; ++k) {
+      ++edges[{corner_key(patch.corners[k]), corner_key(patch.corners[(k + 1) % patch.corner_count])}];
+      lo = glm::min(lo, patch.corners[k]);
+      hi = glm::max(hi, patch.corners[k]);
+    }
+  }
+  if (edges.empty()) return 0;
+  for (const auto& [edge, count] : edges) {
+    if (count != 1) return 0;
+    const auto back = edges.find({edge.second, edge.first});
+    if (back == edges.end() || back->second != 1) return 0;
+  }
+  // Divergence theorem: the volume is the sum over the faces of (c - o) . n A / 3.
+  const glm::dvec3 o = 0.5 * (lo + hi);
+  double volume = 0.0;
+  for (uint32_t p : fronts) {
+    const solver::Patch& patch = doc.scene.patches[p];
+    glm::dvec3 area(0.0), centre(0.0);  // area vector (Newell), corner mean
+    for (uint32_t k = 0; k < patch.corner_count; ++k) {
+      area += 0.5 * glm::cross(patch.corners[k] - o, patch.corners[(k + 1) % patch.corner_count] - o);
+      centre += patch.corners[k] / static_cast<double>(patch.corner_count);
+    }
+    volume += glm::dot(centre - o, area) / 3.0;
+  }
+  const double tiny = 1e-9 * std::pow(glm::length(hi - lo), 3.0);
+  return volume > tiny ? 1 : volume < -tiny ? -1 : 0;
+}
+
+// Whether point x lies within the closed surface of `fronts` (within its box, and a ray from x
+// crosses it an odd number of times; the ray's direction is one no modeller's edge runs along).
+bool encloses(const SceneDocument& doc, const std::vector<uint32_t>& fronts, const glm::dvec3& lo, const glm::dvec3& hi,
+              const glm::dvec3& x) {
+  if (glm::any(glm::lessThan(x, lo)) || glm::any(glm::greaterThan(x, hi))) return false;
+  const glm::dvec3 dir = glm::normalize(glm::dvec3(0.5377, 0.6123, 0.5799));
+  int crossings = 0;
+  for (uint32_t p : fronts) {
+    const solver::Patch& patch = doc.scene.patches[p];
+    // The polygon as a fan of triangles from its first corner (Moller-Trumbore).
+    for (uint32_t k = 1; k + 1 < patch.corner_count; ++k) {
+      const glm::dvec3 a = patch.corners[0], e1 = patch.corners[k] - a, e2 = patch.corners[k + 1] - a;
+      const glm::dvec3 pv = glm::cross(dir, e2);
+      const double det = glm::dot(e1, pv);
+      if (std::abs(det) < 1e-300) continue;
+      const glm::dvec3 tv = x - a;
+      const double u = glm::dot(tv, pv) / det;
+      if (u < 0.0 || u > 1.0) continue;
+      const glm::dvec3 qv = glm::cross(tv, e1);
+      const double v = glm::dot(dir, qv) / det;
+      if (v < 0.0 || u + v > 1.0) continue;
+      if (glm::dot(e2, qv) / det > 0.0) ++crossings;
+    }
+  }
+  return crossings % 2 == 1;
+}
+
+// The output primitives (node, primitive, back side) that are the unlit insides of closed meshes.
+std::set<std::tuple<uint32_t, uint32_t, bool>> closed_insides(const SceneDocument& doc, const Groups& groups) {
+  std::set<std::tuple<uint32_t, uint32_t, bool>> out;
+  std::map<std::pair<uint32_t, uint32_t>, std::vector<uint32_t>> fronts;
+  for (uint32_t p = 0; p < doc.sources.size(); ++p)
+    if (!doc.sources[p].back) fronts[{doc.sources[p].node, doc.sources[p].primitive}].push_back(p);
+  for (const auto& key : groups) {
+    const auto [node, prim, back] = key.first;
+    if (!back || !groups.count({node, prim, false})) continue;
+    const std::vector<uint32_t>& sheet = fronts[{node, prim}];
+    const int side = closed_side(doc, sheet);
+    if (side == 0) continue;
+    glm::dvec3 lo(std::numeric_limits<double>::max()), hi(std::numeric_limits<double>::lowest());
+    for (uint32_t p : sheet)
+      for (uint32_t k = 0; k < doc.scene.patches[p].corner_count; ++k) {
+        lo = glm::min(lo, doc.scene.patches[p].corners[k]);
+        hi = glm::max(hi, doc.scene.patches[p].corners[k]);
+      }
+    bool lit = false;
+    for (const solver::Light& l : doc.scene.lights)
+      lit = lit || (l.type != solver::Light::Type::kDirectional && encloses(doc, sheet, lo, hi, l.position));
+    for (uint32_t p = 0; p < doc.scene.patches.size() && !lit; ++p) {
+      const solver::Patch& patch = doc.scene.patches[p];
+      if (patch.emission == glm::dvec3(0.0) || (doc.sources[p].node == node && doc.sources[p].primitive == prim)) continue;
+      glm::dvec3 centre(0.0);
+      for (uint32_t k = 0; k < patch.corner_count; ++k) centre += patch.corners[k] / static_cast<double>(patch.corner_count);
+      lit = encloses(doc, sheet, lo, hi, centre);
+    }
+    if (!lit) out.insert({node, prim, side > 0});
+  }
+  return out;
 }
 
 // Unlit shading shows the base colour alone: emission (its light is in COLOR_0 now), normal,
@@ -503,7 +617,10 @@ WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, 
   int default_material = -1;
   bool used_draco = false;
   std::map<uint32_t, int> node_mesh;  // node -> new mesh
-  for (const auto& [key, elements] : group_elements(doc, mesh)) {
+  const Groups groups = group_elements(doc, mesh);
+  const auto hidden = closed_insides(doc, groups);
+  for (const auto& [key, elements] : groups) {
+    if (hidden.count(key)) continue;
     const auto [node_index, prim_index, back] = key;
     const tinygltf::Node& node = doc.model.nodes[node_index];
     const PrimitiveData data = primitive_triangles(doc, mesh, elements, node_index, result.exposure);

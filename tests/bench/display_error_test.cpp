@@ -390,7 +390,7 @@ TEST(LightPools, BlenderFloorUnderGlowingSpheresShowsThePathTracersPools) {
   const DisplayError with = displayed_error(points, baked);
   std::printf("glowing spheres: without pools median %.4f p90 %.4f, ratio %.3f; with %.4f %.4f, ratio %.3f\n",
               without.median, without.p90, without.mean_ratio, with.median, with.p90, with.mean_ratio);
-  EXPECT_EQ(with.missed, 0u);
+  EXPECT_LT(with.missed_light, 1e-3);  // the written file leaves out only the dark insides of closed meshes
   EXPECT_LT(with.median, 0.05);
   EXPECT_LT(with.p90, 0.25);
   EXPECT_NEAR(with.mean_ratio, 1.0, 0.05);
@@ -482,7 +482,7 @@ TEST(PunctualLights, BlenderLightsShowThePathTracersLightInTheWrittenBake) {
   const DisplayError e = displayed_error(points, mesh);
   std::printf("Blender lights, written bake, %zu lit points: median %.4f p90 %.4f max %.4f, bake/reference %.3f, missed %u\n",
               points.size(), e.median, e.p90, e.max, e.mean_ratio, e.missed);
-  EXPECT_EQ(e.missed, 0u);
+  EXPECT_LT(e.missed_light, 1e-3);  // the written file leaves out only the dark insides of closed meshes
   EXPECT_LT(e.median, 0.03);
   EXPECT_LT(e.p90, 0.10);
   EXPECT_NEAR(e.mean_ratio, 1.0, 0.03);
@@ -527,7 +527,7 @@ TEST(GatherBudget, BackOfTheLitYardsWallStaysAsDarkAsThePathTracerSeesIt) {
   const DisplayError e = displayed_error(points, mesh);
   std::printf("back of the lit yard's wall, %zu points: median %.4f p90 %.4f, bake/reference %.3f, worst s.e. %.3f\n",
               points.size(), e.median, e.p90, e.mean_ratio, e.worst_std_error);
-  EXPECT_EQ(e.missed, 0u);
+  EXPECT_LT(e.missed_light, 1e-3);  // the written file leaves out only the dark insides of closed meshes
   // 53 times the path tracer's light when the vertices took the whole budget, 14 times with half
   // of it kept for splits (the foot's light needs splits down to centimetres). Where an element's
   // gathered corners misstate its light, its vertices now show the elements' mean, as without the

@@ -732,6 +732,91 @@ TEST(DoubleSidedFeature, BothSidesAreLitLikeSingleSidedQuadsFacingEachLamp) {
   EXPECT_GT(bottom_b.z / bottom_b.x, 2.0);
 }
 
+// A closed box [lo, hi] as one mesh of 12 triangles sharing its 8 corners, wound so that the
+// triangles face out (or in).
+int box_node(Doc& d, const V& lo, const V& hi, int mat, bool inward, json node = json::object()) {
+  const std::vector<V> c = {V(lo.x, lo.y, lo.z), V(hi.x, lo.y, lo.z), V(hi.x, hi.y, lo.z), V(lo.x, hi.y, lo.z),
+                            V(lo.x, lo.y, hi.z), V(hi.x, lo.y, hi.z), V(hi.x, hi.y, hi.z), V(lo.x, hi.y, hi.z)};
+  // Each face's corners counter-clockwise seen from outside.
+  const int faces[6][4] = {{0, 3, 2, 1}, {4, 5, 6, 7}, {0, 1, 5, 4}, {3, 7, 6, 2}, {0, 4, 7, 3}, {1, 2, 6, 5}};
+  std::vector<uint32_t> idx;
+  for (const auto& f : faces) {
+    const std::array<uint32_t, 6> t = {uint32_t(f[0]), uint32_t(f[1]), uint32_t(f[2]), uint32_t(f[0]), uint32_t(f[2]), uint32_t(f[3])};
+    for (size_t k = 0; k < 6; k += 3) {
+      idx.push_back(t[k]);
+      idx.push_back(inward ? t[k + 2] : t[k + 1]);
+      idx.push_back(inward ? t[k + 1] : t[k + 2]);
+    }
+  }
+  node["mesh"] = d.mesh(json::array({d.primitive(c, idx, kTriangles, mat)}));
+  return d.node(node);
+}
+
+// Area of the triangles whose front faces away from point o (out) or towards it (in).
+double area_facing_from(const std::vector<Tri>& tris, const V& o, bool out) {
+  double a = 0.0;
+  for (const Tri& t : tris)
+    if ((glm::dot(t.front, (t.p[0] + t.p[1] + t.p[2]) / 3.0 - o) > 0.0) == out) a += t.area();
+  return a;
+}
+
+// Blender marks every material double-sided, so a closed box comes with the faces of its inside,
+// which no one outside sees; written, they showed through the outside's edges in a viewer's depth
+// test as dark dots. A double-sided box (wound either way) under a lamp is written as its outside
+// alone, and a double-sided floor (open) with both sides.
+TEST(DoubleSidedFeature, ClosedBoxIsWrittenAsItsOutsideAndAnOpenFloorWithBothSides) {
+  for (const bool inward : {false, true}) {
+    Doc d;
+    json m = plain_material(V(0.6), "crate");
+    m["doubleSided"] = true;
+    const int mat = d.material(m);
+    const int floor = d.quad_node(rect(-2, 2, -2, 2, 0, true), mat, {{"name", "floor"}});
+    const V lo(-0.5, 0.3, -0.5), hi(0.5, 1.3, 0.5);
+    const int box = box_node(d, lo, hi, mat, inward, {{"name", "box"}});
+    d.quad_node(rect(-0.5, 0.5, -0.5, 0.5, 2.5, false), d.material(lamp_material(V(4.0))), {{"name", "lamp"}});
+    const Baked b = bake(d.gltf_bytes());
+    const auto box_tris = all_of(baked_node(b.out, box));
+    const V centre = 0.5 * (lo + hi);
+    EXPECT_NEAR(area_facing_from(box_tris, centre, true), 6.0, 1e-5) << (inward ? "wound inward" : "wound outward");
+    EXPECT_EQ(area_facing_from(box_tris, centre, false), 0.0) << (inward ? "wound inward" : "wound outward");
+    EXPECT_GT(mean_radiosity(box_tris).x, 0.0);
+    const auto floor_prims = baked_node(b.out, floor);
+    ASSERT_EQ(floor_prims.size(), 2u);
+    const auto floor_tris = all_of(floor_prims);
+    EXPECT_NEAR(area_facing(floor_tris, V(0, 1, 0)), 16.0, 1e-5);
+    EXPECT_NEAR(area_facing(floor_tris, V(0, -1, 0)), 16.0, 1e-5);
+  }
+}
+
+// A room built as one closed double-sided box with its lamp (an emitting quad, or a point light)
+// inside: its inside is what is seen, and is written with its outside.
+TEST(DoubleSidedFeature, ClosedRoomWithItsLampInsideKeepsItsInside) {
+  for (const bool punctual : {false, true}) {
+    Doc d;
+    json m = plain_material(V(0.6), "room");
+    m["doubleSided"] = true;
+    const V lo(-2, 0, -2), hi(2, 3, 2);
+    const int room = box_node(d, lo, hi, d.material(m), false, {{"name", "room"}});
+    if (punctual) {
+      d.gltf["extensionsUsed"] = json::array({"KHR_lights_punctual"});
+      d.gltf["extensions"]["KHR_lights_punctual"]["lights"] = json::array({json{{"type", "point"}, {"intensity", 20.0}}});
+      d.node({{"name", "bulb"}, {"translation", {0.0, 2.0, 0.0}}, {"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}});
+    } else {
+      d.quad_node(rect(-0.5, 0.5, -0.5, 0.5, 2.9, false), d.material(lamp_material(V(4.0))), {{"name", "lamp"}});
+    }
+    const Baked b = bake(d.gltf_bytes());
+    const auto tris = all_of(baked_node(b.out, room));
+    const V centre = 0.5 * (lo + hi);
+    const double faces = 2.0 * (16.0 + 12.0 + 12.0);
+    EXPECT_NEAR(area_facing_from(tris, centre, false), faces, 1e-4) << (punctual ? "point light" : "lamp");
+    EXPECT_NEAR(area_facing_from(tris, centre, true), faces, 1e-4) << (punctual ? "point light" : "lamp");
+    std::vector<Tri> inside;
+    for (const Tri& t : tris)
+      if (glm::dot(t.front, (t.p[0] + t.p[1] + t.p[2]) / 3.0 - centre) < 0.0) inside.push_back(t);
+    EXPECT_GT(mean_radiosity(inside).x, 0.01);
+  }
+}
+
 // ---- 5. Base colour textures --------------------------------------------------------------------
 
 constexpr uint8_t kTexel[3] = {200, 120, 60};  // sRGB bytes
