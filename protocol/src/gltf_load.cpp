@@ -31,6 +31,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <numbers>
 
@@ -712,6 +713,12 @@ LoadResult load_gltf_memory(std::span<const uint8_t> bytes, const std::string& b
     if (failed(add_instance(*doc, n, limits, tally))) return result;
   tally_warnings(doc->model, tally, result.warnings);
   if (failed(check_patches(doc->scene))) return result;
+  // Each node's primitive is an object of its own (the solver finds closed meshes within one).
+  std::map<std::pair<uint32_t, uint32_t>, uint32_t> objects;
+  for (size_t i = 0; i < doc->scene.patches.size(); ++i)
+    doc->scene.patches[i].object =
+        objects.try_emplace({doc->sources[i].node, doc->sources[i].primitive}, static_cast<uint32_t>(objects.size() + 1))
+            .first->second;
   result.document = std::move(doc);
   return result;
 }

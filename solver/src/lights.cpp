@@ -80,6 +80,8 @@ struct Solver::Impl::LightView {
   std::vector<glm::dvec3> dirs;  // perspective with a range: per pixel, the unit direction
   std::vector<Fragment> frags;
   std::vector<uint32_t> begin, end;  // per element: its front fragments in `frags`
+  std::vector<uint32_t> within;      // perspective: the closed meshes the light lies in (enclosing;
+                                     // parallel: none, the light comes from outside them all)
 
   void place() const {
     if (parallel) cube->place(glm::dvec3(0.0), glm::dvec3(0, 0, 1), glm::dvec3(0, 1, 0));
@@ -184,6 +186,7 @@ void Solver::Impl::light_views(const Light& light, std::vector<LightView>& views
     LightView v;
     v.cube = light_cube.get();
     v.eye = light.position;
+    v.within = enclosing(light.position);
     v.axis = axis;
     v.up = perpendicular(axis);
     v.place();
@@ -293,7 +296,7 @@ void Solver::Impl::light_factors(const Light* light, const std::vector<LightView
       const glm::dvec3& n = prep.normal[e_patch[e]];
       const double plane = ranged ? glm::dot(n, e_centre[e] - light->position) : 0.0;
       for (const LightView& v : views)
-        for (uint32_t k = v.begin[e]; k < v.end[e]; ++k) {
+        for (uint32_t k = sealed(e_patch[e], v.within) ? v.end[e] : v.begin[e]; k < v.end[e]; ++k) {
           const Fragment& f = v.frags[k];
           double a = static_cast<double>(f.area) * v.weight_of(f.pixel);
           if (ranged) {
@@ -382,7 +385,8 @@ uint32_t Solver::Impl::add_sky_directions(uint32_t step, uint32_t skip, uint32_t
     pool.parallel_for(elements.size(), [&](size_t begin, size_t end_i, size_t) {
       for (size_t i = begin; i < end_i; ++i) {
         const uint32_t e = elements[i];
-        for (uint32_t j = v.begin[e]; j < v.end[e]; ++j) {
+        // The sky lies outside every closed mesh.
+        for (uint32_t j = sealed(e_patch[e], {}) ? v.end[e] : v.begin[e]; j < v.end[e]; ++j) {
           const Fragment& f = v.frags[j];
           const double a = omega * static_cast<double>(f.area) * v.pixel_area;
           sums[e].y += a;

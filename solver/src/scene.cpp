@@ -6,6 +6,7 @@
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
 #include <glm/vec3.hpp>
+#include <glm/vector_relational.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -433,13 +434,20 @@ void hide_twin_backs(const Scene& scene, const PointIds& point_of, PreparedScene
     std::sort(key.begin(), key.end());
     by_points[key].push_back(static_cast<uint32_t>(i));
   }
+  // Where two objects' double-sided faces touch (books packed on a shelf), four patches share the
+  // points: each is paired with its own object's other side first.
   for (const auto& [key, list] : by_points)
-    for (size_t x = 0; x < list.size(); ++x)
-      for (size_t y = x + 1; y < list.size(); ++y)
-        if (glm::dot(out.normal[list[x]], out.normal[list[y]]) < 0.0) {
-          out.back_hidden[list[x]] = out.back_hidden[list[y]] = 1;
-          out.twin[list[x]] = list[y];
-          out.twin[list[y]] = list[x];
+    for (const bool same_object : {true, false})
+      for (size_t x = 0; x < list.size(); ++x)
+        for (size_t y = x + 1; y < list.size(); ++y) {
+          const uint32_t a = list[x], b = list[y];
+          if (glm::dot(out.normal[a], out.normal[b]) >= 0.0) continue;
+          if (same_object ? scene.patches[a].object != scene.patches[b].object : out.twin[a] != kNone || out.twin[b] != kNone)
+            continue;
+          if (same_object && (out.twin[a] != kNone || out.twin[b] != kNone)) continue;
+          out.back_hidden[a] = out.back_hidden[b] = 1;
+          out.twin[a] = b;
+          out.twin[b] = a;
         }
 }
 
@@ -528,7 +536,105 @@ void find_t_neighbours(const Scene& scene, const std::vector<std::pair<uint32_t,
   }
 }
 
+// PreparedScene::inner_solid: closed double-sided meshes. Each side of such a mesh is a sheet of
+// patches each meeting, along each edge, exactly one patch of its object (Patch::object) and of the
+// same sheet (running the edge the other way) besides its own twin; a sheet whose every edge does
+// so is closed (books packed on a shelf share edges, each book is an object of its own).
+// Of the two sheets of one mesh, the one enclosing a positive signed volume is the outside, and its
+// twins face the inside. A mesh of more than kMaxClosedPatches patches is left out (a point's test
+// against it walks all of its outside).
+constexpr size_t kMaxClosedPatches = 4096;
+
+void find_closed_meshes(const Scene& scene, const PointIds& point_of, const EdgePatches& edge_patches,
+                        PreparedScene& out) {
+  const size_t n = scene.patches.size();
+  out.inner_solid.assign(n, kNone);
+  UnionFind sheet(n);
+  std::vector<uint8_t> open(n, 0);
+  // Whether patch q runs the edge from point a to point b.
+  auto runs = [&](uint32_t q, uint32_t a, uint32_t b) {
+    const uint32_t cc = scene.patches[q].corner_count;
+    for (uint32_t k = 0; k < cc; ++k)
+      if (point_of[q][k] == a && point_of[q][(k + 1) % cc] == b) return true;
+    return false;
+  };
+  for (uint32_t p = 0; p < n; ++p) {
+    if (out.twin[p] == kNone) {
+      open[p] = 1;
+      continue;
+    }
+    const uint32_t cc = scene.patches[p].corner_count;
+    for (uint32_t k = 0; k < cc && !open[p]; ++k) {
+      const uint32_t a = point_of[p][k], b = point_of[p][(k + 1) % cc];
+      const auto it = edge_patches.find((static_cast<uint64_t>(std::min(a, b)) << 32) | std::max(a, b));
+      uint32_t partner = kNone, partners = 0;
+      if (it != edge_patches.end())
+        for (uint32_t q : it->second)
+          if (q != p && q != out.twin[p] && out.twin[q] != kNone && scene.patches[q].object == scene.patches[p].object &&
+              runs(q, b, a))
+            partner = q, ++partners;
+      if (partners == 1) sheet.unite(p, partner);
+      else open[p] = 1;
+    }
+  }
+  std::vector<std::vector<uint32_t>> members(n);
+  for (uint32_t p = 0; p < n; ++p) members[sheet.find(p)].push_back(p);
+  for (uint32_t r = 0; r < n; ++r) {
+    const std::vector<uint32_t>& m = members[r];
+    if (m.size() < 4 || m.size() > kMaxClosedPatches) continue;
+    bool closed = true;
+    glm::dvec3 lo(std::numeric_limits<double>::max()), hi(std::numeric_limits<double>::lowest());
+    for (uint32_t p : m) {
+      closed = closed && !open[p];
+      for (uint32_t c = 0; c < scene.patches[p].corner_count; ++c) {
+        lo = glm::min(lo, scene.patches[p].corners[c]);
+        hi = glm::max(hi, scene.patches[p].corners[c]);
+      }
+    }
+    if (!closed) continue;
+    const glm::dvec3 o = 0.5 * (lo + hi);
+    double volume = 0.0;
+    for (uint32_t p : m) {
+      glm::dvec3 c(0.0);
+      for (uint32_t k = 0; k < scene.patches[p].corner_count; ++k) c += scene.patches[p].corners[k];
+      c /= static_cast<double>(scene.patches[p].corner_count);
+      volume += glm::dot(c - o, out.normal[p]) * out.area[p] / 3.0;
+    }
+    if (volume <= 1e-9 * std::pow(glm::length(hi - lo), 3.0)) continue;  // the inside sheet, or flat
+    const uint32_t id = static_cast<uint32_t>(out.closed_outside.size());
+    out.closed_outside.push_back(m);
+    out.closed_lo.push_back(lo);
+    out.closed_hi.push_back(hi);
+    for (uint32_t p : m) out.inner_solid[out.twin[p]] = id;
+  }
+}
+
 }  // namespace
+
+bool inside_closed(const std::vector<Patch>& patches, const PreparedScene& prep, uint32_t closed, const glm::dvec3& x) {
+  if (glm::any(glm::lessThan(x, prep.closed_lo[closed])) || glm::any(glm::greaterThan(x, prep.closed_hi[closed])))
+    return false;
+  // A direction along which no modeller's edge runs, so that the ray meets faces inside them.
+  const glm::dvec3 dir = glm::normalize(glm::dvec3(0.5377, 0.6123, 0.5799));
+  int crossings = 0;
+  for (uint32_t p : prep.closed_outside[closed]) {
+    const Patch& patch = patches[p];
+    for (uint32_t k = 1; k + 1 < patch.corner_count; ++k) {  // a fan of triangles (Moller-Trumbore)
+      const glm::dvec3 a = patch.corners[0], e1 = patch.corners[k] - a, e2 = patch.corners[k + 1] - a;
+      const glm::dvec3 pv = glm::cross(dir, e2);
+      const double det = glm::dot(e1, pv);
+      if (det == 0.0) continue;
+      const glm::dvec3 tv = x - a;
+      const double u = glm::dot(tv, pv) / det;
+      if (u < 0.0 || u > 1.0) continue;
+      const glm::dvec3 qv = glm::cross(tv, e1);
+      const double v = glm::dot(dir, qv) / det;
+      if (v < 0.0 || u + v > 1.0) continue;
+      if (glm::dot(e2, qv) / det > 0.0) ++crossings;
+    }
+  }
+  return crossings % 2 == 1;
+}
 
 PreparedScene prepare(const Scene& scene) {
   PreparedScene out;
@@ -541,6 +647,7 @@ PreparedScene prepare(const Scene& scene) {
   out.twin.assign(scene.patches.size(), kNone);
   hide_twin_backs(scene, point_of, out);
   hide_solid_backs(scene, edge_patches, out);
+  find_closed_meshes(scene, point_of, edge_patches, out);
   make_vertices(scene, point_of, out);
   find_t_neighbours(scene, t_pairs, out);
   return out;

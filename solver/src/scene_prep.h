@@ -37,12 +37,23 @@ struct PreparedScene {
   std::vector<glm::dvec3> solid_lo, solid_hi;
   std::vector<uint32_t> twin;                 ///< per patch: its other side (the same points facing
                                               ///< the other way: a double-sided surface), or kNone
+  /// Closed double-sided meshes (a Blender cube: every edge met by one other face of each side):
+  /// per patch, the mesh whose inside it faces, or kNone; per mesh, its bounding box and the
+  /// patches of its outside (inside_closed tests points against them). Only what is in a mesh
+  /// sees its inside (Solver::Impl::sealed).
+  std::vector<uint32_t> inner_solid;
+  std::vector<glm::dvec3> closed_lo, closed_hi;
+  std::vector<std::vector<uint32_t>> closed_outside;
   double total_area = 0.0;
   double diagonal = 0.0;                      ///< of the scene's bounding box
 };
 
 /// Precondition: validate(scene) is empty.
 PreparedScene prepare(const Scene& scene);
+
+/// Whether point x lies inside closed double-sided mesh `closed` (PreparedScene::closed_outside):
+/// within its box, and a ray from x crosses its outside an odd number of times.
+bool inside_closed(const std::vector<Patch>& patches, const PreparedScene& prep, uint32_t closed, const glm::dvec3& x);
 
 /// The lights' and the sky's part of validate(scene) (lights.cpp).
 std::string validate_lights(const Scene& scene);

@@ -53,6 +53,9 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, const std::v
   std::vector<uint32_t> seen;
   gather_seen(shaft, accepted, seen);
   const bool coarse = place_hemicube(piece);
+  // The closed meshes the eye lies in: a volume cluster's centre, or a hair in front of the piece
+  // (a piece of a mesh's inside lies on the mesh's outline, where the test could go either way).
+  eye_within = enclosing(piece.volume ? piece.centre : piece.centre + piece.normal * (kEyeOffset * prep.diagonal));
   project(seen);
   sum_form_factors(accepted);  // the occluders' own form factors are not needed
   double seen_share = 0.0;  // of a deferred piece's light: what meets a front face
@@ -271,6 +274,7 @@ void Solver::Impl::receiver_form_factors(const Piece& piece, const std::vector<u
     for (size_t i = begin; i < end; ++i) {
       const uint32_t e = accepted[i];
       f_recv[e] = f_open[e] = 0.0;
+      if (sealed(e_patch[e], eye_within)) continue;
       const bool seen_here = projected(e);
       if (seen_here) {
         f_recv[e] = by_reciprocity(piece, e, e_ff[e]);

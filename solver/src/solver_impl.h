@@ -129,6 +129,9 @@ constexpr double kLightPoolReach = 0.1;
 // absorber_close, which predicts which absorbing backs the hemicube will see, must draw the same
 // line. Boxes that near meet (patches_meeting).
 constexpr double kRoundingLength = 1e-9;
+// How far in front of a shooting piece (a share of the scene's diagonal) its eye is tested against
+// the closed meshes (enclosing): off the piece's own plane, far inside the thinnest mesh modelled.
+constexpr double kEyeOffset = 1e-6;
 // A receiver counts as close (is_close) only where the piece lies in front of it, and it in front
 // of the piece, by more than this share of the scene's diagonal.
 constexpr double kCloseFacingLength = 1e-6;
@@ -446,6 +449,10 @@ struct Solver::Impl {
   // shooting piece (p_shooting == shooting_stamp).
   void project(std::span<const uint32_t> elements);
   bool culled(uint32_t p, double facing) const;
+  // The closed double-sided meshes a point lies in (PreparedScene::inner_solid), sorted; and
+  // whether patch p faces the inside of one that the eye (in those of `open`) lies outside of.
+  std::vector<uint32_t> enclosing(const glm::dvec3& x) const;
+  bool sealed(uint32_t p, std::span<const uint32_t> open) const;
   bool project_side(detail::Hemicube& into, uint32_t el, uint32_t id, Corners& poly, double facing, bool plane,
                     detail::ProjectScratch& s, std::vector<Fragment>& out) const;
   void join_chunks(std::span<const uint32_t> elements, std::vector<uint32_t>& begin, std::vector<uint32_t>& end,
@@ -563,6 +570,7 @@ struct Solver::Impl {
   std::vector<uint64_t> p_mark;        // per patch: listed for hemicube `mark`
   std::vector<uint32_t> p_surface;     // per patch: its surface for clustering (build_clusters)
   std::vector<uint64_t> p_shooting;    // per patch: part of the piece shooting hemicube `shooting_stamp`
+  std::vector<uint32_t> eye_within;    // the closed meshes the placed hemicube's eye lies in (enclosing)
   uint64_t shooting_stamp = 0;
 
   // Per-hemicube scratch.

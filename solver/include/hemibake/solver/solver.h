@@ -28,6 +28,8 @@ struct Patch {
   glm::dvec3 reflectance{0.5};          ///< diffuse reflectance per RGB channel, in [0, 1)
   glm::dvec3 emission{0.0};             ///< emitted radiosity per channel, >= 0
   uint32_t material = 0;                ///< vertex radiosity is never averaged across materials
+  uint32_t object = 0;                  ///< the input object it belongs to (a glTF node's primitive;
+                                        ///< 0: unknown): closed meshes are found within one
 };
 
 /// A punctual light (as glTF's KHR_lights_punctual defines them). Lights shoot before any patch,
