@@ -207,33 +207,6 @@ int closed_side(const SceneDocument& doc, const std::vector<uint32_t>& fronts) {
   return volume > tiny ? 1 : volume < -tiny ? -1 : 0;
 }
 
-// Whether point x lies within the closed surface of `fronts` (within its box, and a ray from x
-// crosses it an odd number of times; the ray's direction is one no modeller's edge runs along).
-bool encloses(const SceneDocument& doc, const std::vector<uint32_t>& fronts, const glm::dvec3& lo, const glm::dvec3& hi,
-              const glm::dvec3& x) {
-  if (glm::any(glm::lessThan(x, lo)) || glm::any(glm::greaterThan(x, hi))) return false;
-  const glm::dvec3 dir = glm::normalize(glm::dvec3(0.5377, 0.6123, 0.5799));
-  int crossings = 0;
-  for (uint32_t p : fronts) {
-    const solver::Patch& patch = doc.scene.patches[p];
-    // The polygon as a fan of triangles from its first corner (Moller-Trumbore).
-    for (uint32_t k = 1; k + 1 < patch.corner_count; ++k) {
-      const glm::dvec3 a = patch.corners[0], e1 = patch.corners[k] - a, e2 = patch.corners[k + 1] - a;
-      const glm::dvec3 pv = glm::cross(dir, e2);
-      const double det = glm::dot(e1, pv);
-      if (std::abs(det) < 1e-300) continue;
-      const glm::dvec3 tv = x - a;
-      const double u = glm::dot(tv, pv) / det;
-      if (u < 0.0 || u > 1.0) continue;
-      const glm::dvec3 qv = glm::cross(tv, e1);
-      const double v = glm::dot(dir, qv) / det;
-      if (v < 0.0 || u + v > 1.0) continue;
-      if (glm::dot(e2, qv) / det > 0.0) ++crossings;
-    }
-  }
-  return crossings % 2 == 1;
-}
-
 // The output primitives (node, primitive, back side) that are the unlit insides of closed meshes.
 std::set<std::tuple<uint32_t, uint32_t, bool>> closed_insides(const SceneDocument& doc, const Groups& groups) {
   std::set<std::tuple<uint32_t, uint32_t, bool>> out;
@@ -246,21 +219,27 @@ std::set<std::tuple<uint32_t, uint32_t, bool>> closed_insides(const SceneDocumen
     const std::vector<uint32_t>& sheet = fronts[{node, prim}];
     const int side = closed_side(doc, sheet);
     if (side == 0) continue;
+    std::vector<solver::Patch> surface;
     glm::dvec3 lo(std::numeric_limits<double>::max()), hi(std::numeric_limits<double>::lowest());
-    for (uint32_t p : sheet)
+    for (uint32_t p : sheet) {
+      surface.push_back(doc.scene.patches[p]);
       for (uint32_t k = 0; k < doc.scene.patches[p].corner_count; ++k) {
         lo = glm::min(lo, doc.scene.patches[p].corners[k]);
         hi = glm::max(hi, doc.scene.patches[p].corners[k]);
       }
+    }
+    auto encloses = [&](const glm::dvec3& x) {
+      return glm::all(glm::greaterThanEqual(x, lo)) && glm::all(glm::lessThanEqual(x, hi)) && solver::encloses(surface, x);
+    };
     bool lit = false;
     for (const solver::Light& l : doc.scene.lights)
-      lit = lit || (l.type != solver::Light::Type::kDirectional && encloses(doc, sheet, lo, hi, l.position));
+      lit = lit || (l.type != solver::Light::Type::kDirectional && encloses(l.position));
     for (uint32_t p = 0; p < doc.scene.patches.size() && !lit; ++p) {
       const solver::Patch& patch = doc.scene.patches[p];
       if (patch.emission == glm::dvec3(0.0) || (doc.sources[p].node == node && doc.sources[p].primitive == prim)) continue;
       glm::dvec3 centre(0.0);
       for (uint32_t k = 0; k < patch.corner_count; ++k) centre += patch.corners[k] / static_cast<double>(patch.corner_count);
-      lit = encloses(doc, sheet, lo, hi, centre);
+      lit = encloses(centre);
     }
     if (!lit) out.insert({node, prim, side > 0});
   }

@@ -536,6 +536,27 @@ void find_t_neighbours(const Scene& scene, const std::vector<std::pair<uint32_t,
   }
 }
 
+// How many times the ray from x along a fixed direction crosses the patch (a fan of triangles from
+// its first corner; Moller-Trumbore). The direction is one along which no modeller's edge runs.
+int ray_crossings(const Patch& patch, const glm::dvec3& x) {
+  const glm::dvec3 dir = glm::normalize(glm::dvec3(0.5377, 0.6123, 0.5799));
+  int crossings = 0;
+  for (uint32_t k = 1; k + 1 < patch.corner_count; ++k) {
+    const glm::dvec3 a = patch.corners[0], e1 = patch.corners[k] - a, e2 = patch.corners[k + 1] - a;
+    const glm::dvec3 pv = glm::cross(dir, e2);
+    const double det = glm::dot(e1, pv);
+    if (det == 0.0) continue;
+    const glm::dvec3 tv = x - a;
+    const double u = glm::dot(tv, pv) / det;
+    if (u < 0.0 || u > 1.0) continue;
+    const glm::dvec3 qv = glm::cross(tv, e1);
+    const double v = glm::dot(dir, qv) / det;
+    if (v < 0.0 || u + v > 1.0) continue;
+    if (glm::dot(e2, qv) / det > 0.0) ++crossings;
+  }
+  return crossings;
+}
+
 // PreparedScene::inner_solid: closed double-sided meshes. Each side of such a mesh is a sheet of
 // patches each meeting, along each edge, exactly one patch of its object (Patch::object) and of the
 // same sheet (running the edge the other way) besides its own twin; a sheet whose every edge does
@@ -614,25 +635,8 @@ void find_closed_meshes(const Scene& scene, const PointIds& point_of, const Edge
 bool inside_closed(const std::vector<Patch>& patches, const PreparedScene& prep, uint32_t closed, const glm::dvec3& x) {
   if (glm::any(glm::lessThan(x, prep.closed_lo[closed])) || glm::any(glm::greaterThan(x, prep.closed_hi[closed])))
     return false;
-  // A direction along which no modeller's edge runs, so that the ray meets faces inside them.
-  const glm::dvec3 dir = glm::normalize(glm::dvec3(0.5377, 0.6123, 0.5799));
   int crossings = 0;
-  for (uint32_t p : prep.closed_outside[closed]) {
-    const Patch& patch = patches[p];
-    for (uint32_t k = 1; k + 1 < patch.corner_count; ++k) {  // a fan of triangles (Moller-Trumbore)
-      const glm::dvec3 a = patch.corners[0], e1 = patch.corners[k] - a, e2 = patch.corners[k + 1] - a;
-      const glm::dvec3 pv = glm::cross(dir, e2);
-      const double det = glm::dot(e1, pv);
-      if (det == 0.0) continue;
-      const glm::dvec3 tv = x - a;
-      const double u = glm::dot(tv, pv) / det;
-      if (u < 0.0 || u > 1.0) continue;
-      const glm::dvec3 qv = glm::cross(tv, e1);
-      const double v = glm::dot(dir, qv) / det;
-      if (v < 0.0 || u + v > 1.0) continue;
-      if (glm::dot(e2, qv) / det > 0.0) ++crossings;
-    }
-  }
+  for (uint32_t p : prep.closed_outside[closed]) crossings += ray_crossings(patches[p], x);
   return crossings % 2 == 1;
 }
 
@@ -654,4 +658,11 @@ PreparedScene prepare(const Scene& scene) {
 }
 
 }  // namespace detail
+
+bool encloses(std::span<const Patch> surface, const glm::dvec3& x) {
+  int crossings = 0;
+  for (const Patch& p : surface) crossings += detail::ray_crossings(p, x);
+  return crossings % 2 == 1;
+}
+
 }  // namespace hemibake::solver

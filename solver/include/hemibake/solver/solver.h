@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -119,6 +120,10 @@ std::string validate(const Params& params);
 /// intensity, a direction that is not a unit vector, negative range, cone angles outside
 /// 0 <= inner < outer <= pi / 2), or a negative or non-finite sky.
 std::string validate(const Scene& scene);
+
+/// Whether point x lies inside the closed surface made of `surface`'s patches (every edge met by
+/// two of them), by the parity of a ray's crossings; a point on the surface may go either way.
+bool encloses(std::span<const Patch> surface, const glm::dvec3& x);
 
 /// Reported between shots.
 struct Progress {
