@@ -158,8 +158,8 @@ Groups group_elements(const SceneDocument& doc, const solver::Mesh& mesh) {
 }
 
 // The inside of a closed double-sided mesh is not written unless a light lies within it. Blender's
-// and most engines' exporters mark every material double-sided, so each closed object (a cabinet, a
-// wall built as a box, a chair's leg) comes with the faces of its inside, which no one outside can
+// exporter marks every material double-sided by default, so each closed object (a cabinet, a wall
+// built as a box, a chair's leg) comes with the faces of its inside, which no one outside can
 // see: hidden behind its outside, except along its edges, where an inside face behind and an outside
 // face in front meet at one depth and a viewer's depth test lets the dark one through in dots (the
 // study's table and room corners in three.js, every few pixels). A primitive's side is its inside
