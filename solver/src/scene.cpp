@@ -441,10 +441,8 @@ void hide_twin_backs(const Scene& scene, const PointIds& point_of, PreparedScene
       for (size_t x = 0; x < list.size(); ++x)
         for (size_t y = x + 1; y < list.size(); ++y) {
           const uint32_t a = list[x], b = list[y];
-          if (glm::dot(out.normal[a], out.normal[b]) >= 0.0) continue;
-          if (same_object ? scene.patches[a].object != scene.patches[b].object : out.twin[a] != kNone || out.twin[b] != kNone)
-            continue;
-          if (same_object && (out.twin[a] != kNone || out.twin[b] != kNone)) continue;
+          if (glm::dot(out.normal[a], out.normal[b]) >= 0.0 || out.twin[a] != kNone || out.twin[b] != kNone) continue;
+          if (same_object && scene.patches[a].object != scene.patches[b].object) continue;
           out.back_hidden[a] = out.back_hidden[b] = 1;
           out.twin[a] = b;
           out.twin[b] = a;
@@ -580,7 +578,7 @@ void find_closed_meshes(const Scene& scene, const PointIds& point_of, const Edge
     return false;
   };
   for (uint32_t p = 0; p < n; ++p) {
-    if (out.twin[p] == kNone) {
+    if (out.twin[p] == kNone || scene.patches[out.twin[p]].object != scene.patches[p].object) {
       open[p] = 1;
       continue;
     }
