@@ -1,5 +1,16 @@
 """Helpers the scripts that build Blender scenes share (run inside Blender: `import bpy`)."""
+import random
+import sys
+
 import bpy
+
+
+def start(seed):
+    """Empties Blender's scene, seeds `random`, and returns the output path given after `--`."""
+    out = sys.argv[sys.argv.index('--') + 1]
+    random.seed(seed)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    return out
 
 
 def material(name, base, emission=None, strength=0.0, image=None):
@@ -43,3 +54,10 @@ def light(kind, name, energy, location, rotation=(0, 0, 0), color=(1, 1, 1)):
     o.data.energy = energy
     o.data.color = color
     return o
+
+
+def room_materials():
+    """The furnished rooms' materials: plaster walls, an oak floor, walnut, steel and blue fabric."""
+    return (material('Plaster', (0.75, 0.72, 0.68)), material('Oak', (0.45, 0.3, 0.18)),
+            material('Walnut', (0.3, 0.18, 0.1)), material('Steel', (0.5, 0.5, 0.52)),
+            material('Fabric', (0.2, 0.3, 0.55)))

@@ -9,16 +9,9 @@ Run: blender -b --factory-startup --python scripts/make_blender_clutter.py -- te
 import bpy, random, sys
 import os
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from blender_scene import box, light, material
-out = sys.argv[sys.argv.index('--') + 1]
-random.seed(11)
-bpy.ops.wm.read_factory_settings(use_empty=True)
-
-wall = material('Plaster', (0.75, 0.72, 0.68))
-floor = material('Oak', (0.45, 0.3, 0.18))
-wood = material('Walnut', (0.3, 0.18, 0.1))
-metal = material('Steel', (0.5, 0.5, 0.52))
-fabric = material('Fabric', (0.2, 0.3, 0.55))
+from blender_scene import box, light, material, room_materials, start
+out = start(11)
+wall, floor, wood, metal, fabric = room_materials()
 paint = [material('Paint%d' % i, c) for i, c in enumerate(
     [(0.7, 0.2, 0.15), (0.2, 0.5, 0.25), (0.8, 0.7, 0.2), (0.25, 0.3, 0.7), (0.6, 0.6, 0.6), (0.15, 0.15, 0.15)])]
 

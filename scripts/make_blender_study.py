@@ -9,16 +9,9 @@ Run: blender -b --factory-startup --python scripts/make_blender_study.py -- test
 import bpy, math, random, sys
 import os
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from blender_scene import box, light, material
-out = sys.argv[sys.argv.index('--') + 1]
-random.seed(7)
-bpy.ops.wm.read_factory_settings(use_empty=True)
-
-wall = material('Plaster', (0.75, 0.72, 0.68))
-floor = material('Oak', (0.45, 0.3, 0.18))
-wood = material('Walnut', (0.3, 0.18, 0.1))
-metal = material('Steel', (0.5, 0.5, 0.52))
-fabric = material('Fabric', (0.2, 0.3, 0.55))
+from blender_scene import box, light, material, room_materials, start
+out = start(7)
+wall, floor, wood, metal, fabric = room_materials()
 
 # Room: inside x 0..5, y 0..4, z 0..2.8; walls 0.2 m thick; the window in the wall at y = 0,
 # x 1.6..2.8, z 0.9..2.3.
