@@ -19,6 +19,7 @@
 #include <cstring>
 #include <map>
 #include <set>
+#include <span>
 #include <sstream>
 #include <tuple>
 #include <unordered_map>
@@ -172,37 +173,21 @@ using Corner = std::array<double, 3>;
 
 Corner corner_key(const glm::dvec3& p) { return {p.x, p.y, p.z}; }
 
-// Of the primitive's front patches: 1 when they enclose a volume with their fronts facing out, -1
-// facing in, 0 when they do not close up (an edge met other than once each way, or no volume).
-int closed_side(const SceneDocument& doc, const std::vector<uint32_t>& fronts) {
+// Of a primitive's front patches, within the box [lo, hi]: 1 when they enclose a volume with their
+// fronts facing out, -1 facing in, 0 when they do not close up (an edge met other than once each
+// way, or no volume).
+int closed_side(std::span<const solver::Patch> fronts, const glm::dvec3& lo, const glm::dvec3& hi) {
   std::map<std::pair<Corner, Corner>, int> edges;  // directed
-  glm::dvec3 lo(std::numeric_limits<double>::max()), hi(std::numeric_limits<double>::lowest());
-  for (uint32_t p : fronts) {
-    const solver::Patch& patch = doc.scene.patches[p];
-    for (uint32_t k = 0; k < patch.corner_count; ++k) {
+  for (const solver::Patch& patch : fronts)
+    for (uint32_t k = 0; k < patch.corner_count; ++k)
       ++edges[{corner_key(patch.corners[k]), corner_key(patch.corners[(k + 1) % patch.corner_count])}];
-      lo = glm::min(lo, patch.corners[k]);
-      hi = glm::max(hi, patch.corners[k]);
-    }
-  }
   if (edges.empty()) return 0;
   for (const auto& [edge, count] : edges) {
     if (count != 1) return 0;
     const auto back = edges.find({edge.second, edge.first});
     if (back == edges.end() || back->second != 1) return 0;
   }
-  // Divergence theorem: the volume is the sum over the faces of (c - o) . n A / 3.
-  const glm::dvec3 o = 0.5 * (lo + hi);
-  double volume = 0.0;
-  for (uint32_t p : fronts) {
-    const solver::Patch& patch = doc.scene.patches[p];
-    glm::dvec3 area(0.0), centre(0.0);  // area vector (Newell), corner mean
-    for (uint32_t k = 0; k < patch.corner_count; ++k) {
-      area += 0.5 * glm::cross(patch.corners[k] - o, patch.corners[(k + 1) % patch.corner_count] - o);
-      centre += patch.corners[k] / static_cast<double>(patch.corner_count);
-    }
-    volume += glm::dot(centre - o, area) / 3.0;
-  }
+  const double volume = solver::signed_volume(fronts);
   const double tiny = 1e-9 * std::pow(glm::length(hi - lo), 3.0);
   return volume > tiny ? 1 : volume < -tiny ? -1 : 0;
 }
@@ -210,37 +195,42 @@ int closed_side(const SceneDocument& doc, const std::vector<uint32_t>& fronts) {
 // The output primitives (node, primitive, back side) that are the unlit insides of closed meshes.
 std::set<std::tuple<uint32_t, uint32_t, bool>> closed_insides(const SceneDocument& doc, const Groups& groups) {
   std::set<std::tuple<uint32_t, uint32_t, bool>> out;
-  std::map<std::pair<uint32_t, uint32_t>, std::vector<uint32_t>> fronts;
-  for (uint32_t p = 0; p < doc.sources.size(); ++p)
-    if (!doc.sources[p].back) fronts[{doc.sources[p].node, doc.sources[p].primitive}].push_back(p);
+  std::map<std::pair<uint32_t, uint32_t>, std::vector<solver::Patch>> fronts;
+  // Where the scene's emitters are (their centres), with their primitives.
+  struct Emitter {
+    uint32_t node, primitive;
+    glm::dvec3 centre;
+  };
+  std::vector<Emitter> emitters;
+  for (uint32_t p = 0; p < doc.sources.size(); ++p) {
+    const PatchSource& src = doc.sources[p];
+    const solver::Patch& patch = doc.scene.patches[p];
+    if (!src.back) fronts[{src.node, src.primitive}].push_back(patch);
+    if (patch.emission == glm::dvec3(0.0)) continue;
+    glm::dvec3 centre(0.0);
+    for (uint32_t k = 0; k < patch.corner_count; ++k) centre += patch.corners[k] / static_cast<double>(patch.corner_count);
+    emitters.push_back({src.node, src.primitive, centre});
+  }
   for (const auto& key : groups) {
     const auto [node, prim, back] = key.first;
     if (!back || !groups.count({node, prim, false})) continue;
-    const std::vector<uint32_t>& sheet = fronts[{node, prim}];
-    const int side = closed_side(doc, sheet);
-    if (side == 0) continue;
-    std::vector<solver::Patch> surface;
+    const std::vector<solver::Patch>& surface = fronts[{node, prim}];
     glm::dvec3 lo(std::numeric_limits<double>::max()), hi(std::numeric_limits<double>::lowest());
-    for (uint32_t p : sheet) {
-      surface.push_back(doc.scene.patches[p]);
-      for (uint32_t k = 0; k < doc.scene.patches[p].corner_count; ++k) {
-        lo = glm::min(lo, doc.scene.patches[p].corners[k]);
-        hi = glm::max(hi, doc.scene.patches[p].corners[k]);
+    for (const solver::Patch& patch : surface)
+      for (uint32_t k = 0; k < patch.corner_count; ++k) {
+        lo = glm::min(lo, patch.corners[k]);
+        hi = glm::max(hi, patch.corners[k]);
       }
-    }
+    const int side = closed_side(surface, lo, hi);
+    if (side == 0) continue;
     auto encloses = [&](const glm::dvec3& x) {
       return glm::all(glm::greaterThanEqual(x, lo)) && glm::all(glm::lessThanEqual(x, hi)) && solver::encloses(surface, x);
     };
     bool lit = false;
     for (const solver::Light& l : doc.scene.lights)
       lit = lit || (l.type != solver::Light::Type::kDirectional && encloses(l.position));
-    for (uint32_t p = 0; p < doc.scene.patches.size() && !lit; ++p) {
-      const solver::Patch& patch = doc.scene.patches[p];
-      if (patch.emission == glm::dvec3(0.0) || (doc.sources[p].node == node && doc.sources[p].primitive == prim)) continue;
-      glm::dvec3 centre(0.0);
-      for (uint32_t k = 0; k < patch.corner_count; ++k) centre += patch.corners[k] / static_cast<double>(patch.corner_count);
-      lit = encloses(centre);
-    }
+    for (const Emitter& e : emitters)
+      lit = lit || ((e.node != node || e.primitive != prim) && encloses(e.centre));
     if (!lit) out.insert({node, prim, side > 0});
   }
   return out;

@@ -611,15 +611,11 @@ void find_closed_meshes(const Scene& scene, const PointIds& point_of, const Edge
       }
     }
     if (!closed) continue;
-    const glm::dvec3 o = 0.5 * (lo + hi);
-    double volume = 0.0;
-    for (uint32_t p : m) {
-      glm::dvec3 c(0.0);
-      for (uint32_t k = 0; k < scene.patches[p].corner_count; ++k) c += scene.patches[p].corners[k];
-      c /= static_cast<double>(scene.patches[p].corner_count);
-      volume += glm::dot(c - o, out.normal[p]) * out.area[p] / 3.0;
-    }
-    if (volume <= 1e-9 * std::pow(glm::length(hi - lo), 3.0)) continue;  // the inside sheet, or flat
+    std::vector<Patch> sheet_patches;
+    sheet_patches.reserve(m.size());
+    for (uint32_t p : m) sheet_patches.push_back(scene.patches[p]);
+    // The inside sheet, or flat: not the outside.
+    if (signed_volume(sheet_patches) <= 1e-9 * std::pow(glm::length(hi - lo), 3.0)) continue;
     const uint32_t id = static_cast<uint32_t>(out.closed_outside.size());
     out.closed_outside.push_back(m);
     out.closed_lo.push_back(lo);
@@ -656,6 +652,27 @@ PreparedScene prepare(const Scene& scene) {
 }
 
 }  // namespace detail
+
+double signed_volume(std::span<const Patch> surface) {
+  glm::dvec3 lo(std::numeric_limits<double>::max()), hi(std::numeric_limits<double>::lowest());
+  for (const Patch& p : surface)
+    for (uint32_t k = 0; k < p.corner_count; ++k) {
+      lo = glm::min(lo, p.corners[k]);
+      hi = glm::max(hi, p.corners[k]);
+    }
+  // The sum over the faces of (c - o) . n A / 3, with n A the Newell area vector.
+  const glm::dvec3 o = 0.5 * (lo + hi);
+  double volume = 0.0;
+  for (const Patch& p : surface) {
+    glm::dvec3 area(0.0), centre(0.0);
+    for (uint32_t k = 0; k < p.corner_count; ++k) {
+      area += 0.5 * glm::cross(p.corners[k] - o, p.corners[(k + 1) % p.corner_count] - o);
+      centre += p.corners[k] / static_cast<double>(p.corner_count);
+    }
+    volume += glm::dot(centre - o, area) / 3.0;
+  }
+  return volume;
+}
 
 bool encloses(std::span<const Patch> surface, const glm::dvec3& x) {
   int crossings = 0;

@@ -125,6 +125,10 @@ std::string validate(const Scene& scene);
 /// two of them), by the parity of a ray's crossings; a point on the surface may go either way.
 bool encloses(std::span<const Patch> surface, const glm::dvec3& x);
 
+/// The volume `surface`'s patches enclose (divergence theorem, about the centre of their bounding
+/// box): positive when they face away from it, negative when they face into it.
+double signed_volume(std::span<const Patch> surface);
+
 /// Reported between shots.
 struct Progress {
   uint64_t shots = 0;            ///< shots done (Southwell steps)
