@@ -259,6 +259,18 @@ Hemicube::Hemicube(uint32_t resolution, bool full) : n_(resolution), full_(full)
   place(glm::dvec3(0.0), glm::dvec3(0, 0, 1), glm::dvec3(0, 1, 0));
 }
 
+Hemicube::Hemicube(uint32_t resolution, TopFaceTag) : n_(resolution), full_(false), face_count_(1) {
+  assert(resolution >= 2 && resolution % 2 == 0);
+  pixel_count_ = n_ * n_;
+  dff_.assign(pixel_count_, 1.0 / pixel_count_);
+  faces_[0].b_min = -1.0;
+  faces_[0].height = n_;
+  faces_[0].offset = 0;
+  place(glm::dvec3(0.0), glm::dvec3(0, 0, 1), glm::dvec3(0, 1, 0));
+}
+
+Hemicube Hemicube::top_face(uint32_t resolution) { return Hemicube(resolution, TopFaceTag{}); }
+
 void Hemicube::place(const glm::dvec3& eye, const glm::dvec3& normal, const glm::dvec3& up_hint) {
   eye_ = eye;
   glm::dvec3 t = glm::cross(up_hint, normal);

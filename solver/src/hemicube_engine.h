@@ -129,6 +129,9 @@ class Hemicube {
   /// cube of six resolution x resolution faces around the eye (a volume cluster's view, whose
   /// pixels the caller weights), the top facing `normal` as placed.
   explicit Hemicube(uint32_t resolution, bool full = false);
+  /// The top face alone, its pixels' weights each 1 / resolution^2 (no form factors computed): a
+  /// parallel projection's view (lights.cpp), which maps the scene onto the top face only.
+  static Hemicube top_face(uint32_t resolution);
 
   uint32_t resolution() const { return n_; }
   uint32_t pixel_count() const { return pixel_count_; }
@@ -183,6 +186,9 @@ class Hemicube {
   void rasterize(const Face& face, uint32_t element, Method method,
                  const glm::dvec3& plane_normal, double plane_offset, std::span<const Fragment> parent,
                  bool child, ProjectScratch& scratch, std::vector<Fragment>& out) const;
+
+  struct TopFaceTag {};
+  Hemicube(uint32_t resolution, TopFaceTag);
 
   uint32_t n_;
   bool full_;

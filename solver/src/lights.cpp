@@ -171,8 +171,8 @@ Solver::Impl::LightView Solver::Impl::parallel_view(const glm::dvec3& direction,
 void Solver::Impl::light_views(const Light& light, std::vector<LightView>& views) {
   views.clear();
   if (light.type == Light::Type::kDirectional) {
-    views.push_back(parallel_view(light.direction, light_cube->resolution()));
-    views.back().cube = light_cube.get();
+    views.push_back(parallel_view(light.direction, sun_cube->resolution()));
+    views.back().cube = sun_cube.get();
     return;
   }
   // A point light: two hemicubes back to back (their half faces make up the cube's side faces).
@@ -494,9 +494,21 @@ void Solver::Impl::prepare_lights() {
   if (lights.empty() && !has_sky) return;
   const auto t0 = Clock::now();
   light_cube = std::make_unique<detail::Hemicube>(params.resolution);
+  // A sun's one parallel view spans the whole scene: at the hemicube's resolution its pixels were
+  // 30 cm wide over a 30 m yard, and a pillar's shadow across a platform was lost in them. Its
+  // pixels are as wide as the smallest elements a sharp outline splits to (kSharpAreaFactor; at
+  // most kMaxSunResolution a side). Twice as wide, the lit yard's peak memory was 54 MB rather
+  // than 127, but the gallery's displayed p90 was 13.6 % rather than 12.4 (13.2 before either).
+  if (std::any_of(lights.begin(), lights.end(), [](const Light& l) { return l.type == Light::Type::kDirectional; })) {
+    const double pixel = std::sqrt(min_sharp_split_area());
+    uint32_t resolution = params.resolution;
+    if (pixel > 0.0)
+      resolution = std::max(resolution, static_cast<uint32_t>(std::min<double>(kMaxSunResolution, std::ceil(prep.diagonal / pixel))) & ~1u);
+    sun_cube = std::make_unique<detail::Hemicube>(detail::Hemicube::top_face(resolution));
+  }
   // A direction of the sky is one of hundreds: its shadows are summed with the others', so half
   // the resolution serves.
-  sky_cube = std::make_unique<detail::Hemicube>(std::max(kMinResolution, ((params.resolution / 2) + 1) & ~1u));
+  sky_cube = std::make_unique<detail::Hemicube>(detail::Hemicube::top_face(std::max(kMinResolution, ((params.resolution / 2) + 1) & ~1u)));
   grow_scratch();
   double power = 0.0;
   for (const Light& light : lights) {

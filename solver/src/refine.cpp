@@ -86,10 +86,15 @@ std::vector<uint32_t> Solver::Impl::too_coarse(const glm::dvec3& dB, double weig
       // (a) too coarse for this interaction.
       split_it = !sharp_only && e_ff[e] * weight > params.feps;
       stats.splits_form_factor += split_it;
-      // (b) partly hidden, and the hidden part matters.
-      if (!split_it && !sharp_only && e_ff[e] > 0.0 && e_ff[e] < e_ff_open[e]) {
+      // (b) partly hidden, and the hidden part matters. Under AEPS (kShadowAreaFactor), a
+      // punctual light's shadow is an edge across the element, a jump of its whole unhidden light
+      // (kSharpJump), whatever share of the element it hides; both parts must matter (an element
+      // in the shadow keeps rounding's crumbs of light).
+      if (!split_it && (!sharp_only || shooting_light != nullptr) && e_ff[e] > 0.0 && e_ff[e] < e_ff_open[e]) {
         const double open = shot_radiosity(e, dB, f_open[e]);
-        split_it = open - shot_b[e] > tolerance;
+        split_it = sharp_only ? e_area[e] >= min_split_area() / kShadowAreaFactor && open > tolerance &&
+                                    shot_b[e] > b_tolerance && open - shot_b[e] > b_tolerance
+                              : open - shot_b[e] > tolerance;
         stats.splits_visibility += split_it;
       }
     }
@@ -105,8 +110,10 @@ std::vector<uint32_t> Solver::Impl::too_coarse(const glm::dvec3& dB, double weig
 }
 
 // For a replay: by how much dB could grow before this round would split something. The criteria
-// scale with dB, so each gives limit / value; the same tests as too_coarse.
+// scale with dB, so each gives limit / value; the same tests as too_coarse (but a punctual light's
+// shadows under AEPS: lights shoot once, and record nothing).
 double Solver::Impl::split_headroom(const glm::dvec3& dB, double weight, const std::vector<uint32_t>& accepted) const {
+  HEMIBAKE_DCHECK(shooting_light == nullptr);
   double room = std::numeric_limits<double>::infinity();
   for (uint32_t e : accepted) {
     // too_coarse has noted e_cov for the emitters' elements.
