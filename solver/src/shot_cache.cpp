@@ -13,7 +13,7 @@ namespace hemibake::solver {
 // occluder's children hide exactly what it hid. A replay takes them from the last shot's record and
 // only recomputes each piece's unshot radiosity. Every piece must shoot no more than when it was
 // recorded, in every channel: the refinement near the shooter, the hemicubes' resolution and the
-// subdivision criteria all ask less of a weaker shot, so it would have placed coarser hemicubes and
+// subdivision criteria all ask less of a weaker shot, so it would have placed no finer hemicubes and
 // split nothing more (the recorded shot ended with a round that split nothing).
 bool Solver::Impl::replay(uint32_t unit) {
   if (u_record.empty()) return false;
@@ -55,8 +55,8 @@ bool Solver::Impl::replay(uint32_t unit) {
   }
   ShotRecord merged;
   merged.fresh_pieces = r.fresh_pieces;
-  for (const ShotRecord::Piece& rp : r.pieces) merged.append(r, rp, false, stale.data());
-  for (const ShotRecord::Piece& rp : part.pieces) merged.append(part, rp, true, nullptr);
+  for (const ShotRecord::Piece& rp : r.pieces) merged.append(r, rp, stale.data());
+  for (const ShotRecord::Piece& rp : part.pieces) merged.append(part, rp, nullptr);
   HEMIBAKE_DCHECK(merged.consistent());
   keep_record(unit, std::move(merged));
   return true;
@@ -80,12 +80,10 @@ size_t Solver::Impl::mark_stale(const ShotRecord& r, std::vector<uint8_t>& stale
   return stale_count;
 }
 
-// The unshot radiosity each recorded piece shoots now (`dBs`), and the power shot counted. False,
-// counting nothing, when a piece grew past its headroom or the coarser hemicubes would shoot more
-// than their share.
+// The unshot radiosity each recorded piece shoots now (`dBs`). False when a piece grew past its
+// headroom or would now shoot from its children.
 bool Solver::Impl::replayed_radiosities(const ShotRecord& r, std::vector<glm::dvec3>& dBs) {
   dBs.assign(r.pieces.size(), glm::dvec3(0.0));
-  double total = 0.0, coarse = 0.0;
   for (size_t i = 0; i < r.pieces.size(); ++i) {
     const ShotRecord::Piece& rp = r.pieces[i];
     glm::dvec3 power(0.0);
@@ -105,15 +103,7 @@ bool Solver::Impl::replayed_radiosities(const ShotRecord& r, std::vector<glm::dv
     if (rp.src_end - rp.src_begin == 1 && e_child[r.src[rp.src_begin]] != kNone && rp.src_area == rp.area &&
         channel_sum(dBs[i]) * rp.area >= params.feps * emitted_power && uneven_piece(r.src[rp.src_begin]))
       return false;
-    if (rp.extra) continue;
-    const double shot = channel_sum(dBs[i]) * rp.area;
-    total += shot;
-    if (rp.coarse) coarse += shot;
   }
-  // Coarser hemicubes may not shoot more than their share (coarser_levels): shoot anew instead.
-  if (coarse > 0.0 && power_coarse + coarse > kCoarseShare * (power_shot + total)) return false;
-  power_shot += total;
-  power_coarse += coarse;
   return true;
 }
 
@@ -130,23 +120,19 @@ Solver::Impl::ShotRecord Solver::Impl::reshoot_split(uint32_t unit, const ShotRe
   std::sort(redo.begin(), redo.end());
   redo.erase(std::unique(redo.begin(), redo.end()), redo.end());
   ShotRecord part;
-  // The unit's power is counted by the replay already; the partial shot's pieces do not count again.
-  const double shot_before = power_shot, coarse_before = power_coarse;
   recording = &part;
   record_broken = false;
   grow_scratch();
   if (unit_node[unit] == kNone) shoot_patch(unit_patch[unit], redo, false);
   else shoot_cluster(unit_node[unit], redo, false, 0);
   recording = nullptr;
-  power_shot = shot_before;
-  power_coarse = coarse_before;
   ++stats.replays_reshot;
   return part;
 }
 
 // Appends `from`'s piece `np` with its receivers but those flagged in `skip` (may be null); a piece
 // left with no receivers is dropped. `extra`: the piece's power counts elsewhere.
-void Solver::Impl::ShotRecord::append(const ShotRecord& from, Piece np, bool extra, const uint8_t* skip) {
+void Solver::Impl::ShotRecord::append(const ShotRecord& from, Piece np, const uint8_t* skip) {
   const uint32_t src_begin = np.src_begin, src_end = np.src_end, recv_begin = np.recv_begin, recv_end = np.recv_end;
   np.recv_begin = static_cast<uint32_t>(recv.size());
   for (uint32_t k = recv_begin; k < recv_end; ++k) {
@@ -159,7 +145,6 @@ void Solver::Impl::ShotRecord::append(const ShotRecord& from, Piece np, bool ext
   np.src_begin = static_cast<uint32_t>(src.size());
   src.insert(src.end(), from.src.begin() + src_begin, from.src.begin() + src_end);
   np.src_end = static_cast<uint32_t>(src.size());
-  np.extra = np.extra || extra;
   pieces.push_back(np);
 }
 
@@ -179,7 +164,7 @@ bool Solver::Impl::ShotRecord::consistent() const {
 
 // Records a piece's shot: its sources, every accepted receiver with F(element -> piece), and its
 // headroom (piece_headroom).
-void Solver::Impl::record_piece(const Piece& piece, bool coarse, double split_room, const std::vector<uint32_t>& accepted) {
+void Solver::Impl::record_piece(const Piece& piece, double split_room, const std::vector<uint32_t>& accepted) {
   ShotRecord& r = *recording;
   // A record that could not be kept is not built further, and one that outgrows the cache is
   // dropped as it grows: a shot of thousands of pieces (each listing its receivers) would otherwise
@@ -207,15 +192,13 @@ void Solver::Impl::record_piece(const Piece& piece, bool coarse, double split_ro
   rp.area = piece.area;
   rp.dB = piece.dB;
   rp.headroom = piece_headroom(piece, split_room, accepted);
-  rp.coarse = coarse;
-  rp.extra = false;
   rp.shape = shape_of(piece);
   r.pieces.push_back(rp);
 }
 
 // The least factor on dB at which a fresh shot of this piece would decide anything differently
 // from this one: the split criteria (`split_room`, from refine); power thresholds: refinement of
-// weak pieces, the straddle rule, coarser and finer hemicubes (stronger shots get finer ones); and
+// weak pieces, the straddle rule, finer hemicubes for strong cluster pieces; and
 // the close receivers left to this hemicube because the point view's error seemed small.
 double Solver::Impl::piece_headroom(const Piece& piece, double split_room, const std::vector<uint32_t>& accepted) const {
   const double power = piece.power;
@@ -233,11 +216,6 @@ double Solver::Impl::piece_headroom(const Piece& piece, double split_room, const
     lower_headroom(headroom, kSavingRuleSlack * params.feps * emitted_power, power);
   if (patch_piece && power < kStraddlePower * emitted_power) lower_headroom(headroom, kStraddlePower * emitted_power, power);
   if (params.method == Method::kAntiAliased) {
-    // The next coarser_levels threshold above the power: past it, a fresh shot takes a finer hemicube.
-    if (power < kQuarterResolutionPower * emitted_power)
-      lower_headroom(headroom, kQuarterResolutionPower * emitted_power, power);
-    else if (power < kHalfResolutionPower * emitted_power)
-      lower_headroom(headroom, kHalfResolutionPower * emitted_power, power);
     if (!patch_piece && piece.depth == 0 && power < kFinePower * emitted_power) lower_headroom(headroom, kFinePower * emitted_power, power);
   }
   if (piece.may_refine)

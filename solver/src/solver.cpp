@@ -45,7 +45,7 @@ Solver::Impl::Impl(const Scene& scene, const Params& p, const Impl* first, const
       prep(detail::prepare(scene)),
 
       pool(p.threads != 0 ? p.threads : std::max(1u, std::thread::hardware_concurrency())) {
-  for (int d = 0; d <= kMaxShooterDepth + kCoarserLevels; ++d) {
+  for (int d = 0; d < kCubeLevels; ++d) {
     const uint32_t res = std::max(kMinResolution, ((params.resolution >> d) + 1) & ~1u);
     cubes.emplace_back(std::min(res, params.resolution));
   }

@@ -68,17 +68,9 @@ constexpr double kNearError = 0.25;
 constexpr double kSavingRuleSlack = 2.0;
 // Hemicubes halve their resolution per level, down to this.
 constexpr uint32_t kMinResolution = 20;
-// Weak pieces, under these shares of the emitted power, take a hemicube of half (a quarter of)
-// their level's resolution (coarser_levels); piece_headroom stops a replay at the same shares, so
-// that a replayed shot never reuses form factors of a coarser hemicube than a fresh shot would take.
-constexpr double kHalfResolutionPower = 0.05;
-constexpr double kQuarterResolutionPower = 0.005;
-// How many levels coarser than its depth's a piece's hemicube may be (the two shares above): the
-// solver keeps kMaxShooterDepth + kCoarserLevels + 1 hemicubes.
-constexpr int kCoarserLevels = 2;
-// Coarser hemicubes may shoot at most this share of all the power shot (place_hemicube, and the
-// replay's check in replayed_radiosities).
-constexpr double kCoarseShare = 0.25;
+// The solver keeps this many levels of hemicubes: a patch's pieces go down kMaxShooterDepth levels,
+// a cluster's parts further (the deepest share the last level).
+constexpr int kCubeLevels = kMaxShooterDepth + 3;
 // Cluster pieces carrying at least this share of the emitted power take a finer hemicube
 // (finer_level, piece_headroom).
 constexpr double kFinePower = 1e-3;
@@ -232,8 +224,6 @@ struct Solver::Impl {
       double src_area, area;
       glm::dvec3 dB;  // the unshot radiosity it shot when recorded
       double headroom;  // a replay may shoot up to this times dB (piece_headroom)
-      bool coarse;    // shot from a hemicube coarser than its level (kCoarseShare)
-      bool extra;     // shot for children of split receivers: its power counts once, elsewhere
       ShooterShape shape;  // where its light comes from (pools.cpp)
     };
     size_t fresh_pieces = 0;  // pieces of the shot that made it (replays may add more)
@@ -245,7 +235,7 @@ struct Solver::Impl {
       return sizeof(ShotRecord) + pieces.capacity() * sizeof(Piece) +
              (src.capacity() + recv.capacity()) * sizeof(uint32_t) + f.capacity() * sizeof(float);
     }
-    void append(const ShotRecord& from, Piece piece, bool extra, const uint8_t* skip);
+    void append(const ShotRecord& from, Piece piece, const uint8_t* skip);
     bool consistent() const;  // for HEMIBAKE_DCHECK: the pieces' ranges tile src and recv
   };
   // A node of a cluster's binary tree over its patches (by median cuts of their centres).
@@ -374,9 +364,8 @@ struct Solver::Impl {
   std::vector<uint32_t> current_leaves(const std::vector<uint32_t>& receivers) const;
   void classify_receivers(const Piece& piece, const std::vector<uint32_t>& current,
                           std::vector<uint32_t>& accepted, std::vector<uint32_t>& near);
-  int coarser_levels(double power) const;
   bool finer_level(const Piece& piece, double power) const;
-  bool place_hemicube(const Piece& piece);
+  void place_hemicube(const Piece& piece);
   struct VolumeCube;
   void volume_weights(const Piece& piece, const VolumeCube& v);
   void receiver_form_factors(const Piece& piece, const std::vector<uint32_t>& accepted);
@@ -507,7 +496,7 @@ struct Solver::Impl {
   bool replayed_radiosities(const ShotRecord& r, std::vector<glm::dvec3>& dBs);
   ShotRecord reshoot_split(uint32_t unit, const ShotRecord& r);
   void keep_record(uint32_t unit, ShotRecord record);
-  void record_piece(const Piece& piece, bool coarse, double split_room, const std::vector<uint32_t>& accepted);
+  void record_piece(const Piece& piece, double split_room, const std::vector<uint32_t>& accepted);
   double piece_headroom(const Piece& piece, double split_room, const std::vector<uint32_t>& accepted) const;
 
   Params params;
@@ -518,8 +507,6 @@ struct Solver::Impl {
   double gather_tolerance = 0.0;  // ... for the final gather's splits
   double shooter_limit = 0.0;   // widest shooting sub-area
   double emitted_power = 0.0;   // sum over patches of channel_sum(E) * A
-  double power_shot = 0.0;      // by all hemicubes so far
-  double power_coarse = 0.0;    // by hemicubes coarser than their level
 
   // Vertices (shared within a smoothing group) and edge midpoints.
   std::vector<glm::dvec3> vpos;
@@ -585,8 +572,7 @@ struct Solver::Impl {
 
   // Per-hemicube scratch.
   // Hemicubes of halving resolution (at least kMinResolution): a quarter-size shooting area serves
-  // receivers half as far, which project as large, so its hemicube needs half the resolution; weak
-  // shots may use coarser ones still (coarser_levels).
+  // receivers half as far, which project as large, so its hemicube needs half the resolution.
   std::vector<detail::Hemicube> cubes;
   std::unique_ptr<detail::Hemicube> finer_cube;  // for strong cluster shots (finer_level)
   // Whole cubes for volume clusters, per level as `cubes` (made when first needed), with each
