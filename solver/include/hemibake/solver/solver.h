@@ -73,7 +73,7 @@ enum class Method : uint8_t {
 struct Params {
   Method method = Method::kAntiAliased;
   uint32_t resolution = 100;    ///< hemicube top face is resolution x resolution pixels (even, 4..4096);
-                                ///< near-field and (aa) weak shots use coarser ones (see README)
+                                ///< near-field pieces use coarser ones (see README)
   double feps = 1e-3;           ///< form-factor tolerance: split when F(shooter->element) * shooter's
                                 ///< share of emitted power exceeds it
   double aeps = 1e-4;           ///< minimum element area, as a fraction of the scene's total area
