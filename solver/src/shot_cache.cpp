@@ -131,7 +131,7 @@ Solver::Impl::ShotRecord Solver::Impl::reshoot_split(uint32_t unit, const ShotRe
 }
 
 // Appends `from`'s piece `np` with its receivers but those flagged in `skip` (may be null); a piece
-// left with no receivers is dropped. `extra`: the piece's power counts elsewhere.
+// left with no receivers is dropped.
 void Solver::Impl::ShotRecord::append(const ShotRecord& from, Piece np, const uint8_t* skip) {
   const uint32_t src_begin = np.src_begin, src_end = np.src_end, recv_begin = np.recv_begin, recv_end = np.recv_end;
   np.recv_begin = static_cast<uint32_t>(recv.size());
