@@ -36,6 +36,7 @@ class SceneDocument {
   std::vector<std::vector<uint8_t>> image_bytes;  ///< per image: the encoded file
   std::vector<std::string> image_mime;
   uint64_t triangles = 0;
+  uint64_t vertices = 0;  ///< the primitives' vertices numbered so far (solver::Patch::vertex)
 };
 
 }  // namespace hemibake::protocol

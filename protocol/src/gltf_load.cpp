@@ -31,6 +31,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <memory>
 #include <numbers>
@@ -489,12 +490,16 @@ ShadedTriangles shade_triangles(const tinygltf::Model& m, int mode, bool mirrore
 // `count`); `source` names its node, mesh and primitive.
 void add_patch(const std::array<uint32_t, 4>& v, uint32_t count, const glm::dvec3& base, const glm::dvec3& reflect,
                const glm::dvec3& emission, const Vertices& vertices, const std::vector<glm::dvec2>& uv,
-               const MaterialInfo& mat, uint32_t material, PatchSource src, SceneDocument& doc) {
+               const MaterialInfo& mat, uint32_t material, PatchSource src, uint64_t vertex_base, SceneDocument& doc) {
   solver::Patch patch;
   patch.corner_count = count;
   for (uint32_t k = 0; k < count; ++k) {
     patch.corners[k] = vertices.points[v[k]];
     if (!uv.empty()) src.uv[k] = uv[v[k]];
+    // The exporter's vertex (its smooth shading shares one between faces), numbered across the
+    // scene's primitives from 1; past 32 bits, unknown.
+    const uint64_t id = vertex_base + v[k] + 1;
+    patch.vertex[k] = id <= std::numeric_limits<uint32_t>::max() ? static_cast<uint32_t>(id) : 0;
   }
   src.has_uv = !uv.empty();
   src.base = glm::clamp(base, 0.0, 1.0);
@@ -518,9 +523,11 @@ void add_patch(const std::array<uint32_t, 4>& v, uint32_t count, const glm::dvec
   if (!mat.double_sided) return;
   // The back side: the same corners in reverse order (a quad keeps its diagonal 1-3).
   std::reverse(patch.corners.begin(), patch.corners.begin() + count);
+  std::reverse(patch.vertex.begin(), patch.vertex.begin() + count);
   std::reverse(src.uv.begin(), src.uv.begin() + count);
   if (count == 4) {
     std::rotate(patch.corners.begin(), patch.corners.begin() + 1, patch.corners.begin() + 4);
+    std::rotate(patch.vertex.begin(), patch.vertex.begin() + 1, patch.vertex.begin() + 4);
     std::rotate(src.uv.begin(), src.uv.begin() + 1, src.uv.begin() + 4);
   }
   src.back = true;
@@ -531,17 +538,20 @@ void add_patch(const std::array<uint32_t, 4>& v, uint32_t count, const glm::dvec
 // A quad's colours are its triangles' means, weighted by area.
 void add_patches(const std::vector<Outline>& outlines, const ShadedTriangles& tris, const Vertices& vertices,
                  const std::vector<glm::dvec2>& uv, const MaterialInfo& mat, uint32_t material, const PatchSource& src,
-                 SceneDocument& doc) {
+                 bool has_normals, SceneDocument& doc) {
+  // Without NORMAL a primitive's faces are flat (glTF 2.0, 3.7.2.1), whatever vertices they share.
+  const uint64_t vertex_base = has_normals ? doc.vertices : std::numeric_limits<uint64_t>::max() / 2;
+  doc.vertices += vertices.points.size();
   for (const Outline& o : outlines) {
     const uint32_t t = o.first, u = o.second;
     if (o.count == 3) {
-      add_patch(o.v, 3, tris.base[t], tris.reflect[t], tris.emission[t], vertices, uv, mat, material, src, doc);
+      add_patch(o.v, 3, tris.base[t], tris.reflect[t], tris.emission[t], vertices, uv, mat, material, src, vertex_base, doc);
       continue;
     }
     const double wa = tris.area[t], wb = tris.area[u];
     add_patch(o.v, 4, (wa * tris.base[t] + wb * tris.base[u]) / (wa + wb),
               (wa * tris.reflect[t] + wb * tris.reflect[u]) / (wa + wb),
-              (wa * tris.emission[t] + wb * tris.emission[u]) / (wa + wb), vertices, uv, mat, material, src, doc);
+              (wa * tris.emission[t] + wb * tris.emission[u]) / (wa + wb), vertices, uv, mat, material, src, vertex_base, doc);
   }
 }
 
@@ -586,7 +596,8 @@ std::string add_primitive(SceneDocument& doc, int n, size_t pi, const LoadLimits
   src.node = static_cast<uint32_t>(n);
   src.mesh = static_cast<uint32_t>(node.mesh);
   src.primitive = static_cast<uint32_t>(pi);
-  add_patches(outlines, tris, vertices, colours.uv, mat, static_cast<uint32_t>(prim.material + 1), src, doc);
+  add_patches(outlines, tris, vertices, colours.uv, mat, static_cast<uint32_t>(prim.material + 1), src,
+              prim.attributes.count("NORMAL") > 0, doc);
   return {};
 }
 

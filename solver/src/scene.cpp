@@ -20,7 +20,8 @@
 namespace hemibake::solver {
 namespace {
 
-// Patches meeting at less than this angle are one smooth surface for vertex averaging.
+// Patches meeting at less than this angle are one smooth surface for vertex averaging (and at
+// under 90 degrees where the input's vertices there are one: same_input_vertices).
 constexpr double kCreaseCos = 0.866;  // 30 degrees
 
 bool finite(const glm::dvec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
@@ -314,9 +315,23 @@ EdgePatches patches_by_edge(const Scene& scene, const PointIds& point_of) {
   return edge_patches;
 }
 
+// Whether patches a and b have the same input vertex (Patch::vertex, known) at both ends of their
+// common edge `key`: the exporter wrote one vertex, one normal, for both faces there.
+bool same_input_vertices(const Scene& scene, const PointIds& point_of, uint32_t a, uint32_t b, uint64_t key) {
+  for (const uint32_t point : {static_cast<uint32_t>(key >> 32), static_cast<uint32_t>(key & 0xffffffffu)}) {
+    uint32_t va = 0, vb = 0;
+    for (uint32_t c = 0; c < scene.patches[a].corner_count; ++c)
+      if (point_of[a][c] == point) va = scene.patches[a].vertex[c];
+    for (uint32_t c = 0; c < scene.patches[b].corner_count; ++c)
+      if (point_of[b][c] == point) vb = scene.patches[b].vertex[c];
+    if (va == 0 || va != vb) return false;
+  }
+  return true;
+}
+
 // Smoothing groups, occlusion groups and the occlusion groups' adjacency; `t_pairs` gets the
 // coplanar patches of one material that touch along an edge (for find_t_neighbours).
-void find_groups(const Scene& scene, const EdgePatches& edge_patches, PreparedScene& out,
+void find_groups(const Scene& scene, const PointIds& point_of, const EdgePatches& edge_patches, PreparedScene& out,
                  std::vector<std::pair<uint32_t, uint32_t>>& t_pairs) {
   const size_t n = scene.patches.size();
   UnionFind occl(n), smooth(n);
@@ -352,8 +367,9 @@ void find_groups(const Scene& scene, const EdgePatches& edge_patches, PreparedSc
     for (size_t x = 0; x < list.size(); ++x) {
       for (size_t y = x + 1; y < list.size(); ++y) {
         const uint32_t a = list[x], b = list[y];
-        if (glm::dot(out.normal[a], out.normal[b]) > kCreaseCos &&
-            scene.patches[a].material == scene.patches[b].material)
+        const double cos_ab = glm::dot(out.normal[a], out.normal[b]);
+        if (scene.patches[a].material == scene.patches[b].material &&
+            (cos_ab > kCreaseCos || (cos_ab > 0.0 && same_input_vertices(scene, point_of, a, b, key))))
           smooth.unite(a, b);
       }
     }
@@ -640,7 +656,7 @@ PreparedScene prepare(const Scene& scene) {
   const PointIds point_of = point_ids(scene);
   const EdgePatches edge_patches = patches_by_edge(scene, point_of);
   std::vector<std::pair<uint32_t, uint32_t>> t_pairs;
-  find_groups(scene, edge_patches, out, t_pairs);
+  find_groups(scene, point_of, edge_patches, out, t_pairs);
   out.back_hidden.assign(scene.patches.size(), 0);
   out.twin.assign(scene.patches.size(), kNone);
   hide_twin_backs(scene, point_of, out);

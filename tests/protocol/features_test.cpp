@@ -35,6 +35,7 @@
 #include <random>
 #include <array>
 #include <cmath>
+#include <map>
 #include <numbers>
 #include <limits>
 #include <cstring>
@@ -815,6 +816,74 @@ TEST(DoubleSidedFeature, ClosedRoomWithItsLampInsideKeepsItsInside) {
       if (glm::dot(t.front, (t.p[0] + t.p[1] + t.p[2]) / 3.0 - centre) < 0.0) inside.push_back(t);
     EXPECT_GT(mean_radiosity(inside).x, 0.01);
   }
+}
+
+// ---- 4b. Smooth shading -------------------------------------------------------------------------
+
+// A six-sided tube (its sides 60 degrees apart, more than the solver's 30 degree crease) lit from
+// one side. Written smooth-shaded, as an exporter does (one vertex with one normal where faces
+// meet), its light is one surface's: every point on a vertical edge shows one value whichever face
+// is drawn. Written flat (a vertex per face, with the face's normal), the faces keep their own
+// values there. Without NORMAL, shared vertices say nothing (glTF shades such faces flat).
+TEST(SmoothShadingFeature, SharedVerticesWithNormalsAreOneSmoothSurface) {
+  constexpr double kPi = std::numbers::pi;
+  auto spread_on_edges = [&](bool shared, bool normals) {
+    Doc d;
+    const int mat = d.material(plain_material(V(0.6), "tube"));
+    std::vector<V> points, normal;
+    std::vector<uint32_t> idx;
+    auto ring = [&](int k, double y) { return V(0.5 * std::cos(k * kPi / 3), y, 0.5 * std::sin(k * kPi / 3)); };
+    auto radial = [&](int k) { return V(std::cos(k * kPi / 3), 0.0, std::sin(k * kPi / 3)); };
+    for (int k = 0; k < 6; ++k) {
+      const int j = (k + 1) % 6;
+      // The side between angles k and j, counter-clockwise seen from outside.
+      const std::array<V, 4> c = {ring(k, 0.0), ring(k, 1.0), ring(j, 1.0), ring(j, 0.0)};
+      if (shared) {
+        if (k == 0)
+          for (int m = 0; m < 6; ++m) {
+            points.push_back(ring(m, 0.0));
+            points.push_back(ring(m, 1.0));
+            normal.push_back(radial(m));
+            normal.push_back(radial(m));
+          }
+        const uint32_t a = 2 * k, b = 2 * k + 1, e = 2 * j + 1, f = 2 * j;
+        idx.insert(idx.end(), {a, b, e, a, e, f});
+      } else {
+        const uint32_t base = static_cast<uint32_t>(points.size());
+        const V n = glm::normalize(glm::cross(c[1] - c[0], c[3] - c[0]));
+        for (const V& x : c) {
+          points.push_back(x);
+          normal.push_back(n);
+        }
+        idx.insert(idx.end(), {base, base + 1, base + 2, base, base + 2, base + 3});
+      }
+    }
+    json prim = d.primitive(points, idx, kTriangles, mat);
+    if (normals) prim["attributes"]["NORMAL"] = d.positions(normal);
+    const int tube = d.node({{"mesh", d.mesh(json::array({prim}))}, {"name", "tube"}});
+    d.quad_node({V(2.0, -0.5, -1.0), V(2.0, -0.5, 1.0), V(2.0, 1.5, 1.0), V(2.0, 1.5, -1.0)},
+                d.material(lamp_material(V(4.0))), {{"name", "lamp"}});
+    const Baked b = bake(d.gltf_bytes());
+    // Per point on a vertical edge (angle k * 60 degrees), the values the faces show there.
+    std::map<std::array<long, 3>, std::pair<double, double>> seen;
+    for (const Tri& t : all_of(baked_node(b.out, tube)))
+      for (int c = 0; c < 3; ++c) {
+        const V& x = t.p[c];
+        const double angle = std::atan2(x.z, x.x) / (kPi / 3);
+        if (std::abs(angle - std::round(angle)) > 1e-4 || std::hypot(x.x, x.z) < 0.49) continue;
+        const std::array<long, 3> key = {std::lround(x.x * 1e4), std::lround(x.y * 1e4), std::lround(x.z * 1e4)};
+        auto [it, fresh] = seen.try_emplace(key, t.b[c].x, t.b[c].x);
+        it->second.first = std::min(it->second.first, t.b[c].x);
+        it->second.second = std::max(it->second.second, t.b[c].x);
+      }
+    EXPECT_GE(seen.size(), 12u);
+    double worst = 0.0;
+    for (const auto& [key, range] : seen) worst = std::max(worst, (range.second - range.first) / std::max(range.second, 1e-12));
+    return worst;
+  };
+  EXPECT_LT(spread_on_edges(true, true), 1e-6);
+  EXPECT_GT(spread_on_edges(false, true), 0.05);
+  EXPECT_GT(spread_on_edges(true, false), 0.05);
 }
 
 // ---- 5. Base colour textures --------------------------------------------------------------------

@@ -31,6 +31,10 @@ struct Patch {
   uint32_t material = 0;                ///< vertex radiosity is never averaged across materials
   uint32_t object = 0;                  ///< the input object it belongs to (a glTF node's primitive;
                                         ///< 0: unknown): closed meshes are found within one
+  std::array<uint32_t, 4> vertex{};     ///< the input's vertex at each corner (0: unknown). Two
+                                        ///< patches whose shared edge ends at the same two input
+                                        ///< vertices in both are smooth across it (an exporter's
+                                        ///< smooth shading) at any angle under 90 degrees
 };
 
 /// A punctual light (as glTF's KHR_lights_punctual defines them). Lights shoot before any patch,
