@@ -154,7 +154,7 @@ bool Solver::Impl::finer_level(const Piece& piece, double power) const {
 // of the emitted power, a quarter under 0.5 %), as long as those shot under a quarter of all the
 // power. The hemicube's cost is mostly per element projected, and replays of such shots were
 // refused once the quarter was reached: without them the atrium took 158 000 hemicubes rather than
-// 201 000 (178 s against 188), the cluttered room 0.93 of the time, and the displayed error fell
+// 201 000 (162 s against 188), the cluttered room 0.93 of the time, and the displayed error fell
 // (the gallery's visible points: median 2.6 -> 2.0 %, p90 12.4 -> 11.5 %; bench/README.md).
 void Solver::Impl::place_hemicube(const Piece& piece) {
   const bool finer = finer_level(piece, piece.power);
