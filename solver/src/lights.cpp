@@ -496,8 +496,8 @@ void Solver::Impl::prepare_lights() {
   light_cube = std::make_unique<detail::Hemicube>(params.resolution);
   // A sun's one parallel view spans the whole scene: at the hemicube's resolution its pixels were
   // 30 cm wide over a 30 m yard, and a pillar's shadow across a platform was lost in them. Its
-  // pixels are as wide as the smallest elements a sharp outline splits to (kSharpAreaFactor; at
-  // most kMaxSunResolution a side). Twice as wide, the lit yard's peak memory was 54 MB rather
+  // pixels are as wide as the smallest elements a sharp outline still splits (min_sharp_split_area;
+  // at most kMaxSunResolution a side). Twice as wide, the lit yard's peak memory was 54 MB rather
   // than 127, but the gallery's displayed p90 was 13.6 % rather than 12.4 (13.2 before either).
   if (std::any_of(lights.begin(), lights.end(), [](const Light& l) { return l.type == Light::Type::kDirectional; })) {
     const double pixel = std::sqrt(min_sharp_split_area());

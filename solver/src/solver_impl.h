@@ -123,8 +123,8 @@ constexpr double kLightPoolReach = 0.1;
 // kSharpAreaFactor, the atrium's sun took 20 % more elements and 12 % more time, for about a
 // point of p90 on the study (11.6 against 12.7 %).
 constexpr double kShadowAreaFactor = 16.0;
-// The sun's parallel view has pixels as wide as the smallest elements a sharp outline splits to,
-// at most this many a side (prepare_lights).
+// The sun's parallel view has pixels as wide as the smallest elements a sharp outline still splits
+// (min_sharp_split_area), at most this many a side (prepare_lights).
 constexpr uint32_t kMaxSunResolution = 1024;
 // Lengths under this share of the scene's diagonal are rounding. An eye that near a patch's plane
 // sees it edge-on: project() leaves such patches out and projects backs beyond it, and
