@@ -371,6 +371,15 @@ void add_black_box(Scene& s, V lo, V hi) {
   s.patches.push_back(quad(V(hi.x, lo.y, lo.z), V(hi.x, hi.y, lo.z), V(hi.x, hi.y, hi.z), V(hi.x, lo.y, hi.z), k));  // +x
 }
 
+// A sun of `illuminance` whose light travels along `direction` (normalized here).
+Light sun_light(const V& direction, double illuminance) {
+  Light sun;
+  sun.type = Light::Type::kDirectional;
+  sun.direction = glm::normalize(direction);
+  sun.intensity = V(illuminance);
+  return sun;
+}
+
 // Whether the ray from x towards `to_light` hits the box (slab test).
 bool hits_box(const V& x, const V& to_light, const V& lo, const V& hi) {
   double t0 = 1e-9, t1 = 1e300;
@@ -395,10 +404,7 @@ TEST(DirectionalLight, BoxShadowIsDarkAndTheOpenFloorGetsRhoECosTheta) {
   add_floor(scene, -1.5, 1.5, -1.5, 1.5, 1, V(rho));
   const V lo(-0.4, 0.0, -0.3), hi(0.4, 0.6, 0.3);
   add_black_box(scene, lo, hi);
-  Light sun;
-  sun.type = Light::Type::kDirectional;
-  sun.direction = glm::normalize(V(1.0, -1.5, 0.5));
-  sun.intensity = V(illuminance);
+  const Light sun = sun_light(V(1.0, -1.5, 0.5), illuminance);
   scene.lights.push_back(sun);
   const Mesh mesh = solve(scene);
   const auto samples = sample_mesh(mesh, 6000, rng, [](uint32_t p) { return p == 0; });
@@ -467,10 +473,7 @@ TEST(DirectionalLight, ThinPoleShadowsAWideYard) {
   add_floor(scene, -15.0, 15.0, -15.0, 15.0, 1, V(rho));
   const V lo(-half, 0.0, -half), hi(half, 2.0, half);
   add_black_box(scene, lo, hi);
-  Light sun;
-  sun.type = Light::Type::kDirectional;
-  sun.direction = glm::normalize(V(1.0, -1.3, 0.4));
-  sun.intensity = V(illuminance);
+  const Light sun = sun_light(V(1.0, -1.3, 0.4), illuminance);
   scene.lights.push_back(sun);
   const Mesh mesh = solve(scene);
   const double open = rho * illuminance * -sun.direction.y;
@@ -523,11 +526,8 @@ TEST(DirectionalLight, RugJustAboveAFloorTakesTheSunEverywhere) {
       scene.patches.push_back(p);
     }
   const uint32_t rug_first = 24 * 24;
-  Light sun;
-  sun.type = Light::Type::kDirectional;
   const double elevation = 35.0 * kPi / 180.0;
-  sun.direction = glm::normalize(V(0.3 * std::cos(elevation), -std::sin(elevation), std::cos(elevation)));
-  sun.intensity = V(illuminance);
+  const Light sun = sun_light(V(0.3 * std::cos(elevation), -std::sin(elevation), std::cos(elevation)), illuminance);
   scene.lights.push_back(sun);
   const Mesh mesh = solve(scene);
   const double want = rho * illuminance * -sun.direction.y;
