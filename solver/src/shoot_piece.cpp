@@ -253,6 +253,9 @@ void Solver::Impl::receiver_form_factors(const Piece& piece, const std::vector<u
     for (auto& [q, share] : shares) share = front_share(piece, q);
   }
   auto share_of = [&](uint32_t q) { return std::lower_bound(shares.begin(), shares.end(), std::make_pair(q, 0.0))->second; };
+  // An uneven piece (a wall piece reaching from the room into the gap behind a cabinet) gives a
+  // close receiver the light of the leaves it faces most (uneven_share), not the front part's mean.
+  const std::vector<ShotNode> uneven = shares.empty() ? std::vector<ShotNode>{} : uneven_tree(piece);
   pool.parallel_for(accepted.size(), [&](size_t begin, size_t end, size_t) {
     for (size_t i = begin; i < end; ++i) {
       const uint32_t e = accepted[i];
@@ -274,7 +277,8 @@ void Solver::Impl::receiver_form_factors(const Piece& piece, const std::vector<u
         // wall's foot took the piece's mean, diluted by the covered strip (a closed room of wall
         // boxes lost 3 % of the light at each of its floor's shots).
         const double f = exact_form_factor(piece, e, size < 0.5 * piece.diameter ? 1 : size < piece.diameter ? 2 : 3);
-        f_open[e] = std::min(1.0, f * share_of(e_patch[e]));
+        const double share = uneven.empty() ? share_of(e_patch[e]) : uneven_share(piece, uneven, e, share_of(e_patch[e]));
+        f_open[e] = std::min(1.0, f * share);
         f_recv[e] = seen_here ? f_open[e] * (e_ff[e] / e_ff_open[e]) : f_open[e];
       }
       // Visible shares are at most the unoccluded ones, and both form factors at most 1.
@@ -298,6 +302,80 @@ double Solver::Impl::front_share(const Piece& piece, uint32_t q) const {
   });
   const double mean = channel_sum(piece.dB);
   return area > 0.0 && mean > 0.0 ? power / area / mean : 0.0;
+}
+
+// The element tree under a piece that is one element, cut up, whose unshot radiosity is uneven
+// (uneven_piece); empty otherwise. Each node holds its leaves' mean unshot radiosity (channels
+// summed) as a share of the piece's mean; a node's children follow one another.
+std::vector<Solver::Impl::ShotNode> Solver::Impl::uneven_tree(const Piece& piece) const {
+  std::vector<ShotNode> out;
+  if (piece.src.size() != 1 || e_child[piece.src[0]] == kNone || piece.src_area != piece.area || piece.volume) return out;
+  const double mean = channel_sum(piece.dB);
+  if (!(mean > 0.0) || !uneven_piece(piece.src[0])) return out;
+  // Breadth first, so that each node's four children are placed together; then the shares, from
+  // the leaves up (children come after their parents).
+  std::vector<uint32_t> element{piece.src[0]};
+  out.push_back({e_centre[piece.src[0]], e_area[piece.src[0]], e_radius[piece.src[0]] * e_radius[piece.src[0]], 0.0, kNone});
+  for (size_t i = 0; i < out.size(); ++i) {
+    const uint32_t x = element[i];
+    if (e_child[x] == kNone) {
+      out[i].share = channel_sum(e_unshot[x]) / mean;
+      continue;
+    }
+    out[i].first_child = static_cast<uint32_t>(out.size());
+    for (uint32_t k = 0; k < 4; ++k) {
+      const uint32_t c = e_child[x] + k;
+      element.push_back(c);
+      out.push_back({e_centre[c], e_area[c], e_radius[c] * e_radius[c], 0.0, kNone});
+    }
+  }
+  for (size_t i = out.size(); i-- > 0;) {
+    if (out[i].first_child == kNone) continue;
+    double sum = 0.0, area = 0.0;
+    for (uint32_t k = 0; k < 4; ++k) {
+      const ShotNode& c = out[out[i].first_child + k];
+      sum += c.share * c.area;
+      area += c.area;
+    }
+    out[i].share = area > 0.0 ? sum / area : 0.0;
+  }
+  return out;
+}
+
+// The unshot radiosity receiver e takes from an uneven piece, as a share of the piece's mean: its
+// leaves' own, each weighted by its point-to-point form factor from the receiver's centre and
+// corners, A cos cos' / (pi d^2), with d at least the leaf's radius (the receiver's whole view is
+// the exact form factor to the piece; this only says whose light it is). Nodes of the piece's tree
+// that lie further than kShareOpen radii away stand for their leaves. A cabinet's back 5 cm before
+// a wall piece that reaches out of the gap behind the cabinet into the lit room took the piece's
+// mean, several times the gap's own light (bench/README.md). `fallback` where it faces none.
+double Solver::Impl::uneven_share(const Piece& piece, std::span<const ShotNode> nodes, uint32_t e, double fallback) const {
+  constexpr double kShareOpen = 2.0;
+  const glm::dvec3& nq = prep.normal[e_patch[e]];
+  double weighted = 0.0, weight = 0.0;
+  std::vector<uint32_t> stack;
+  auto from = [&](const glm::dvec3& x) {
+    stack.assign(1, 0);
+    while (!stack.empty()) {
+      const ShotNode& node = nodes[stack.back()];
+      stack.pop_back();
+      const glm::dvec3 v = node.centre - x;
+      const double d2 = glm::dot(v, v);
+      if (node.first_child != kNone && d2 < kShareOpen * kShareOpen * node.radius2) {
+        for (uint32_t k = 0; k < 4; ++k) stack.push_back(node.first_child + k);
+        continue;
+      }
+      const double ce = glm::dot(nq, v), cl = -glm::dot(piece.normal, v);
+      if (ce <= 0.0 || cl <= 0.0) continue;
+      // cos cos' / d^2 = ce cl / d^4, the distance held at the node's radius and above
+      const double w = node.area * ce * cl / (d2 * std::max(d2, node.radius2));
+      weighted += w * node.share;
+      weight += w;
+    }
+  };
+  from(e_centre[e]);
+  for (uint32_t i = 0; i < corner_count(e); ++i) from(vpos[e_corner[e][i]]);
+  return weight > 0.0 ? weighted / weight : fallback;
 }
 
 // The share of the hemicube's view that its receivers take, sum of F(piece -> receiver): at most 1

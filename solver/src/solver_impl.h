@@ -406,6 +406,15 @@ struct Solver::Impl {
   bool absorber_close(const Piece& piece) const;
   bool uneven_piece(uint32_t element) const;
   double front_share(const Piece& piece, uint32_t q) const;
+  // A node of an uneven piece's element tree (uneven_tree).
+  struct ShotNode {
+    glm::dvec3 centre;
+    double area, radius2;
+    double share;          // its leaves' mean unshot radiosity over the piece's
+    uint32_t first_child;  // kNone: a leaf
+  };
+  std::vector<ShotNode> uneven_tree(const Piece& piece) const;
+  double uneven_share(const Piece& piece, std::span<const ShotNode> nodes, uint32_t e, double fallback) const;
   // Which surfaces may cover a point (covered): any, or only those that emit nothing.
   enum class Cover : uint8_t { kAny, kNonEmitters };
   bool covered(uint32_t p, const glm::dvec3& x, double gap = 0.0, bool any_facing = false,

@@ -136,12 +136,12 @@ TEST(EmitterNearSurface, DoubleSidedLampOneMillimetreUnderTheCeilingWithTheGathe
   expect_lamp_outline_and_room_light(0.001, true, true);
 }
 
-// A 4 x 3 x 4 room with walls, floor and ceiling in 0.25 m tiles (smaller than the smallest split
-// at these settings, as in a cluttered room), four lamps 1 cm under its ceiling, and a cabinet (a
-// box without a bottom, 1.2 x 1.9 x 0.5 m) standing 5 cm in front of the wall at z = 2.
-Scene room_with_cabinet() {
+// A 4 x 3 x 4 room with walls, floor and ceiling in `tile` tiles (0.25 m: smaller than the smallest
+// split at the settings of the tests below, as in a cluttered room; 4 m: one quad each, as exporters
+// write a room), four lamps 1 cm under its ceiling, and a cabinet (a box without a bottom,
+// 1.2 x 1.9 x 0.5 m) standing 5 cm in front of the wall at z = 2.
+Scene room_with_cabinet(double tile = 0.25) {
   Scene s;
-  const double tile = 0.25;
   auto grid = [&](dvec3 o, dvec3 u, dvec3 v, const dvec3& rho, uint32_t m, double cell) {
     const int nu = static_cast<int>(std::ceil(glm::length(u) / cell - 1e-9)), nv = static_cast<int>(std::ceil(glm::length(v) / cell - 1e-9));
     for (int i = 0; i < nu; ++i)
@@ -268,6 +268,41 @@ TEST(CoverNearSurface, FloorAtTheFootOfABottomlessCabinetIsLitToItsOutline) {
 
 // Mean absolute error of the displayed light at `points` against the path tracer, and their mean
 // reference (grey: the mean of the channels).
+std::pair<double, double> error_at(const Scene& scene, const solver::Mesh& mesh, std::vector<SurfacePoint>& points);
+
+// The same room with its walls one quad each, at default settings. The wall's pieces reach from the
+// lit room into the 5 cm gap behind the cabinet; a weak shot of such a piece (its mean from the
+// room's side) gave the cabinet's back, 5 cm in front of it, that mean, and the back gave it on to
+// the wall: the cabinet's back read several times the path tracer's light.
+TEST(CoverNearSurface, CabinetBackFiveCentimetresFromAWholeWallStaysDark) {
+  const Scene scene = room_with_cabinet(4.0);
+  const solver::Mesh mesh = solve(scene);
+  std::mt19937_64 rng(17);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  uint32_t back = solver::kNone;  // the cabinet's back, at z = 1.95 facing the wall
+  for (uint32_t i = 0; i < scene.patches.size(); ++i)
+    if (scene.patches[i].corners[0].z == 1.95 && scene.patches[i].corners[2].z == 1.95) back = i;
+  ASSERT_NE(back, solver::kNone);
+  std::vector<SurfacePoint> points;
+  for (int i = 0; i < 40; ++i) {
+    SurfacePoint p;
+    p.patch = back;
+    p.position = dvec3(-0.45 + uni(rng) * 0.9, 0.1 + uni(rng) * 1.6, 1.95);  // 15 cm and more inside the outline
+    p.normal = dvec3(0.0, 0.0, 1.0);
+    points.push_back(p);
+  }
+  ReferenceOptions options;
+  options.points = 200;
+  const auto room_points = reference_points(scene, options);
+  double room_mean = 0.0;
+  for (const SurfacePoint& p : room_points) room_mean += (p.reference.x + p.reference.y + p.reference.z) / 3.0;
+  room_mean /= static_cast<double>(room_points.size());
+  const auto [error, reference] = error_at(scene, mesh, points);
+  std::printf("cabinet's back 5 cm from a whole wall: reference %.4f, mean error %.4f (room mean %.4f)\n", reference, error, room_mean);
+  EXPECT_LT(reference, 0.1 * room_mean);  // the gap is dark
+  EXPECT_LT(error, 0.05 * room_mean);
+}
+
 std::pair<double, double> error_at(const Scene& scene, const solver::Mesh& mesh, std::vector<SurfacePoint>& points) {
   ReferenceOptions options;
   trace_reference(scene, points, options);
