@@ -136,6 +136,13 @@ TEST(EmitterNearSurface, DoubleSidedLampOneMillimetreUnderTheCeilingWithTheGathe
   expect_lamp_outline_and_room_light(0.001, true, true);
 }
 
+// The mean of the points' reference light (grey: the mean of the channels).
+double grey_mean_reference(const std::vector<SurfacePoint>& points) {
+  double sum = 0.0;
+  for (const SurfacePoint& p : points) sum += (p.reference.x + p.reference.y + p.reference.z) / 3.0;
+  return sum / static_cast<double>(points.size());
+}
+
 // A 4 x 3 x 4 room with walls, floor and ceiling in `tile` tiles (0.25 m: smaller than the smallest
 // split at the settings of the tests below, as in a cluttered room; 4 m: one quad each, as exporters
 // write a room), four lamps 1 cm under its ceiling, and a cabinet (a box without a bottom,
@@ -190,9 +197,7 @@ TEST(CoverNearSurface, WallBehindACabinetFiveCentimetresFromItStaysDark) {
   options.points = 200;
   const auto points = reference_points(scene, options);
   const DisplayError room = displayed_error(points, mesh);
-  double mean_reference = 0.0;
-  for (const SurfacePoint& p : points) mean_reference += (p.reference.x + p.reference.y + p.reference.z) / 3.0;
-  mean_reference /= static_cast<double>(points.size());
+  const double mean_reference = grey_mean_reference(points);
   // Points on the wall behind the cabinet, 10 cm or more inside its outline.
   std::mt19937_64 rng(11);
   std::uniform_real_distribution<double> uni(0.0, 1.0);
@@ -294,9 +299,7 @@ TEST(CoverNearSurface, CabinetBackFiveCentimetresFromAWholeWallStaysDark) {
   ReferenceOptions options;
   options.points = 200;
   const auto room_points = reference_points(scene, options);
-  double room_mean = 0.0;
-  for (const SurfacePoint& p : room_points) room_mean += (p.reference.x + p.reference.y + p.reference.z) / 3.0;
-  room_mean /= static_cast<double>(room_points.size());
+  const double room_mean = grey_mean_reference(room_points);
   const auto [error, reference] = error_at(scene, mesh, points);
   std::printf("cabinet's back 5 cm from a whole wall: reference %.4f, mean error %.4f (room mean %.4f)\n", reference, error, room_mean);
   EXPECT_LT(reference, 0.1 * room_mean);  // the gap is dark
