@@ -132,12 +132,17 @@ class Hemicube {
   /// The top face alone, its pixels' weights each 1 / resolution^2 (no form factors computed): a
   /// parallel projection's view (lights.cpp), which maps the scene onto the top face only.
   static Hemicube top_face(uint32_t resolution);
+  /// A hemicube whose pixel weights (delta_form_factors) are their solid angles, with no form
+  /// factors computed: a point or spot light's view (lights.cpp), at resolutions where the exact
+  /// form factors would cost more than the light's shot.
+  static Hemicube solid_angles(uint32_t resolution);
 
   uint32_t resolution() const { return n_; }
   uint32_t pixel_count() const { return pixel_count_; }
   bool full() const { return full_; }
   /// Exact form factor of each pixel from the hemicube's centre (they sum to 1); a full cube's
-  /// pixels' shares of the sphere's solid angle (they sum to 1).
+  /// pixels' shares of the sphere's solid angle (they sum to 1); a solid_angles() hemicube's
+  /// pixels' solid angles (they sum to 2 pi).
   const std::vector<double>& delta_form_factors() const { return dff_; }
 
   /// The world direction from the eye through the centre of pixel `pixel` (not unit), as placed.
@@ -189,6 +194,10 @@ class Hemicube {
 
   struct TopFaceTag {};
   Hemicube(uint32_t resolution, TopFaceTag);
+  struct SolidAngleTag {};
+  Hemicube(uint32_t resolution, SolidAngleTag);
+  // The faces' rows, offsets and pixel count (the constructors' common part).
+  void lay_out_faces();
 
   uint32_t n_;
   bool full_;

@@ -168,7 +168,7 @@ Solver::Impl::LightView Solver::Impl::parallel_view(const glm::dvec3& direction,
 }
 
 // The views of a light, with their pixel weights.
-void Solver::Impl::light_views(const Light& light, std::vector<LightView>& views) {
+void Solver::Impl::light_views(const Light& light, std::vector<LightView>& views, bool fine) {
   views.clear();
   if (light.type == Light::Type::kDirectional) {
     views.push_back(parallel_view(light.direction, sun_cube->resolution()));
@@ -184,15 +184,16 @@ void Solver::Impl::light_views(const Light& light, std::vector<LightView>& views
   const double scale = 1.0 / std::max(1e-3, std::cos(light.inner_cone) - cos_outer);
   for (const glm::dvec3& axis : axes) {
     LightView v;
-    v.cube = light_cube.get();
+    v.cube = fine && fine_light_cube ? fine_light_cube.get() : light_cube.get();
     v.eye = light.position;
     v.within = enclosing(light.position);
     v.axis = axis;
     v.up = perpendicular(axis);
     v.place();
     v.weight.resize(v.cube->pixel_count());
+    const std::vector<double>& omega = v.cube->delta_form_factors();  // solid angles (prepare_lights)
     for (uint32_t px = 0; px < v.cube->pixel_count(); ++px) {
-      double w = v.cube->pixel_solid_angle(px);
+      double w = omega[px];
       if (light.type == Light::Type::kSpot) {
         // KHR_lights_punctual's falloff, at the pixel's centre.
         const double c = glm::dot(glm::normalize(v.cube->pixel_direction(px)), light.direction);
@@ -333,7 +334,8 @@ void Solver::Impl::light_receive(uint32_t e, const glm::dvec3& irradiance) {
 // receiver takes rho E.
 void Solver::Impl::shoot_light(const Light& light) {
   std::vector<LightView> views;
-  light_views(light, views);
+  const size_t index = static_cast<size_t>(&light - lights.data());
+  light_views(light, views, index < light_power.size() && light_power[index] >= kFineLightShare * emitted_power);
   std::vector<uint32_t> accepted = leaves;
   grow_scratch();
   for (LightView& v : views) project_light_view(v, accepted);
@@ -493,7 +495,7 @@ void Solver::Impl::prepare_lights() {
   const bool has_sky = sky != glm::dvec3(0.0);
   if (lights.empty() && !has_sky) return;
   const auto t0 = Clock::now();
-  light_cube = std::make_unique<detail::Hemicube>(params.resolution);
+  light_cube = std::make_unique<detail::Hemicube>(detail::Hemicube::solid_angles(params.resolution));
   // A sun's one parallel view spans the whole scene: at the hemicube's resolution its pixels were
   // 30 cm wide over a 30 m yard, and a pillar's shadow across a platform was lost in them. Its
   // pixels are as wide as the smallest elements a sharp outline still splits (min_sharp_split_area;
@@ -506,6 +508,15 @@ void Solver::Impl::prepare_lights() {
       resolution = std::max(resolution, static_cast<uint32_t>(std::min<double>(kMaxSunResolution, std::ceil(prep.diagonal / pixel))) & ~1u);
     sun_cube = std::make_unique<detail::Hemicube>(detail::Hemicube::top_face(resolution));
   }
+  // A point or spot light's shadows of small things (boxes on a table under a lamp 1.4 m away)
+  // spread over a pixel of its cube, 2.8 cm there at resolution 100: so a strong light's cube has
+  // pixels as wide as the smallest elements a sharp outline still splits, half the scene's diagonal
+  // from the light (kMaxPointResolution; bench/README.md, "Crowded tables").
+  const bool any_point = std::any_of(lights.begin(), lights.end(), [](const Light& l) { return l.type != Light::Type::kDirectional; });
+  if (const double pixel = std::sqrt(min_sharp_split_area()); any_point && pixel > 0.0) {
+    const uint32_t resolution = static_cast<uint32_t>(std::min<double>(kMaxPointResolution, std::ceil(prep.diagonal / pixel))) & ~1u;
+    if (resolution > params.resolution) fine_light_cube = std::make_unique<detail::Hemicube>(detail::Hemicube::solid_angles(resolution));
+  }
   // A direction of the sky is one of hundreds: its shadows are summed with the others', so half
   // the resolution serves.
   sky_cube = std::make_unique<detail::Hemicube>(detail::Hemicube::top_face(std::max(kMinResolution, ((params.resolution / 2) + 1) & ~1u)));
@@ -516,7 +527,10 @@ void Solver::Impl::prepare_lights() {
     light_views(light, views);
     for (LightView& v : views) project_light_view(v, leaves);
     light_factors(&light, views, leaves);
-    for (uint32_t e : leaves) power += channel_sum(light.intensity) * f_recv[e] * e_area[e];
+    double own = 0.0;
+    for (uint32_t e : leaves) own += channel_sum(light.intensity) * f_recv[e] * e_area[e];
+    light_power.push_back(own);
+    power += own;
   }
   if (has_sky) {
     const std::vector<glm::dvec3> f = sky_factors(kSkyEstimateStep, leaves);

@@ -126,6 +126,11 @@ constexpr double kShadowAreaFactor = 16.0;
 // The sun's parallel view has pixels as wide as the smallest elements a sharp outline still splits
 // (min_sharp_split_area), at most this many a side (prepare_lights).
 constexpr uint32_t kMaxSunResolution = 1024;
+// A point or spot light's cube has pixels as wide, half the scene's diagonal from the light, as
+// those elements (at most this many a side), if the light brings at least kFineLightShare of the
+// emitted power (prepare_lights); weaker lights take the hemicube's resolution.
+constexpr uint32_t kMaxPointResolution = 512;
+constexpr double kFineLightShare = 0.01;
 // Lengths under this share of the scene's diagonal are rounding. An eye that near a patch's plane
 // sees it edge-on: project() leaves such patches out and projects backs beyond it, and
 // absorber_close, which predicts which absorbing backs the hemicube will see, must draw the same
@@ -267,7 +272,7 @@ struct Solver::Impl {
   struct LightView;
   void prepare_lights();
   bool shoot_next_light();
-  void light_views(const Light& light, std::vector<LightView>& views);
+  void light_views(const Light& light, std::vector<LightView>& views, bool fine = false);
   LightView parallel_view(const glm::dvec3& direction, uint32_t resolution) const;
   void project_light_view(LightView& view, std::span<const uint32_t> elements);
   void project_light_children(LightView& view, const std::vector<uint32_t>& parents);
@@ -628,6 +633,8 @@ struct Solver::Impl {
   };
   SkyShot sky_shot;
   std::unique_ptr<detail::Hemicube> light_cube;  // at params.resolution, for lights' views
+  std::unique_ptr<detail::Hemicube> fine_light_cube;  // for strong point and spot lights (or none)
+  std::vector<double> light_power;  // per light: the power it brings (prepare_lights' estimate)
   std::unique_ptr<detail::Hemicube> sun_cube;    // finer, for directional lights (prepare_lights)
   std::unique_ptr<detail::Hemicube> sky_cube;    // coarser, for the sky's many directions
 

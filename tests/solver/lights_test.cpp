@@ -504,6 +504,50 @@ TEST(DirectionalLight, ThinPoleShadowsAWideYard) {
   }
 }
 
+// A lamp 4 m over a 12 x 12 m floor and a pole 6 cm thick and 2 m tall, 2 m out: the pole's
+// shadow is a strip 6 to 12 cm wide from the pole's foot to 4 m out. At the hemicube's resolution
+// the lamp's pixels were 10 cm wide there, about as wide as the strip, which the floor showed at
+// 0.42 of the open floor's light (a 12 cm pole's strip came out dark either way). The light's cube
+// now has pixels about as wide as the smallest elements a sharp outline splits (2 cm there).
+// Shown along the strip's middle, 2.6 to 3.6 m out, the floor is dark; 30 cm beside it, it
+// takes the light's rho I h / d^3.
+TEST(PointLight, ThinPoleShadowsAWideFloor) {
+  const double rho = 0.5, h = 4.0, intensity = 40.0;
+  Scene scene;
+  add_floor(scene, -6.0, 6.0, -6.0, 6.0, 1, V(rho));
+  const V lo(1.97, 0.0, -0.03), hi(2.03, 2.0, 0.03);
+  add_black_box(scene, lo, hi);
+  Light light;
+  light.type = Light::Type::kPoint;
+  light.position = V(0.0, h, 0.0);
+  light.intensity = V(intensity);
+  scene.lights.push_back(light);
+  const Mesh mesh = solve(scene);
+  double sum = 0.0, open_sum = 0.0, worst = 0.0;
+  int count = 0;
+  for (double x = 2.6; x <= 3.6; x += 0.01, ++count) {
+    const V p(x, 0.0, 0.0);
+    ASSERT_TRUE(hits_box(p, light.position - p, lo, hi)) << x;
+    const double open = rho * point_irradiance(light, intensity, h, p);
+    const std::optional<V> shown = shown_on_floor(mesh, 0, 1, p.x, p.z);
+    ASSERT_TRUE(shown.has_value()) << x;
+    sum += shown->x;
+    open_sum += open;
+    worst = std::max(worst, shown->x / open);
+  }
+  std::printf("the strip shows %.3f of the open floor's light (mean), %.3f at most\n", sum / open_sum, worst);
+  EXPECT_LE(sum, 0.15 * open_sum) << "mean along the strip " << sum / open_sum << " of the open floor's";
+  EXPECT_LE(worst, 0.4);
+  for (double side : {-0.3, 0.3}) {
+    const V p(3.1, 0.0, side);
+    ASSERT_FALSE(hits_box(p, light.position - p, lo, hi));
+    const std::optional<V> shown = shown_on_floor(mesh, 0, 1, p.x, p.z);
+    ASSERT_TRUE(shown.has_value());
+    const double open = rho * point_irradiance(light, intensity, h, p);
+    EXPECT_NEAR(shown->x, open, 0.05 * open);
+  }
+}
+
 // A rug 3 mm over a floor under a low sun (35 degrees): along the light, the two lie 5 mm apart,
 // while one of the sun's pixels spans about 6 cm of depth along them. Both are cut finely (tiles
 // offset from each other, so their elements' centres differ within a pixel). The rug takes the
