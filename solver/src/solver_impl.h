@@ -129,7 +129,7 @@ constexpr uint32_t kMaxSunResolution = 1024;
 // A point or spot light's cube has pixels as wide, half the scene's diagonal from the light, as
 // those elements (at most this many a side), if the light brings at least kFineLightShare of the
 // emitted power (prepare_lights); weaker lights take the hemicube's resolution.
-constexpr uint32_t kMaxPointResolution = 512;
+constexpr uint32_t kMaxPointResolution = 256;
 constexpr double kFineLightShare = 0.01;
 // Lengths under this share of the scene's diagonal are rounding. An eye that near a patch's plane
 // sees it edge-on: project() leaves such patches out and projects backs beyond it, and
