@@ -508,9 +508,9 @@ TEST(DirectionalLight, ThinPoleShadowsAWideYard) {
 // shadow is a strip 6 to 12 cm wide from the pole's foot to 4 m out. At the hemicube's resolution
 // the lamp's pixels were 10 cm wide there, about as wide as the strip, which the floor showed at
 // 0.42 of the open floor's light (a 12 cm pole's strip came out dark either way). The light's cube
-// now has pixels about as wide as the smallest elements a sharp outline splits (2 cm there).
-// Shown along the strip's middle, 2.6 to 3.6 m out, the floor is dark; 30 cm beside it, it
-// takes the light's rho I h / d^3.
+// now has pixels about as wide as the smallest elements a sharp outline splits, or 256 a side (4 cm
+// there): the strip shows 0.02. Shown along the strip's middle, 2.6 to 3.6 m out, the floor is
+// dark; 30 cm beside it, it takes the light's rho I h / d^3.
 TEST(PointLight, ThinPoleShadowsAWideFloor) {
   const double rho = 0.5, h = 4.0, intensity = 40.0;
   Scene scene;
