@@ -145,7 +145,16 @@ JobMemory job_memory(const protocol::JobSpec& spec, const protocol::SceneDocumen
       (spec.method == protocol::Method::kAntiAliased || spec.method == protocol::Method::kClassical ||
        spec.method == protocol::Method::kReference))
     m.hemicubes += kVolumeCubeBytesPerPixel * std::min<uint64_t>(n, 256) * std::min<uint64_t>(n, 256);
-  m.patch_count = protocol::scene_of(document).patches.size();
+  const solver::Scene& scene = protocol::scene_of(document);
+  m.patch_count = scene.patches.size();
+  // A point or spot light's finer cube while it shoots (the solver's kMaxPointResolution, 256 a
+  // side): two hemicubes back to back, as the hemicubes above per top-face pixel; aa and classical
+  // bake the lights (a reference job's mesh is an aa solve's).
+  constexpr uint64_t kPointResolution = 256;
+  if (kPointResolution > n && spec.method != protocol::Method::kHierarchical &&
+      std::any_of(scene.lights.begin(), scene.lights.end(),
+                  [](const solver::Light& l) { return l.type != solver::Light::Type::kDirectional; }))
+    m.hemicubes += kCubeBytesPerPixel * 2 * kPointResolution * kPointResolution;
   // Only the anti-aliased hemicube splits under aeps (a reference job's mesh is an aa solve's).
   const bool sharp = spec.method == protocol::Method::kAntiAliased || spec.method == protocol::Method::kReference;
   const double by_area = spec.params.aeps > 0 ? std::ceil((sharp ? kSharpSplits : 1.0) / spec.params.aeps) : 1e18;
