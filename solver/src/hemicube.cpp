@@ -256,8 +256,7 @@ Hemicube::Hemicube(uint32_t resolution, bool full) : n_(resolution), full_(full)
     }
   }
   // A full cube's pixels tile the sphere: each one's share of it.
-  if (full)
-    for (uint32_t px = 0; px < pixel_count_; ++px) dff_[px] = pixel_solid_angle(px) / (4.0 * std::numbers::pi);
+  if (full) fill_solid_angles(1.0 / (4.0 * std::numbers::pi));
   // The pixels tile the hemisphere (the sphere): their exact form factors (shares) sum to 1.
   HEMIBAKE_DCHECK(std::abs(std::accumulate(dff_.begin(), dff_.end(), 0.0) - 1.0) < 1e-6);
   place(glm::dvec3(0.0), glm::dvec3(0, 0, 1), glm::dvec3(0, 1, 0));
@@ -267,13 +266,20 @@ Hemicube::Hemicube(uint32_t resolution, SolidAngleTag) : n_(resolution), full_(f
   assert(resolution >= 2 && resolution % 2 == 0);
   lay_out_faces();
   dff_.resize(pixel_count_);
+  fill_solid_angles(1.0);
+  // The pixels tile the hemisphere: 2 pi steradians.
+  HEMIBAKE_DCHECK(std::abs(std::accumulate(dff_.begin(), dff_.end(), 0.0) - 2.0 * std::numbers::pi) < 1e-5);
+  place(glm::dvec3(0.0), glm::dvec3(0, 0, 1), glm::dvec3(0, 1, 0));
+}
+
+void Hemicube::fill_solid_angles(double scale) {
   // pixel_solid_angle's corner terms, once per corner of the faces' grids rather than four times
-  // per pixel (a 512 cube has 786 432 pixels).
+  // per pixel (a 256 light cube has 196 608 pixels).
   const double step = 2.0 / n_;
+  const uint32_t w = n_ + 1;
   std::vector<double> corner;
   for (size_t f = 0; f < face_count_; ++f) {
     const Face& face = faces_[f];
-    const uint32_t w = n_ + 1;
     corner.resize(static_cast<size_t>(w) * (face.height + 1));
     for (uint32_t row = 0; row <= face.height; ++row)
       for (uint32_t col = 0; col <= n_; ++col) {
@@ -282,13 +288,10 @@ Hemicube::Hemicube(uint32_t resolution, SolidAngleTag) : n_(resolution), full_(f
       }
     for (uint32_t row = 0; row < face.height; ++row)
       for (uint32_t col = 0; col < n_; ++col)
-        dff_[face.offset + row * n_ + col] = corner[(row + 1) * w + col + 1] - corner[(row + 1) * w + col] -
-                                             corner[row * w + col + 1] + corner[row * w + col];
+        dff_[face.offset + row * n_ + col] = scale * (corner[(row + 1) * w + col + 1] - corner[(row + 1) * w + col] -
+                                                      corner[row * w + col + 1] + corner[row * w + col]);
   }
-  HEMIBAKE_DCHECK(std::abs(dff_[pixel_count_ / 3] - pixel_solid_angle(pixel_count_ / 3)) < 1e-12);
-  // The pixels tile the hemisphere: 2 pi steradians.
-  HEMIBAKE_DCHECK(std::abs(std::accumulate(dff_.begin(), dff_.end(), 0.0) - 2.0 * std::numbers::pi) < 1e-5);
-  place(glm::dvec3(0.0), glm::dvec3(0, 0, 1), glm::dvec3(0, 1, 0));
+  HEMIBAKE_DCHECK(std::abs(dff_[pixel_count_ / 3] - scale * pixel_solid_angle(pixel_count_ / 3)) < 1e-12);
 }
 
 Hemicube Hemicube::solid_angles(uint32_t resolution) { return Hemicube(resolution, SolidAngleTag{}); }

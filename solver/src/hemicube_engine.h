@@ -198,6 +198,9 @@ class Hemicube {
   Hemicube(uint32_t resolution, SolidAngleTag);
   // The faces' rows, offsets and pixel count (the constructors' common part).
   void lay_out_faces();
+  // Every pixel's solid angle times `scale`, into dff_ (pixel_solid_angle's corner terms computed
+  // once per corner of the faces' grids).
+  void fill_solid_angles(double scale);
 
   uint32_t n_;
   bool full_;

@@ -332,9 +332,9 @@ void Solver::Impl::light_receive(uint32_t e, const glm::dvec3& irradiance) {
 // One light's shot: its views of every leaf, refined until no receiver is too coarse for it (the
 // criteria of refine.cpp, with the children's factors from their parents' pixels), then every
 // receiver takes rho E.
-void Solver::Impl::shoot_light(const Light& light) {
+void Solver::Impl::shoot_light(size_t index) {
+  const Light& light = lights[index];
   std::vector<LightView> views;
-  const size_t index = static_cast<size_t>(&light - lights.data());
   light_views(light, views, index < light_power.size() && light_power[index] >= kFineLightShare * emitted_power);
   std::vector<uint32_t> accepted = leaves;
   grow_scratch();
@@ -555,7 +555,7 @@ bool Solver::Impl::shoot_next_light() {
   }
   const auto t0 = Clock::now();
   bool shot = true;
-  if (light_turn < lights.size()) shoot_light(lights[light_turn]);
+  if (light_turn < lights.size()) shoot_light(light_turn);
   else shot = shoot_sky_part();
   stats.seconds += seconds_since(t0);
   stats.seconds_lights += seconds_since(t0);
