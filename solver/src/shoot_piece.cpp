@@ -149,6 +149,20 @@ bool Solver::Impl::finer_level(const Piece& piece, double power) const {
          power >= kFinePower * emitted_power;
 }
 
+// Whether a piece shoots from the finer hemicube whatever its level (Params::sharp_shadows). A
+// large emitter's light reaches much of the scene through its near-field pieces (a glowing wall's
+// quarters, for a table of boxes a few metres from it), whose hemicubes halve the resolution per
+// level: there a box is a pixel or less, and a pixel's layers taken as independent light the
+// crevices between boxes and leave a box's face half behind another one lit element. Tables of
+// 60 to 65 boxes before a glowing wall, under a ceiling panel and beside a wall panel, against the
+// path tracer at 1500 points (median as displayed): 33.7 -> 16.3 %, 8.6 -> 5.4 %, 33.0 -> 18.4 %
+// (hr 13.1, 8.5, 11.3 %). Elsewhere it changes little at 1 to 1.25 times the time (the Cornell
+// box's shadows split more finely), and a wall 5 cm behind a cabinet can take more of the light
+// past it (bench/README.md): an option, off by default and at every preset.
+bool Solver::Impl::sharp_level(const Piece& piece, double power) const {
+  return params.sharp_shadows && params.method == Method::kAntiAliased && !piece.volume && power >= kSharpPower * emitted_power;
+}
+
 // Chooses the piece's hemicube, its level's or, for a strong cluster piece, a finer one, and places
 // it at the piece's centre. Weak pieces once took coarser hemicubes (half the resolution under 5 %
 // of the emitted power, a quarter under 0.5 %), as long as those shot under a quarter of all the
@@ -157,10 +171,11 @@ bool Solver::Impl::finer_level(const Piece& piece, double power) const {
 // 201 000 (162 s against 188), the cluttered room 0.93 of the time, and the displayed error fell
 // (the gallery's visible points: median 2.6 -> 2.0 %, p90 12.4 -> 11.5 %; bench/README.md).
 void Solver::Impl::place_hemicube(const Piece& piece) {
-  const bool finer = finer_level(piece, piece.power);
+  const bool sharp = sharp_level(piece, piece.power);
+  const bool finer = sharp || finer_level(piece, piece.power);
   ++stats.hemicubes;
   ++stamp;
-  const size_t level = std::min<size_t>(static_cast<size_t>(piece.depth), cubes.size() - 1);
+  const size_t level = sharp ? 0 : std::min<size_t>(static_cast<size_t>(piece.depth), cubes.size() - 1);
   cube = &cubes[level];
   if (piece.volume) {
     VolumeCube& v = volume_cubes[level];

@@ -198,7 +198,8 @@ void Solver::Impl::record_piece(const Piece& piece, double split_room, const std
 
 // The least factor on dB at which a fresh shot of this piece would decide anything differently
 // from this one: the split criteria (`split_room`, from refine); power thresholds: refinement of
-// weak pieces, the straddle rule, finer hemicubes for strong cluster pieces; and
+// weak pieces, the straddle rule, finer hemicubes for strong cluster pieces and (sharp_shadows)
+// strong pieces; and
 // the close receivers left to this hemicube because the point view's error seemed small.
 double Solver::Impl::piece_headroom(const Piece& piece, double split_room, const std::vector<uint32_t>& accepted) const {
   const double power = piece.power;
@@ -217,6 +218,8 @@ double Solver::Impl::piece_headroom(const Piece& piece, double split_room, const
   if (patch_piece && power < kStraddlePower * emitted_power) lower_headroom(headroom, kStraddlePower * emitted_power, power);
   if (params.method == Method::kAntiAliased) {
     if (!patch_piece && piece.depth == 0 && power < kFinePower * emitted_power) lower_headroom(headroom, kFinePower * emitted_power, power);
+    if (params.sharp_shadows && !piece.volume && power < kSharpPower * emitted_power)
+      lower_headroom(headroom, kSharpPower * emitted_power, power);
   }
   if (piece.may_refine)
     for (uint32_t e : accepted)

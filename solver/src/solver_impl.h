@@ -74,6 +74,10 @@ constexpr int kCubeLevels = kMaxShooterDepth + 3;
 // Cluster pieces carrying at least this share of the emitted power take a finer hemicube
 // (finer_level, piece_headroom).
 constexpr double kFinePower = 1e-3;
+// With Params::sharp_shadows, pieces carrying at least this share of the emitted power (as a
+// punctual light's kFineLightShare) take the finer hemicube at any level (sharp_level,
+// piece_headroom).
+constexpr double kSharpPower = 0.01;
 // pools.cpp: the first pass looks for light pools once every emitter has shot and the unshot power
 // is below this share of the emitted (or at convergence): the emitters' light and its first
 // reflections. An element splits there when the light its points took differs by more than
@@ -370,6 +374,7 @@ struct Solver::Impl {
   void classify_receivers(const Piece& piece, const std::vector<uint32_t>& current,
                           std::vector<uint32_t>& accepted, std::vector<uint32_t>& near);
   bool finer_level(const Piece& piece, double power) const;
+  bool sharp_level(const Piece& piece, double power) const;
   void place_hemicube(const Piece& piece);
   struct VolumeCube;
   void volume_weights(const Piece& piece, const VolumeCube& v);

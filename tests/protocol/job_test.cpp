@@ -131,10 +131,14 @@ TEST(JobParams, QualityPresetIsOverriddenByTheParametersGivenWithIt) {
   // Light pools: looked for by default and at high, not at draft.
   EXPECT_TRUE(defaults.params.pools);
   EXPECT_TRUE(high.params.pools);
+  // Sharp shadows (finer hemicubes for the strongest pieces): asked for alone, in no preset.
+  EXPECT_FALSE(defaults.params.sharp_shadows);
+  EXPECT_FALSE(high.params.sharp_shadows);
   JobSpec draft;
   ASSERT_EQ(apply_params({{"quality", "draft"}}, draft), "");
   EXPECT_FALSE(draft.params.gather);
   EXPECT_FALSE(draft.params.pools);
+  EXPECT_FALSE(draft.params.sharp_shadows);
   EXPECT_LT(draft.params.resolution, defaults.params.resolution);
   EXPECT_GT(draft.params.beps, defaults.params.beps);
   EXPECT_GT(draft.params.convergence, defaults.params.convergence);
