@@ -600,7 +600,7 @@ Scene boxes_on_a_table() {
   std::mt19937_64 rng(1);
   std::uniform_real_distribution<double> size(0.04, 0.18), unit(0.0, 1.0);
   std::vector<std::array<double, 4>> placed;  // centre x, z and size x, z
-  while (placed.size() < 60) {
+  for (int attempt = 0; placed.size() < 60 && attempt < 100000; ++attempt) {
     const double sx = size(rng), sy = size(rng), sz = size(rng);
     const double cx = -0.6 + sx / 2 + unit(rng) * (1.2 - sx), cz = -0.4 + sz / 2 + unit(rng) * (0.8 - sz);
     bool clear = true;
@@ -617,6 +617,7 @@ Scene boxes_on_a_table() {
 TEST(SharpShadows, BoxesOnATableBeforeAGlowingWallShowThePathTracersShadows) {
   const Scene scene = boxes_on_a_table();
   ASSERT_EQ(solver::validate(scene), "");
+  ASSERT_EQ(scene.patches.size(), 6u * 61 + 1);  // the table, 60 boxes and the wall
   ReferenceOptions options;
   options.points = 400;
   const auto points = reference_points(scene, options);
