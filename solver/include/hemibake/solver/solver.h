@@ -109,11 +109,11 @@ struct Params {
   bool pools = false;           ///< a quick first pass finds where the light pools on surfaces too
                                 ///< large for any one shot to split (a floor under small lamps), and
                                 ///< the solve proper starts with those elements split (see README)
-  bool sharp_shadows = false;   ///< aa: pieces shooting at least a hundredth of the emitted power keep
-                                ///< the full resolution at every near-field level and take a hemicube
-                                ///< of twice it (at most 400), so that small objects close to a large
-                                ///< emitter cast their shadows and leave their crevices dark (see
-                                ///< README); false: each near-field level halves the resolution
+  bool sharp_shadows = false;   ///< aa: pieces shooting at least a hundredth of the emitted power take
+                                ///< a hemicube of twice the resolution (at most 400) at every
+                                ///< near-field level, so that small objects close to a large emitter
+                                ///< cast their shadows and leave their crevices dark (see README);
+                                ///< false: each near-field level halves the resolution
   uint32_t shot_cache_mb = 1024; ///< memory for the form factors of earlier shots, replayed when the
                                  ///< same shooter shoots again with no more power and an unchanged
                                  ///< mesh (see README); 0 = every shot projects anew; taken as it
