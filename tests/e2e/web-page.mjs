@@ -527,20 +527,30 @@ async function keyboard({ server, page, record, out, log }) {
   await page.setViewportSize({ width: 1366, height: 768 });
   await openPage(page, server.origin);
   await page.locator('#app').waitFor({ state: 'visible' });
-  // Tab from the top of the page to the file input; Space opens the file chooser.
+  // Tab from the top of the page to the file input; Space opens the file chooser. On a loaded
+  // machine (the tests two at a time) Space once opened no chooser within 30 s: the page is
+  // tabbed to the input again and Space pressed again, three times at most.
   const focusedId = () => page.evaluate(() => document.activeElement?.id ?? '');
-  let steps = 0;
-  while ((await focusedId()) !== 'scene') {
-    await page.keyboard.press('Tab');
-    assert.ok(++steps < 10, 'the file input is not reached by Tab');
+  let chooser = null;
+  for (let attempt = 0; attempt < 3 && !chooser; ++attempt) {
+    let steps = 0;
+    while ((await focusedId()) !== 'scene') {
+      await page.keyboard.press('Tab');
+      assert.ok(++steps < 10, 'the file input is not reached by Tab');
+    }
+    const drop = await page.evaluate(() => getComputedStyle(document.getElementById('drop')).outlineStyle);
+    assert.notEqual(drop, 'none', 'the focused file input shows no focus ring');
+    [chooser] = await Promise.all([
+      page.waitForEvent('filechooser', { timeout: 15000 }).catch(() => null),
+      page.keyboard.press('Space'),
+    ]);
+    if (!chooser) log('Space on the focused file input opened no file chooser within 15 s; again');
   }
-  const drop = await page.evaluate(() => getComputedStyle(document.getElementById('drop')).outlineStyle);
-  assert.notEqual(drop, 'none', 'the focused file input shows no focus ring');
-  const [chooser] = await Promise.all([page.waitForEvent('filechooser'), page.keyboard.press('Space')]);
+  assert.ok(chooser, 'Space on the focused file input opened no file chooser (3 tries)');
   await chooser.setFiles(kCornell);
   await page.locator('#scene-name', { hasText: 'cornell-box.gltf' }).waitFor();
   // On to the Bake button and press it.
-  steps = 0;
+  let steps = 0;
   while ((await focusedId()) !== 'submit') {
     await page.keyboard.press('Tab');
     assert.ok(++steps < 40, 'the Bake button is not reached by Tab');
