@@ -74,10 +74,6 @@ constexpr int kCubeLevels = kMaxShooterDepth + 3;
 // Cluster pieces carrying at least this share of the emitted power take a finer hemicube
 // (finer_level, piece_headroom).
 constexpr double kFinePower = 1e-3;
-// With Params::sharp_shadows, pieces carrying at least this share of the emitted power (as a
-// punctual light's kFineLightShare) take the finer hemicube at any level (sharp_level,
-// piece_headroom).
-constexpr double kSharpPower = 0.01;
 // pools.cpp: the first pass looks for light pools once every emitter has shot and the unshot power
 // is below this share of the emitted (or at convergence): the emitters' light and its first
 // reflections. An element splits there when the light its points took differs by more than
@@ -135,6 +131,9 @@ constexpr uint32_t kMaxSunResolution = 1024;
 // emitted power (prepare_lights); weaker lights take the hemicube's resolution.
 constexpr uint32_t kMaxPointResolution = 256;
 constexpr double kFineLightShare = 0.01;
+// With Params::sharp_shadows, pieces carrying the same share of the emitted power take the finer
+// hemicube at any level (sharp_level, piece_headroom).
+constexpr double kSharpPower = kFineLightShare;
 // Lengths under this share of the scene's diagonal are rounding. An eye that near a patch's plane
 // sees it edge-on: project() leaves such patches out and projects backs beyond it, and
 // absorber_close, which predicts which absorbing backs the hemicube will see, must draw the same
