@@ -90,6 +90,11 @@ void trace_reference(const solver::Scene& scene, std::vector<SurfacePoint>& poin
   constexpr uint32_t kBatch = 512;
   std::vector<glm::dvec3> sum(points.size(), glm::dvec3(0.0));
   std::vector<double> var_sum(points.size(), 0.0);  // of the batch means' channel sums
+  for (size_t i = 0; i < points.size(); ++i) {
+    const double batches = static_cast<double>(points[i].samples / kBatch);
+    sum[i] = points[i].reference * batches;
+    var_sum[i] = points[i].std_error * points[i].std_error * batches * batches;
+  }
   auto trace = [&](size_t i) {
     const uint64_t batch = points[i].samples / kBatch;
     const auto r = reference.radiosity_at(points[i].patch, points[i].position, kBatch,
@@ -101,7 +106,9 @@ void trace_reference(const solver::Scene& scene, std::vector<SurfacePoint>& poin
     points[i].reference = sum[i] / batches;
     points[i].std_error = std::sqrt(var_sum[i]) / batches;
   };
-  parallel(points.size(), options.threads, trace);
+  parallel(points.size(), options.threads, [&](size_t i) {
+    if (points[i].samples == 0) trace(i);
+  });
   double mean = 0.0;
   for (const auto& p : points) mean += channel_sum(p.reference) / static_cast<double>(points.size());
   const double floor = 0.05 * mean;

@@ -37,6 +37,9 @@ struct ReferenceOptions {
 std::vector<SurfacePoint> reference_points(const solver::Scene& scene, const ReferenceOptions& options);
 
 /// Traces the reference at `points` (patch, position and normal set) as reference_points does.
+/// Points already traced go on from their samples: a second call only traces those whose standard
+/// error is still above the options' (before, it restarted their sums but not their sample counts,
+/// and read them at a fraction of their light).
 void trace_reference(const solver::Scene& scene, std::vector<SurfacePoint>& points, const ReferenceOptions& options);
 
 struct DisplayError {

@@ -121,13 +121,35 @@ void Solver::Impl::start_gather() {
   // Children come after their parents: a backward sweep meets every node after its children.
   e_hidden.assign(e_patch.size(), 0);
   e_settled.assign(e_patch.size(), 0);
+  // Per node: the light and area of its uncovered leaves.
+  std::vector<glm::dvec3> open_light(e_patch.size(), glm::dvec3(0.0));
+  std::vector<double> open_area(e_patch.size(), 0.0);
+  for (size_t i = e_patch.size(); i-- > 0;) {
+    if (e_child[i] == kNone) {
+      if (leaf_covered(static_cast<uint32_t>(i))) continue;
+      open_light[i] = e_b[i] * e_area[i];
+      open_area[i] = e_area[i];
+      continue;
+    }
+    for (uint32_t k = 0; k < 4; ++k) {
+      open_light[i] += open_light[e_child[i] + k];
+      open_area[i] += open_area[e_child[i] + k];
+    }
+  }
   for (size_t i = e_patch.size(); i-- > 0;) {
     if (e_child[i] == kNone) {
       // A leaf covered by a surface just in front of it shows its light to no gather (kCoverGap).
-      const bool cov = leaf_covered(static_cast<uint32_t>(i));
-      e_mean[i] = cov ? glm::dvec3(0.0) : e_b[i];
+      // One reaching past its cover's outline (partly_open) shows the light of the uncovered
+      // leaves of its nearest node that has any: the shots gave it little (resolve hands a
+      // covered element's share of a pixel to its surface's uncovered ones).
+      const uint32_t e = static_cast<uint32_t>(i);
+      const bool cov = leaf_covered(e);
+      const bool open = cov && partly_open(e);
+      uint32_t up = e;
+      while (open && open_area[up] <= 0.0 && e_parent[up] != kNone) up = e_parent[up];
+      e_mean[i] = !cov ? e_b[i] : open && open_area[up] > 0.0 ? open_light[up] / open_area[up] : glm::dvec3(0.0);
+      e_hidden[i] = cov && !open ? 1 : 0;
       e_low[i] = e_high[i] = mean(e_mean[i]);
-      e_hidden[i] = cov ? 1 : 0;
       continue;
     }
     e_hidden[i] = 1;
@@ -235,7 +257,7 @@ void Solver::Impl::gather_round() {
       e_settled[e] = 1;
       continue;
     }
-    if (e_hidden[e]) {  // covered: seen by no one
+    if (e_hidden[e] || leaf_covered(e)) {  // covered: seen by no one, or through its open part only
       e_settled[e] = 1;
       continue;
     }

@@ -218,6 +218,21 @@ bool Solver::Impl::gap_covered(uint32_t p, const glm::dvec3& x, double radius) c
   return covered(p, x, std::min(radius, kCoverGap * prep.diagonal), true);
 }
 
+// Whether covered leaf e reaches past its cover's outline into the open, where the cover emits
+// nothing: the end of a wall box pressed against the next wall covers that wall's elements along
+// the room's corner, and the one straddling the end's outline is lit on its open side. A gather at
+// the corner sees that side (start_gather); left out, the corner saw through it into the dark
+// inside of the wall box. Elements across a lamp's outline stay out: their light is the lamp's.
+bool Solver::Impl::partly_open(uint32_t e) const {
+  const uint32_t p = e_patch[e];
+  const double reach = std::min(kCoverGap * prep.diagonal, e_radius[e]);
+  if (!covered(p, e_centre[e], reach, true, Cover::kNonEmitters)) return false;
+  const Corners c = corners_of_copy(e);
+  for (uint32_t k = 0; k < corner_count(e); ++k)
+    if (!covered(p, c[k] + 0.02 * (e_centre[e] - c[k]), reach, true)) return true;
+  return false;
+}
+
 // Whether element e is covered (gap_covered at its centre), once per element.
 bool Solver::Impl::leaf_covered(uint32_t e) {
   if (e_cov[e] < 0) e_cov[e] = gap_covered(e_patch[e], e_centre[e], e_radius[e]) ? 1 : 0;

@@ -453,6 +453,7 @@ struct Solver::Impl {
   void extrapolate_to_outline(const std::vector<uint32_t>& leaves, const std::vector<char>& fixed, Mesh& m) const;
   std::vector<std::array<uint32_t, 2>> standing_on(const std::vector<uint32_t>& leaves) const;
   bool leaf_covered(uint32_t e);
+  bool partly_open(uint32_t e) const;
   double covered_share(std::span<const uint32_t> sources);
   static double point_piece_form_factor(const Piece& piece, const glm::dvec3& x, const glm::dvec3& n);
   double element_piece_form_factor(const Piece& piece, uint32_t e, int side) const;

@@ -3,6 +3,8 @@
 // under a ceiling ends at the lamp's outline, and the room's light stays the reference's.
 #include "display_error.h"
 
+#include "../solver/add_box.h"
+
 #include "hemibake/protocol/bake.h"
 #include "hemibake/protocol/gltf.h"
 #include "hemibake/solver/scenes.h"
@@ -56,6 +58,10 @@ TEST(DisplayedError, ClosedBoxShowsItsClosedForm) {
   EXPECT_EQ(e.missed, 0u);
   EXPECT_LT(e.median, 0.03);
   EXPECT_NEAR(e.mean_ratio, 1.0, 0.02);
+  // Traced again, the points keep their light (a second call once read them at a fraction of it).
+  auto again = lit_points;
+  trace_reference(lit, again, options);
+  EXPECT_NEAR(displayed_error(again, solve(lit)).mean_ratio, 1.0, 0.02);
 }
 
 // A 4 x 3 x 4 room (one-sided walls facing in) with a 1 m lamp under its ceiling, `gap` below it,
@@ -638,6 +644,65 @@ TEST(SharpShadows, BoxesOnATableBeforeAGlowingWallShowThePathTracersShadows) {
   EXPECT_LT(with.p90, 0.5 * without.p90);
   EXPECT_LT(with.median, 0.25);
   EXPECT_NEAR(with.mean_ratio, 1.0, 0.05);
+}
+
+// A room modelled as builders model walls: six closed boxes 25 cm thick, lit by a panel 1 cm under
+// the ceiling. The west and east walls' ends press against the south and north walls' faces, which
+// run on past the corners: each corner of the room has a wall's end covering the next wall's face
+// from the corner outward. The quadtree cannot cut that face at the corner, and along it an element
+// is left that reaches from under the end into the room. Its centre covered, the shots gave it
+// little (its covered share of each pixel went to its open neighbours), and the final gather left
+// it out: a vertex at the corner saw through it into the wall box's dark inside. The Blender
+// study's corners read up to 35 % dark with the gather where the shots alone were within 3 %, and
+// `--quality high` was worse than the default there. A gather now sees such an element with its
+// open neighbours' light.
+TEST(CoverNearSurface, CornersOfAbuttingWallBoxesAreLitWithTheGather) {
+  const double w = 4.0, h = 2.5, d = 3.0, t = 0.25;
+  const dvec3 rho(0.6), none(0.0);
+  Scene scene;
+  solver::add_box(scene, {-t, 0, 0}, {0, h, d}, rho, none, 0);          // west: patches 0-5, its face 5
+  solver::add_box(scene, {w, 0, 0}, {w + t, h, d}, rho, none, 0);       // east: 6-11, its face 10
+  solver::add_box(scene, {-t, 0, -t}, {w + t, h, 0}, rho, none, 0);     // south: 12-17, its face 15
+  solver::add_box(scene, {-t, 0, d}, {w + t, h, d + t}, rho, none, 0);  // north: 18-23, its face 20
+  solver::add_box(scene, {-t, -t, -t}, {w + t, 0, d + t}, rho, none, 0);
+  solver::add_box(scene, {-t, h, -t}, {w + t, h + t, d + t}, rho, none, 0);
+  const double y = h - 0.01;
+  solver::add_quad(scene, {1.4, y, 0.9}, {2.6, y, 0.9}, {2.6, y, 2.1}, {1.4, y, 2.1}, dvec3(0.8), dvec3(5.0), 1);
+  ASSERT_EQ(solver::validate(scene), "");
+  // Points 3 mm to 8 cm from each vertical corner of the room, on both walls, seeded.
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> away(0.003, 0.08), up(0.3, 2.2);
+  std::vector<SurfacePoint> points;
+  for (const double cx : {0.0, w})
+    for (const double cz : {0.0, d})
+      for (int i = 0; i < 8; ++i) {
+        const double a = away(rng), b = away(rng), ya = up(rng), yb = up(rng);
+        SurfacePoint on_x;  // on the west or east face
+        on_x.patch = cx == 0.0 ? 5 : 10;
+        on_x.position = dvec3(cx, ya, cz == 0.0 ? a : d - a);
+        on_x.normal = dvec3(cx == 0.0 ? 1.0 : -1.0, 0.0, 0.0);
+        SurfacePoint on_z;  // on the south or north face
+        on_z.patch = cz == 0.0 ? 15 : 20;
+        on_z.position = dvec3(cx == 0.0 ? b : w - b, yb, cz);
+        on_z.normal = dvec3(0.0, 0.0, cz == 0.0 ? 1.0 : -1.0);
+        points.push_back(on_x);
+        points.push_back(on_z);
+      }
+  for (const SurfacePoint& p : points) {  // each point lies on its patch, facing its way
+    const Patch& q = scene.patches[p.patch];
+    ASSERT_GT(glm::dot(glm::normalize(glm::cross(q.corners[1] - q.corners[0], q.corners[2] - q.corners[0])), p.normal), 0.999);
+    ASSERT_NEAR(glm::dot(p.normal, q.corners[0] - p.position), 0.0, 1e-12);
+  }
+  const solver::Mesh shot = solve(scene), gathered = solve(scene, true);
+  const auto [shot_error, reference] = error_at(scene, shot, points);
+  const double gathered_error = error_at(scene, gathered, points).first;
+  std::printf("corners of abutting wall boxes: reference %.4f; mean error %.4f shot, %.4f gathered\n", reference, shot_error,
+              gathered_error);
+  // 0.07 of the reference with the shots alone and with the gather when written, 0.17 with the
+  // gather before (the points next to the corner on the south and north faces are still a fifth
+  // too dark, the shots' error there, and those 2 to 7 cm from it up to a sixth too bright).
+  EXPECT_LT(gathered_error, 0.1 * reference);
+  EXPECT_LT(gathered_error, shot_error + 0.01 * reference);  // the gather does no worse than the shots
 }
 
 }  // namespace

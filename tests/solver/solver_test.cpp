@@ -3,6 +3,7 @@
 #include "hemibake/solver/hemicube.h"
 #include "hemibake/solver/scenes.h"
 #include "hemibake/solver/solver.h"
+#include "add_box.h"
 #include "solve_scene.h"
 
 #include <gtest/gtest.h>
@@ -724,18 +725,6 @@ TEST(Validate, RejectsBadPatchesWithAMessageNamingThem) {
   params = Params{};
   params.aeps = 0.0;
   EXPECT_NE(validate(params).find("aeps"), std::string::npos);
-}
-
-// A closed box from lo to hi, its six faces looking out.
-void add_box(Scene& scene, const glm::dvec3& lo, const glm::dvec3& hi, const glm::dvec3& rho, const glm::dvec3& e,
-             uint32_t material) {
-  using V = glm::dvec3;
-  add_quad(scene, V(lo.x, hi.y, lo.z), V(lo.x, hi.y, hi.z), V(hi.x, hi.y, hi.z), V(hi.x, hi.y, lo.z), rho, e, material);
-  add_quad(scene, V(lo.x, lo.y, lo.z), V(hi.x, lo.y, lo.z), V(hi.x, lo.y, hi.z), V(lo.x, lo.y, hi.z), rho, e, material);
-  add_quad(scene, V(lo.x, lo.y, lo.z), V(lo.x, hi.y, lo.z), V(hi.x, hi.y, lo.z), V(hi.x, lo.y, lo.z), rho, e, material);
-  add_quad(scene, V(lo.x, lo.y, hi.z), V(hi.x, lo.y, hi.z), V(hi.x, hi.y, hi.z), V(lo.x, hi.y, hi.z), rho, e, material);
-  add_quad(scene, V(lo.x, lo.y, lo.z), V(lo.x, lo.y, hi.z), V(lo.x, hi.y, hi.z), V(lo.x, hi.y, lo.z), rho, e, material);
-  add_quad(scene, V(hi.x, lo.y, lo.z), V(hi.x, hi.y, lo.z), V(hi.x, hi.y, hi.z), V(hi.x, lo.y, hi.z), rho, e, material);
 }
 
 // A closed 4 m room (walls in 0.5 m cells) with `count` small closed boxes (4 to 18 cm, all six
