@@ -257,7 +257,7 @@ void Solver::Impl::gather_round() {
       e_settled[e] = 1;
       continue;
     }
-    if (e_hidden[e] || leaf_covered(e)) {  // covered: seen by no one, or through its open part only
+    if (leaf_covered(e)) {  // covered: seen by no one, or through its open part only
       e_settled[e] = 1;
       continue;
     }

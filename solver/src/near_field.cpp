@@ -224,12 +224,16 @@ bool Solver::Impl::gap_covered(uint32_t p, const glm::dvec3& x, double radius) c
 // the corner sees that side (start_gather); left out, the corner saw through it into the dark
 // inside of the wall box. Elements across a lamp's outline stay out: their light is the lamp's.
 bool Solver::Impl::partly_open(uint32_t e) const {
-  const uint32_t p = e_patch[e];
   const double reach = std::min(kCoverGap * prep.diagonal, e_radius[e]);
-  if (!covered(p, e_centre[e], reach, true, Cover::kNonEmitters)) return false;
+  return covered(e_patch[e], e_centre[e], reach, true, Cover::kNonEmitters) && corner_covered_unlike(e, reach, Cover::kAny, true);
+}
+
+// Whether one of element e's corners, pulled a little towards its centre, is covered (within
+// `reach`, facing either way, by `by`) where `centre` says the centre is not, or the other way round.
+bool Solver::Impl::corner_covered_unlike(uint32_t e, double reach, Cover by, bool centre) const {
   const Corners c = corners_of_copy(e);
   for (uint32_t k = 0; k < corner_count(e); ++k)
-    if (!covered(p, c[k] + 0.02 * (e_centre[e] - c[k]), reach, true)) return true;
+    if (covered(e_patch[e], c[k] + 0.02 * (e_centre[e] - c[k]), reach, true, by) != centre) return true;
   return false;
 }
 
@@ -269,21 +273,15 @@ void Solver::Impl::split_along_cover_outlines() {
   bool any = false;
   const double gap = kCoverGap * prep.diagonal;
   const double other_limit = min_split_area() / std::pow(4.0, kCoverOutlineLevels);
-  auto mixed = [&](uint32_t e, double reach, Cover by) {
-    const uint32_t p = e_patch[e];
-    const bool centre = covered(p, e_centre[e], reach, true, by);
-    const Corners c = corners_of_copy(e);
-    for (uint32_t k = 0; k < corner_count(e); ++k)
-      if (covered(p, c[k] + 0.02 * (e_centre[e] - c[k]), reach, true, by) != centre) return true;
-    return false;
-  };
   while (!queue.empty()) {
     const uint32_t e = queue.back();
     queue.pop_back();
     if (e_area[e] < other_limit || leaves.size() > params.max_elements) continue;
     if (channel_sum(patches[e_patch[e]].emission) > 0.0) continue;
     const double reach = std::min(gap, e_radius[e]);
-    if (!mixed(e, reach, e_area[e] >= min_split_area() ? Cover::kAny : Cover::kNonEmitters) && !contact_crosses(e)) continue;
+    const Cover by = e_area[e] >= min_split_area() ? Cover::kAny : Cover::kNonEmitters;
+    if (!corner_covered_unlike(e, reach, by, covered(e_patch[e], e_centre[e], reach, true, by)) && !contact_crosses(e))
+      continue;
     split(e);
     any = true;
     for (uint32_t k = 0; k < 4; ++k) queue.push_back(e_child[e] + k);
