@@ -727,8 +727,7 @@ class PixelResolver {
     return g & group_mask_;
   }
   enum class Meet : uint8_t { kApart, kTile, kFold };
-  template <class SideOf, class Fn>
-  void neighbours_in_pixel(uint32_t i, SideOf side_of, Fn fn);
+  void pair_neighbours();
   Meet meet(uint64_t a, uint64_t b);
   int standing_order(uint64_t a, uint64_t b);
   void order_standing();
@@ -775,13 +774,16 @@ class PixelResolver {
   uint64_t stood_a_ = 0, stood_b_ = 0;
   int stood_answer_ = 0;
   bool stood_any_ = false;
-  std::vector<std::pair<uint64_t, uint32_t>> by_group_;  // (surface, fragment)
+  std::vector<std::pair<uint64_t, uint32_t>> by_group_;  // (surface, fragment's place in the pixel)
+  std::vector<uint32_t> group_at_;  // per fragment of the pixel, in order: its group
   std::vector<GroupSum> groups_;
   std::vector<uint32_t> layers_;
   std::vector<uint32_t> rank_;  // per group root: its place in `layers_`
   std::vector<double> fold_cap_;  // per group root: the most a fold leaves it (share_pixel)
   std::vector<std::pair<uint32_t, uint32_t>> folds_;  // pairs of the pixel's groups folded one behind the other
-  std::vector<std::pair<uint32_t, uint32_t>> met_;    // neighbours_in_pixel: (surface id, group)
+  std::vector<std::pair<uint32_t, uint32_t>> tiles_;  // pairs of the pixel's groups side by side
+  std::vector<uint8_t> in_fold_;  // merge_neighbours: per root, whether its groups are in folds_
+  std::vector<std::pair<uint32_t, uint32_t>> met_;    // pair_neighbours: (surface id, group)
   // Per thread, per surface id of the adjacency's: where the surface's two sides sit among the
   // pixel's groups, valid while `stamp` is the pixel's (sum_groups), so that index_of looks
   // neighbours up directly (a binary search per neighbour was 14 % of a 127k-triangle bake).
@@ -794,28 +796,49 @@ class PixelResolver {
   uint32_t* stamp_ = nullptr;
 };
 
-// Calls fn(j, link) for each of the pixel's groups j that shares an edge with group i, in
-// increasing id, where j is on the side side_of(i's side, link) names. By i's links when it has
-// few; by the pixel's groups when it has more (a floor shares edges with much that stands on it,
-// and a pixel holds a few surfaces).
-template <class SideOf, class Fn>
-void PixelResolver::neighbours_in_pixel(uint32_t i, SideOf side_of, Fn fn) {
-  const uint64_t side = groups_[i].group & ~uint64_t{0xffffffffu};
-  const uint32_t id = static_cast<uint32_t>(groups_[i].group);
-  const std::span<const GroupAdjacency::Link> links = adjacency_.neighbours(id);
-  if (links.size() <= 2 * groups_.size()) {
-    for (const GroupAdjacency::Link& link : links) {
-      const int64_t j = index_of(side_of(side, link) | (link.key & 0xffffffffu));
-      if (j >= 0) fn(static_cast<uint32_t>(j), link);
+// The pixel's groups that share an edge with another of its groups: folds_ holds the pairs (i, j)
+// where j lies folded behind i, tiles_ those where j tiles with i (fold_side, tile_side), each
+// ordered by i and then by j's surface id. By i's links when it has few; by the pixel's groups
+// when it has more (a floor shares edges with much that stands on it, and a pixel holds a few
+// surfaces). One pass over the links for both kinds, where a pass per kind (and a third for
+// share_pixel) took a seventh of a cluttered room's bake.
+void PixelResolver::pair_neighbours() {
+  folds_.clear();
+  tiles_.clear();
+  bool met_sorted = false;
+  for (uint32_t i = 0; i < groups_.size(); ++i) {
+    const uint64_t side = groups_[i].group & ~uint64_t{0xffffffffu};
+    const uint32_t id = static_cast<uint32_t>(groups_[i].group);
+    const std::span<const GroupAdjacency::Link> links = adjacency_.neighbours(id);
+    if (links.size() <= 2 * groups_.size()) {
+      for (const GroupAdjacency::Link& link : links) {
+        const uint64_t other = link.key & 0xffffffffu;
+        if (const int64_t j = index_of(fold_side(side, link) | other); j >= 0) folds_.emplace_back(i, static_cast<uint32_t>(j));
+        if (const int64_t j = index_of(tile_side(side, link) | other); j >= 0) tiles_.emplace_back(i, static_cast<uint32_t>(j));
+      }
+      continue;
     }
-    return;
-  }
-  met_.clear();
-  for (uint32_t j = 0; j < groups_.size(); ++j) met_.emplace_back(static_cast<uint32_t>(groups_[j].group), j);
-  std::sort(met_.begin(), met_.end());
-  for (const auto& [other, j] : met_) {
-    const GroupAdjacency::Link* link = adjacency_.find(id, other);
-    if (link != nullptr && (groups_[j].group & ~uint64_t{0xffffffffu}) == side_of(side, *link)) fn(j, *link);
+    if (!met_sorted) {
+      // groups_ runs by surface id over the front sides, then over the back sides: the two runs
+      // merged.
+      met_.clear();
+      uint32_t backs = 0;
+      while (backs < groups_.size() && (groups_[backs].group >> 32) == 0) ++backs;
+      for (uint32_t a = 0, b = backs; a < backs || b < groups_.size();) {
+        const bool take_a = b == groups_.size() ||
+                            (a < backs && static_cast<uint32_t>(groups_[a].group) <= static_cast<uint32_t>(groups_[b].group));
+        const uint32_t j = take_a ? a++ : b++;
+        met_.emplace_back(static_cast<uint32_t>(groups_[j].group), j);
+      }
+      met_sorted = true;
+    }
+    for (const auto& [other, j] : met_) {
+      const GroupAdjacency::Link* link = adjacency_.find(id, other);
+      if (link == nullptr) continue;
+      const uint64_t j_side = groups_[j].group & ~uint64_t{0xffffffffu};
+      if (j_side == fold_side(side, *link)) folds_.emplace_back(i, j);
+      if (j_side == tile_side(side, *link)) tiles_.emplace_back(i, j);
+    }
   }
 }
 
@@ -972,9 +995,11 @@ void PixelResolver::open_share(uint32_t lo, uint32_t hi) {
   if (!saw_covered_) return;
   saw_covered_ = false;
   open_.clear();
+  size_t last = 0;  // fragments of one surface mostly come together
   auto entry = [&](uint64_t surface) -> OpenShare& {
-    for (OpenShare& o : open_)
-      if (o.surface == surface) return o;
+    if (last < open_.size() && open_[last].surface == surface) return open_[last];
+    for (last = 0; last < open_.size(); ++last)
+      if (open_[last].surface == surface) return open_[last];
     open_.push_back({surface, 0.0, 0.0, 0.0});
     return open_.back();
   };
@@ -1001,26 +1026,64 @@ void PixelResolver::layers(uint32_t lo, uint32_t hi) {
   order_layers(any_fold);
   share_pixel(any_fold);
   for (uint32_t i = 0; i < groups_.size(); ++i) groups_[i].trans = groups_[root(i)].trans;
-  size_t gi = 0;
-  for (const auto& [g, fi] : by_group_) {
-    while (groups_[gi].group != g) ++gi;
-    fragments_[fi].trans = groups_[gi].trans;
-  }
+  for (uint32_t k = lo; k < hi; ++k) fragments_[order_[k]].trans = groups_[group_at_[k - lo]].trans;
 }
 
 // Sums the coverage of each occlusion group: pieces of one surface never hide each other.
+// The groups come out in increasing surface id, each summed over its fragments in the pixel's
+// order (increasing fragment index). A pixel mostly holds a few surfaces, each cut into many
+// fragments where it is cut finely (a box's face under a lamp, in sixteen elements within one
+// pixel): each fragment's surface is looked up among the few met so far, where sorting the
+// fragments took a fifth of a cluttered room's bake. Past kFewSurfaces (a pixel of a coarse
+// near-field hemicube over a tessellated sphere's facets), the fragments are sorted.
 void PixelResolver::sum_groups(uint32_t lo, uint32_t hi) {
-  by_group_.clear();
-  for (uint32_t k = lo; k < hi; ++k) by_group_.emplace_back(surface_noting(fragments_[order_[k]].element), order_[k]);
-  std::sort(by_group_.begin(), by_group_.end());
+  constexpr size_t kFewSurfaces = 16;
   groups_.clear();
-  for (const auto& [g, fi] : by_group_) {
-    const Fragment& f = fragments_[fi];
-    if (groups_.empty() || groups_.back().group != g) {
-      groups_.push_back({g, static_cast<uint32_t>(groups_.size()), 0.0, 0.0, 0.0f, 1.0f});
+  group_at_.resize(hi - lo);
+  uint32_t at = 0;
+  bool few = true;
+  for (uint32_t k = lo; k < hi && few; ++k) {
+    const Fragment& f = fragments_[order_[k]];
+    const uint64_t g = surface_noting(f.element);
+    if (groups_.empty() || groups_[at].group != g) {
+      at = 0;
+      while (at < groups_.size() && groups_[at].group != g) ++at;
+      if (at == groups_.size()) {
+        few = groups_.size() < kFewSurfaces;
+        groups_.push_back({g, at, 0.0, 0.0, 0.0f, 1.0f});
+      }
     }
-    groups_.back().area += f.area;
-    groups_.back().depth_sum += static_cast<double>(f.area) * f.inv_depth;
+    groups_[at].area += f.area;
+    groups_[at].depth_sum += static_cast<double>(f.area) * f.inv_depth;
+    group_at_[k - lo] = at;
+  }
+  if (few) {
+    // Into increasing surface id; group_at_ follows.
+    bool sorted = true;
+    for (size_t j = 1; j < groups_.size(); ++j) sorted = sorted && groups_[j - 1].group < groups_[j].group;
+    if (!sorted) {
+      std::sort(groups_.begin(), groups_.end(), [](const GroupSum& a, const GroupSum& b) { return a.group < b.group; });
+      std::array<uint32_t, kFewSurfaces> moved{};
+      for (uint32_t j = 0; j < groups_.size(); ++j) {
+        moved[groups_[j].root] = j;
+        groups_[j].root = j;
+      }
+      for (uint32_t& g : group_at_) g = moved[g];
+    }
+  } else {
+    by_group_.clear();
+    for (uint32_t k = lo; k < hi; ++k) by_group_.emplace_back(surface_of(fragments_[order_[k]].element), k - lo);
+    for (uint32_t k = lo; k < hi && !saw_covered_; ++k) surface_noting(fragments_[order_[k]].element);
+    std::sort(by_group_.begin(), by_group_.end());
+    groups_.clear();
+    for (const auto& [g, i] : by_group_) {
+      const Fragment& f = fragments_[order_[lo + i]];
+      if (groups_.empty() || groups_.back().group != g)
+        groups_.push_back({g, static_cast<uint32_t>(groups_.size()), 0.0, 0.0, 0.0f, 1.0f});
+      groups_.back().area += f.area;
+      groups_.back().depth_sum += static_cast<double>(f.area) * f.inv_depth;
+      group_at_[i] = static_cast<uint32_t>(groups_.size() - 1);
+    }
   }
   for (GroupSum& g : groups_) g.inv_depth = mean_depth(g.depth_sum, g.area);
   if (slot_count_ == 0) return;
@@ -1046,20 +1109,24 @@ bool PixelResolver::merge_neighbours() {
   // Folded pairs first: two surfaces folded one behind the other never join one layer, even
   // through neighbours that tile with both (the floors of two rooms meet under the wall between
   // them, and each tiles with the wall's side that faces its room).
-  folds_.clear();
-  for (uint32_t i = 0; i < groups_.size(); ++i)
-    neighbours_in_pixel(i, fold_side, [&](uint32_t j, const GroupAdjacency::Link&) { folds_.emplace_back(i, j); });
-  for (uint32_t i = 0; i < groups_.size(); ++i)
-    neighbours_in_pixel(i, tile_side, [&](uint32_t j, const GroupAdjacency::Link&) {
-      const uint32_t ri = root(i), rj = root(j);
-      if (ri == rj) return;
-      bool apart = false;
+  pair_neighbours();
+  // Per root: whether a group joined under it is in a folded pair. Two roots are kept apart only
+  // if both are.
+  in_fold_.assign(groups_.size(), 0);
+  for (const auto& [x, y] : folds_) in_fold_[x] = in_fold_[y] = 1;
+  for (const auto& [i, j] : tiles_) {
+    const uint32_t ri = root(i), rj = root(j);
+    if (ri == rj) continue;
+    bool apart = false;
+    if (in_fold_[ri] && in_fold_[rj])
       for (const auto& [x, y] : folds_) {
         const uint32_t rx = root(x), ry = root(y);
         apart = apart || (rx == ri && ry == rj) || (rx == rj && ry == ri);
       }
-      if (!apart) groups_[std::max(ri, rj)].root = std::min(ri, rj);
-    });
+    if (apart) continue;
+    groups_[std::max(ri, rj)].root = std::min(ri, rj);
+    in_fold_[std::min(ri, rj)] |= in_fold_[std::max(ri, rj)];
+  }
   return !folds_.empty();
 }
 
@@ -1125,14 +1192,10 @@ void PixelResolver::share_pixel(bool any_fold) {
   // double-sided box tile one layer, which only the faces meeting the near side's edges touch.
   if (any_fold) {
     fold_cap_.assign(groups_.size(), 1.0);
-    for (uint32_t i = 0; i < groups_.size(); ++i) {
-      const uint32_t ri = root(i);
-      if (groups_[ri].area <= 0.0) continue;
-      neighbours_in_pixel(i, fold_side, [&](uint32_t j, const GroupAdjacency::Link&) {
-        const uint32_t rj = root(j);
-        if (rank_[rj] < rank_[ri])
-          fold_cap_[ri] = std::min(fold_cap_[ri], std::max(0.0, groups_[ri].area - groups_[rj].area) / groups_[ri].area);
-      });
+    for (const auto& [i, j] : folds_) {  // merge_neighbours's pairs
+      const uint32_t ri = root(i), rj = root(j);
+      if (groups_[ri].area > 0.0 && rank_[rj] < rank_[ri])
+        fold_cap_[ri] = std::min(fold_cap_[ri], std::max(0.0, groups_[ri].area - groups_[rj].area) / groups_[ri].area);
     }
   }
   double f = 0.0;  // the paper's f_{k-1}: the pixel's fraction taken by nearer layers
