@@ -11,6 +11,7 @@
 #include <glm/geometric.hpp>
 
 #include <algorithm>
+#include <bit>
 #include <cassert>
 #include <cmath>
 #include <limits>
@@ -782,7 +783,7 @@ class PixelResolver {
   std::vector<double> fold_cap_;  // per group root: the most a fold leaves it (share_pixel)
   std::vector<std::pair<uint32_t, uint32_t>> folds_;  // pairs of the pixel's groups folded one behind the other
   std::vector<std::pair<uint32_t, uint32_t>> tiles_;  // pairs of the pixel's groups side by side
-  std::vector<uint8_t> in_fold_;  // merge_neighbours: per root, whether its groups are in folds_
+  std::vector<uint64_t> fold_mask_;  // merge_neighbours: per root, the roots folded against it
   std::vector<std::pair<uint32_t, uint32_t>> met_;    // pair_neighbours: (surface id, group)
   // Per thread, per surface id of the adjacency's: where the surface's two sides sit among the
   // pixel's groups, valid while `stamp` is the pixel's (sum_groups), so that index_of looks
@@ -1110,24 +1111,50 @@ bool PixelResolver::merge_neighbours() {
   // through neighbours that tile with both (the floors of two rooms meet under the wall between
   // them, and each tiles with the wall's side that faces its room).
   pair_neighbours();
-  // Per root: whether a group joined under it is in a folded pair. Two roots are kept apart only
-  // if both are.
-  in_fold_.assign(groups_.size(), 0);
-  for (const auto& [x, y] : folds_) in_fold_[x] = in_fold_[y] = 1;
+  if (folds_.empty()) {
+    for (const auto& [i, j] : tiles_) {
+      const uint32_t ri = root(i), rj = root(j);
+      if (ri != rj) groups_[std::max(ri, rj)].root = std::min(ri, rj);
+    }
+    return false;
+  }
+  // Up to 64 groups, per root a mask of the roots it is folded against, joined as roots join;
+  // past that, the folded pairs are searched.
+  const bool masks = groups_.size() <= 64;
+  if (masks) {
+    fold_mask_.assign(groups_.size(), 0);
+    for (const auto& [x, y] : folds_) {
+      fold_mask_[x] |= uint64_t{1} << y;
+      fold_mask_[y] |= uint64_t{1} << x;
+    }
+  }
   for (const auto& [i, j] : tiles_) {
     const uint32_t ri = root(i), rj = root(j);
     if (ri == rj) continue;
     bool apart = false;
-    if (in_fold_[ri] && in_fold_[rj])
+    if (masks) {
+      apart = (fold_mask_[ri] >> rj) & 1;
+    } else {
       for (const auto& [x, y] : folds_) {
         const uint32_t rx = root(x), ry = root(y);
         apart = apart || (rx == ri && ry == rj) || (rx == rj && ry == ri);
       }
+    }
     if (apart) continue;
-    groups_[std::max(ri, rj)].root = std::min(ri, rj);
-    in_fold_[std::min(ri, rj)] |= in_fold_[std::max(ri, rj)];
+    const uint32_t keep = std::min(ri, rj), gone = std::max(ri, rj);
+    groups_[gone].root = keep;
+    if (masks && fold_mask_[gone] != 0) {
+      // Whoever was folded against `gone` is folded against `keep`.
+      const uint64_t against = fold_mask_[gone];
+      fold_mask_[keep] |= against;
+      fold_mask_[gone] = 0;
+      for (uint64_t m = against; m != 0; m &= m - 1) {
+        const int k = std::countr_zero(m);
+        fold_mask_[k] = (fold_mask_[k] & ~(uint64_t{1} << gone)) | (uint64_t{1} << keep);
+      }
+    }
   }
-  return !folds_.empty();
+  return true;
 }
 
 // The merged groups' roots as layers, nearest first; ties go to the lower group id so the order is
