@@ -50,9 +50,12 @@ bool Solver::Impl::culled(uint32_t p, double facing) const {
 // the room, a chair's leg) its inside took a share of the pixel behind its own outside, the
 // study's books 30 to 60 % of their outside's light and the insides of the walls' boxes 1 to 3 %,
 // which bounced about inside and took shots to settle. For an eye outside their mesh such faces
-// take no light; they are still projected, and hide what they hid (left out, the seam between two
-// wall boxes under a window, where each box's outside covers part of a pixel, let the sun through
-// in a line across the floor).
+// take no light. A light's view still projects them, to hide what they hid: left out there, the
+// seam between two wall boxes under a window, where each box's outside covers part of a pixel, let
+// the sun through in a line across the floor. A patch's hemicube leaves them out (project): in a
+// pixel they lie folded behind their own outside, which leaves them nothing, yet each is one more
+// surface in every pixel its box covers, and a room of hundreds of double-sided boxes spent a third
+// of its bake layering them (bench/README.md, "Faces inside closed boxes").
 std::vector<uint32_t> Solver::Impl::enclosing(const glm::dvec3& x) const {
   std::vector<uint32_t> in;
   for (uint32_t k = 0; k < prep.closed_outside.size(); ++k)
@@ -118,7 +121,7 @@ void Solver::Impl::project(std::span<const uint32_t> elements) {
       const uint32_t p = e_patch[el];
       f_begin[el] = f_end[el] = static_cast<uint32_t>(out.size());
       const double facing = glm::dot(prep.normal[p], eye - patches[p].corners[0]);
-      if (p_shooting[p] == shooting_stamp || culled(p, facing)) continue;
+      if (p_shooting[p] == shooting_stamp || culled(p, facing) || sealed(p, eye_within)) continue;
       corners_of(el, poly);
       if (project_side(*cube, el, el, poly, facing, true, scratch[c], out)) f_end[el] = static_cast<uint32_t>(out.size());
     }
