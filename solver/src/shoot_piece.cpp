@@ -258,14 +258,14 @@ void Solver::Impl::receiver_form_factors(const Piece& piece, const std::vector<u
   auto near_piece = [&](uint32_t e) {
     return e_radius[e] < piece.diameter && glm::distance(piece.centre, e_centre[e]) - e_radius[e] < piece.diameter;
   };
-  // front_share per receiving patch near the piece, once per call (it walks the piece's leaves).
+  // front_shares: per receiving patch near the piece, once per call.
   std::vector<std::pair<uint32_t, double>> shares;
   if (exact_close) {
     for (uint32_t e : accepted)
       if (near_piece(e)) shares.emplace_back(e_patch[e], 0.0);
     std::sort(shares.begin(), shares.end());
     shares.erase(std::unique(shares.begin(), shares.end()), shares.end());
-    for (auto& [q, share] : shares) share = front_share(piece, q);
+    front_shares(piece, shares);
   }
   auto share_of = [&](uint32_t q) { return std::lower_bound(shares.begin(), shares.end(), std::make_pair(q, 0.0))->second; };
   // An uneven piece (a wall piece reaching from the room into the gap behind a cabinet) gives a
@@ -286,7 +286,7 @@ void Solver::Impl::receiver_form_factors(const Piece& piece, const std::vector<u
         // A receiver the hemicube did not see (the piece's centre lies behind it, though part of
         // the piece is in front: a floor piece under a block's face) is taken as unoccluded from
         // the part in front, which lies within a diameter of it. The exact form factor is to that
-        // part, and the light is that part's own unshot radiosity (front_share): the floor under a
+        // part, and the light is that part's own unshot radiosity (front_shares): the floor under a
         // block that stands on it is dark; and beside a wall box standing on a floor, the floor
         // piece reaching under the wall holds its light in front of the wall alone, where the
         // wall's foot took the piece's mean, diluted by the covered strip (a closed room of wall
@@ -302,21 +302,37 @@ void Solver::Impl::receiver_form_factors(const Piece& piece, const std::vector<u
   });
 }
 
-// The unshot radiosity of the part of `piece` in front of the plane of receiving patch q, as a
-// share of the piece's mean: its leaves there, by their centres (1 for a piece of uniform
-// radiosity; more where the part behind holds less, as a floor piece reaching under a wall box does).
-double Solver::Impl::front_share(const Piece& piece, uint32_t q) const {
-  if (piece.src.size() != 1 || e_child[piece.src[0]] == kNone || piece.src_area != piece.area) return 1.0;
-  const glm::dvec3& nq = prep.normal[q];
-  const glm::dvec3& oq = patches[q].corners[0];
-  double power = 0.0, area = 0.0;
-  for_leaves(piece.src[0], [&](uint32_t x) {
-    if (glm::dot(nq, e_centre[x] - oq) <= 0.0) return;
-    power += channel_sum(e_unshot[x]) * e_area[x];
-    area += e_area[x];
-  });
+// For each (q, share): the unshot radiosity of the part of `piece` in front of the plane of
+// receiving patch q, as a share of the piece's mean: its leaves there, by their centres (1 for a
+// piece of uniform radiosity; more where the part behind holds less, as a floor piece reaching
+// under a wall box does). The piece's leaves are listed once for all the patches, which are
+// shared among the threads.
+void Solver::Impl::front_shares(const Piece& piece, std::vector<std::pair<uint32_t, double>>& shares) {
+  if (piece.src.size() != 1 || e_child[piece.src[0]] == kNone || piece.src_area != piece.area) {
+    for (auto& entry : shares) entry.second = 1.0;
+    return;
+  }
+  struct Leaf {
+    glm::dvec3 centre;
+    double power, area;
+  };
+  std::vector<Leaf> lit;
+  for_leaves(piece.src[0], [&](uint32_t x) { lit.push_back({e_centre[x], channel_sum(e_unshot[x]) * e_area[x], e_area[x]}); });
   const double mean = channel_sum(piece.dB);
-  return area > 0.0 && mean > 0.0 ? power / area / mean : 0.0;
+  pool.parallel_for(shares.size(), [&](size_t begin, size_t end, size_t) {
+    for (size_t i = begin; i < end; ++i) {
+      const uint32_t q = shares[i].first;
+      const glm::dvec3& nq = prep.normal[q];
+      const glm::dvec3& oq = patches[q].corners[0];
+      double power = 0.0, area = 0.0;
+      for (const Leaf& x : lit) {
+        if (glm::dot(nq, x.centre - oq) <= 0.0) continue;
+        power += x.power;
+        area += x.area;
+      }
+      shares[i].second = area > 0.0 && mean > 0.0 ? power / area / mean : 0.0;
+    }
+  });
 }
 
 // The element tree under a piece that is one element, cut up, whose unshot radiosity is uneven

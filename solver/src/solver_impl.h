@@ -414,7 +414,7 @@ struct Solver::Impl {
   double near_error(const Piece& piece, uint32_t e) const;
   bool absorber_close(const Piece& piece) const;
   bool uneven_piece(uint32_t element) const;
-  double front_share(const Piece& piece, uint32_t q) const;
+  void front_shares(const Piece& piece, std::vector<std::pair<uint32_t, double>>& shares);
   // A node of an uneven piece's element tree (uneven_tree).
   struct ShotNode {
     glm::dvec3 centre;
