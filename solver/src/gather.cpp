@@ -389,6 +389,12 @@ glm::dvec3 Solver::Impl::gather_at(const GatherPoint& point, GatherWorker& w, ui
     w.inside[k] = glm::all(glm::greaterThanEqual(x, prep.solid_lo[k] - ahead)) &&
                   glm::all(glm::lessThanEqual(x, prep.solid_hi[k] + ahead));
   w.cube.place(x, n, up_hint(n));
+  // The insides of closed meshes the point lies outside of are left out, as in a shot's hemicube
+  // (projection.cpp, enclosing): they hold no light for it and lie behind their own outside. The
+  // test is a hair in front of the surface, as a shot's eye is: on a closed mesh's own face (a room
+  // modelled as one double-sided box) it could go either way.
+  const std::vector<uint32_t> within =
+      prep.closed_outside.empty() ? std::vector<uint32_t>{} : enclosing(x + n * (kEyeOffset * prep.diagonal));
   // Fragments carry the node's place in the list.
   w.frags.clear();
   w.group_of.resize(w.list.size());
@@ -400,6 +406,7 @@ glm::dvec3 Solver::Impl::gather_at(const GatherPoint& point, GatherWorker& w, ui
     const double facing = glm::dot(prep.normal[p], x - patches[p].corners[0]);
     const bool solid_seen_inside = prep.solid[p] != kNone && w.inside[prep.solid[p]];
     if (std::abs(facing) <= ahead || (facing < 0.0 && prep.back_hidden[p] && !solid_seen_inside)) continue;
+    if (sealed(p, within)) continue;
     corners_of(el, poly);
     project_side(w.cube, el, i, poly, facing, true, w.scratch, w.frags);
   }
