@@ -3,6 +3,7 @@
 #include "hemibake/solver/hemicube.h"
 #include "hemibake/solver/scenes.h"
 #include "hemibake/solver/solver.h"
+#include "add_box.h"
 #include "shown_on_floor.h"
 
 #include <gtest/gtest.h>
@@ -279,6 +280,44 @@ TEST(Gather, FloorUnderABoxStaysDark) {
   EXPECT_GT(n_inside, 8u);
   EXPECT_GT(outside, 0.0);
   EXPECT_LT(inside, 0.01 * outside);
+}
+
+// A room modelled as one closed double-sided box, as a modeller's flipped cube is exported: every
+// face emits E and reflects rho on both sides, so inside B = E / (1 - rho) everywhere and outside,
+// where the faces see nothing, B = E. A vertex lies on the box itself, where whether it is inside
+// the box could go either way; taken as outside, it left the room's faces out of its gather and
+// showed E (the attic's ceiling, bench/README.md, seventeenth session).
+TEST(Gather, RoomOfOneDoubleSidedBoxShowsItsFurnace) {
+  Scene scene;
+  const glm::dvec3 rho(0.6), e(1.0);
+  add_box(scene, glm::dvec3(0.0), glm::dvec3(4.0, 2.5, 3.0), rho, e, 0);
+  for (uint32_t k = 0; k < 6; ++k) {
+    const auto& c = scene.patches[k].corners;
+    add_quad(scene, c[3], c[2], c[1], c[0], rho, e, 0);
+  }
+  for (Patch& p : scene.patches) p.object = 1;
+  const Gathered solved = solve_with_gather(scene);
+  const Mesh& mesh = solved.mesh;
+  const double inside = e.x / (1.0 - rho.x);
+  double worst_in = 0.0, worst_out = 0.0;
+  size_t n_in = 0;
+  for (const Mesh::Element& el : mesh.elements) {
+    const bool faces_in = el.patch >= 6;  // the reversed quads look into the room
+    for (uint32_t i = el.boundary_begin; i < el.boundary_end; ++i) {
+      const double b = mesh.radiosity[mesh.boundary[i]].x;
+      if (faces_in) {
+        worst_in = std::max(worst_in, std::abs(b - inside) / inside);
+        ++n_in;
+      } else {
+        worst_out = std::max(worst_out, std::abs(b - e.x) / e.x);
+      }
+    }
+  }
+  std::printf("room of one double-sided box: %zu vertex values inside, worst %.4f; outside worst %.4f\n", n_in, worst_in,
+              worst_out);
+  EXPECT_GE(n_in, 24u);
+  EXPECT_LT(worst_in, 0.03);
+  EXPECT_LT(worst_out, 0.03);
 }
 
 // An open floor under a uniform sky of radiance L: E = pi L everywhere, so every vertex shows
