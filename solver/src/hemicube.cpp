@@ -802,7 +802,7 @@ class PixelResolver {
 // ordered by i and then by j's surface id. By i's links when it has few; by the pixel's groups
 // when it has more (a floor shares edges with much that stands on it, and a pixel holds a few
 // surfaces). One pass over the links for both kinds, where a pass per kind (and a third for
-// share_pixel) took a seventh of a cluttered room's bake.
+// share_pixel) made merge_neighbours a seventh of a cluttered room's samples.
 void PixelResolver::pair_neighbours() {
   folds_.clear();
   tiles_.clear();
@@ -1034,9 +1034,9 @@ void PixelResolver::layers(uint32_t lo, uint32_t hi) {
 // The groups come out in increasing surface id, each summed over its fragments in the pixel's
 // order (increasing fragment index). A pixel mostly holds a few surfaces, each cut into many
 // fragments where it is cut finely (a box's face under a lamp, in sixteen elements within one
-// pixel): each fragment's surface is looked up among the few met so far, where sorting the
-// fragments took a fifth of a cluttered room's bake. Past kFewSurfaces (a pixel of a coarse
-// near-field hemicube over a tessellated sphere's facets), the fragments are sorted.
+// pixel): each fragment's surface is looked up among the few met so far rather than sorting the
+// fragments. Past kFewSurfaces (a pixel of a coarse near-field hemicube over a tessellated sphere's
+// facets), the fragments are sorted.
 void PixelResolver::sum_groups(uint32_t lo, uint32_t hi) {
   constexpr size_t kFewSurfaces = 16;
   groups_.clear();
