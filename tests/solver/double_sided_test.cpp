@@ -169,17 +169,23 @@ TEST(DoubleSided, SmallClosedBoxesAreDarkInside) {
   EXPECT_LT(in.mean(), 0.01 * out.mean());
 }
 
+// Two rooms side by side, 2 m high and deep, the left one x 0..left_end, the right one
+// right_start..4 (inward faces); each lacks the wall toward the other, which the caller builds
+// between them. Returns the right room's patches, [first, second).
+std::pair<uint32_t, uint32_t> add_two_rooms(Scene& scene, double left_end, double right_start) {
+  add_box(scene, dvec3(0.0), dvec3(left_end, 2.0, 2.0), 2, Faces::kInward, dvec3(0.7), dvec3(0.0), 0,
+          {false, true, false, false, false, false});
+  const uint32_t right_begin = static_cast<uint32_t>(scene.patches.size());
+  add_box(scene, dvec3(right_start, 0.0, 0.0), dvec3(4.0, 2.0, 2.0), 2, Faces::kInward, dvec3(0.7), dvec3(0.0), 0,
+          {true, false, false, false, false, false});
+  return {right_begin, static_cast<uint32_t>(scene.patches.size())};
+}
+
 // Two rooms side by side, their common wall one double-sided quad (its twins face either room),
 // the light in the left one: the right room gets no light through the wall.
 TEST(DoubleSided, WallBetweenALitAndADarkRoomLetsNoLightThrough) {
   Scene scene;
-  // The left room's walls but its right one, then the right room's but its left one (inward).
-  add_box(scene, dvec3(0.0), dvec3(2.0, 2.0, 2.0), 2, Faces::kInward, dvec3(0.7), dvec3(0.0), 0,
-          {false, true, false, false, false, false});
-  const uint32_t right_begin = static_cast<uint32_t>(scene.patches.size());
-  add_box(scene, dvec3(2.0, 0.0, 0.0), dvec3(4.0, 2.0, 2.0), 2, Faces::kInward, dvec3(0.7), dvec3(0.0), 0,
-          {true, false, false, false, false, false});
-  const uint32_t right_end = static_cast<uint32_t>(scene.patches.size());
+  const auto [right_begin, right_end] = add_two_rooms(scene, 2.0, 2.0);
   // The common wall x = 2, double-sided.
   add_box(scene, dvec3(2.0, 0.0, 0.0), dvec3(2.0, 2.0, 2.0), 2, Faces::kBoth, dvec3(0.7), dvec3(0.0), 0,
           {false, true, true, true, true, true});
@@ -204,12 +210,7 @@ TEST(DoubleSided, WallBetweenALitAndADarkRoomLetsNoLightThrough) {
 // them and the insides hide the seam a second time); the right room stays dark against the left.
 TEST(DoubleSided, WallOfTwoBoxesBetweenALitAndADarkRoomLetsAlmostNoLightThrough) {
   Scene scene;
-  add_box(scene, dvec3(0.0), dvec3(1.9, 2.0, 2.0), 2, Faces::kInward, dvec3(0.7), dvec3(0.0), 0,
-          {false, true, false, false, false, false});
-  const uint32_t right_begin = static_cast<uint32_t>(scene.patches.size());
-  add_box(scene, dvec3(2.1, 0.0, 0.0), dvec3(4.0, 2.0, 2.0), 2, Faces::kInward, dvec3(0.7), dvec3(0.0), 0,
-          {true, false, false, false, false, false});
-  const uint32_t right_end = static_cast<uint32_t>(scene.patches.size());
+  const auto [right_begin, right_end] = add_two_rooms(scene, 1.9, 2.1);
   for (uint32_t k = 0; k < right_end; ++k) scene.patches[k].object = 1;
   // The wall: two boxes of 1 m, one over the other (their seam at y = 1), each an object.
   for (uint32_t b = 0; b < 2; ++b) {
