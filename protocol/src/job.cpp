@@ -60,7 +60,7 @@ const ParamInfo kParams[] = {
      [](const JobSpec& s) { return s.params.aeps; }, [](JobSpec& s, double v) { s.params.aeps = v; }},
     {"beps", "beps", Kind::kNumber, 0, kNoLimit, "radiosity tolerance (splits at jumps across an element)",
      [](const JobSpec& s) { return s.params.beps; }, [](JobSpec& s, double v) { s.params.beps = v; }},
-    {"convergence", "convergence", Kind::kNumber, 0, 1, "stop when unshot power is below this fraction of the emitted",
+    {"convergence", "convergence", Kind::kNumber, 0, 1, "stop when unshot power is below this fraction of the emitted and each shooter's below ten times this of its own light",
      [](const JobSpec& s) { return s.params.convergence; }, [](JobSpec& s, double v) { s.params.convergence = v; }},
     {"max_shots", "max-shots", Kind::kWhole, 0, static_cast<double>(1ull << 40), "stop after this many shots",
      [](const JobSpec& s) { return static_cast<double>(s.params.max_shots); },

@@ -188,11 +188,15 @@ bool Solver::Impl::step() {
     restart = true;
     return true;
   }
+  uint32_t best = kNone;
   if (stats.unshot_fraction < params.convergence || emitted_power <= 0.0) {
-    if (gather_step()) return true;
-    stats.converged = true;
-    done = true;
-    return false;
+    if (emitted_power > 0.0 && stats.shots < params.max_shots) best = lagging_unit();
+    if (best == kNone) {
+      if (gather_step()) return true;
+      stats.converged = true;
+      done = true;
+      return false;
+    }
   }
   if (stats.shots >= params.max_shots) {
     if (gather_step()) return true;
@@ -201,7 +205,7 @@ bool Solver::Impl::step() {
     return false;
   }
   const auto t0 = Clock::now();
-  const uint32_t best = strongest_unit();
+  if (best == kNone) best = strongest_unit();
   shooting_unit = best;
   if (replay(best)) {
     ++stats.replayed_shots;
@@ -221,6 +225,27 @@ uint32_t Solver::Impl::strongest_unit() const {
   for (uint32_t u = 1; u < u_unshot.size(); ++u)
     if (u_unshot[u] > u_unshot[best]) best = u;
   for (double u : u_unshot) HEMIBAKE_DCHECK(u >= 0.0);
+  return best;
+}
+
+// Once the unshot power is below `convergence` of the emitted, the unit with the most unshot power
+// among those still holding more than kLocalConvergence times `convergence` of their own light
+// (radiosity times area), or kNone. The global test alone weighs every surface by the scene's
+// power: an attic room lit by an 80 W spot, beside an outside lit by the sun, stopped with 191 of
+// the scene's 411 shooters holding over 1 % of their own light unshot, the room's floor and walls
+// 0.88 to 0.97 of the path tracer's light (0.97 to 1.04 with the convergence ten times finer,
+// 0.96 to 1.02 with this test). Units holding under kLocalFloor times `convergence` of the emitted
+// power are left: their light is too dim to matter anywhere.
+uint32_t Solver::Impl::lagging_unit() const {
+  if (first_pass) return kNone;
+  std::vector<double> light(u_unshot.size(), 0.0);
+  for (uint32_t e : leaves) light[p_unit[e_patch[e]]] += channel_sum(e_b[e]) * e_area[e];
+  const double floor = kLocalFloor * params.convergence * emitted_power;
+  uint32_t best = kNone;
+  for (uint32_t u = 0; u < u_unshot.size(); ++u) {
+    if (u_unshot[u] <= floor || u_unshot[u] <= kLocalConvergence * params.convergence * light[u]) continue;
+    if (best == kNone || u_unshot[u] > u_unshot[best]) best = u;
+  }
   return best;
 }
 

@@ -74,6 +74,11 @@ constexpr int kCubeLevels = kMaxShooterDepth + 3;
 // Cluster pieces carrying at least this share of the emitted power take a finer hemicube
 // (finer_level, piece_headroom).
 constexpr double kFinePower = 1e-3;
+// Once the unshot power is below `convergence` of the emitted, units still holding more than
+// kLocalConvergence times `convergence` of their own light shoot on, unless their unshot power is
+// below kLocalFloor times `convergence` of the emitted (lagging_unit).
+constexpr double kLocalConvergence = 10.0;
+constexpr double kLocalFloor = 1e-3;
 // pools.cpp: the first pass looks for light pools once every emitter has shot and the unshot power
 // is below this share of the emitted (or at convergence): the emitters' light and its first
 // reflections. An element splits there when the light its points took differs by more than
@@ -298,6 +303,7 @@ struct Solver::Impl {
   static std::unique_ptr<Impl> next_pass(Impl& first);
   bool step();
   uint32_t strongest_unit() const;
+  uint32_t lagging_unit() const;
   void fresh_shot(uint32_t unit);
   void clear_unshot(uint32_t unit);
   void receive(uint32_t e, const glm::dvec3& dB, double f);

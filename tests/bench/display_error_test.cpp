@@ -643,7 +643,11 @@ TEST(SharpShadows, BoxesOnATableBeforeAGlowingWallShowThePathTracersShadows) {
   EXPECT_LT(with.median, 0.75 * without.median);
   EXPECT_LT(with.p90, 0.5 * without.p90);
   EXPECT_LT(with.median, 0.25);
-  EXPECT_NEAR(with.mean_ratio, 1.0, 0.05);
+  // Converged, this scene bakes about 7 % brighter than the path tracer with or without sharp
+  // shadows (before every shooter's own light had to converge, 1.012 at the default convergence
+  // and 1.067 at 1e-4: the light left unshot had hidden it; bench/README.md).
+  EXPECT_NEAR(with.mean_ratio, 1.0, 0.09);
+  EXPECT_LE(with.mean_ratio, without.mean_ratio);
 }
 
 // A room modelled as builders model walls: six closed boxes 25 cm thick, lit by a panel 1 cm under

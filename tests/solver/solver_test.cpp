@@ -153,6 +153,36 @@ INSTANTIATE_TEST_SUITE_P(Solver, ClosedBox,
                                   (test.param.method == Method::kAntiAliased ? "Aa" : "Classical");
                          });
 
+// Two closed rooms apart, each a furnace (every patch emits E and reflects rho): B = E / (1 - rho)
+// in each, whatever the other holds. The dim room emits 5e-4 of the bright one's power, under the
+// global convergence test's share of 1e-3: that test alone stopped before the dim room shot at all
+// (its walls read E, 0.5 of the closed form). Each room's light must converge on its own scale.
+TEST(Solver, DimRoomBesideABrightOneConvergesToItsOwnClosedForm) {
+  const glm::dvec3 rho(0.5), bright(1.0), dim(5e-4);
+  Scene scene = make_closed_box(2.0, 3, rho, bright, false);
+  const uint32_t dim_begin = static_cast<uint32_t>(scene.patches.size());
+  for (Patch p : make_closed_box(2.0, 3, rho, dim, false).patches) {
+    for (auto& c : p.corners) c.x += 3.0;
+    p.object = 1;
+    scene.patches.push_back(p);
+  }
+  const Mesh mesh = solve(scene);
+  auto mean_radiosity = [&](bool dim_room) {
+    double ba = 0.0, a = 0.0;
+    for (const auto& el : mesh.elements) {
+      if ((el.patch >= dim_begin) != dim_room) continue;
+      ba += mean3(el.radiosity) * el.area;
+      a += el.area;
+    }
+    return ba / a;
+  };
+  const double bright_room = mean_radiosity(false) / (mean3(bright) / (1.0 - rho.x));
+  const double dim_room = mean_radiosity(true) / (mean3(dim) / (1.0 - rho.x));
+  std::printf("mean radiosity over the closed form: bright room %.4f, dim room %.4f\n", bright_room, dim_room);
+  EXPECT_NEAR(bright_room, 1.0, 0.01);
+  EXPECT_NEAR(dim_room, 1.0, 0.02);
+}
+
 // Per element, the worst channel's relative error against the closed form; its largest value and
 // RMS over the elements, and the energy sum A B over sum A E / (1 - rho).
 struct ClosedFormError {
