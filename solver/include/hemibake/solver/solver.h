@@ -84,7 +84,9 @@ struct Params {
   double beps = 0.03;           ///< radiosity tolerance: split when a shot's radiosity differs across
                                 ///< an element's corners (or its hidden part) by more than beps times
                                 ///< the scene's mean emitted radiosity per unit area
-  double convergence = 1e-3;    ///< stop when unshot power < convergence * emitted power
+  double convergence = 1e-3;    ///< stop when unshot power < convergence * emitted power and no
+                                ///< shooter holds unshot power over 10 * convergence of its own
+                                ///< light (those under 1e-3 * convergence of the emitted aside)
   uint64_t max_shots = 1'000'000;     ///< stop after this many shots
   uint64_t max_elements = 2'000'000;  ///< no splits past this many leaf elements
   uint32_t threads = 0;         ///< worker threads within a shot; 0 = hardware concurrency
