@@ -16,11 +16,11 @@ namespace hemibake::solver {
 // is by how much the piece's dB could grow before that round would have split something.
 bool Solver::Impl::refine(const Piece& piece, const detail::Shaft& shaft, std::vector<uint32_t>& accepted,
                           std::vector<uint32_t>& seen, double& split_room) {
-  // This piece's share of the emitted power: how much the interaction matters (criterion a). A
-  // strong emitter's piece (shooters.cpp) weighs as all n of them, judge squared times its own (they
-  // see a receiver alike: the Cornell box's p90 7.2 -> 6.8 %); the other criteria judge dB times
-  // the judge (sqrt(n)).
-  const double weight = piece.judge * piece.judge * piece.power / emitted_power;
+  // This piece's share of the light its shot acts on (feps_scale): how much the interaction matters
+  // (criterion a). A strong emitter's piece (shooters.cpp) weighs as all n of them, judge squared
+  // times its own (they see a receiver alike: the Cornell box's p90 7.2 -> 6.8 %); the other
+  // criteria judge dB times the judge (sqrt(n)).
+  const double weight = piece.judge * piece.judge * piece.power / feps_scale;
   const glm::dvec3 judged = piece.judge * piece.dB;
   for (int round = 0; round < kMaxRounds; ++round) {
     receiver_form_factors(piece, accepted);
@@ -42,6 +42,26 @@ bool Solver::Impl::refine(const Piece& piece, const detail::Shaft& shaft, std::v
     split_receivers(to_split, shaft, accepted, seen);
   }
   return false;
+}
+
+// The power that FEPS is a share of for a whole-scene shot of `unit`: the light (radiosity times
+// area) of the receivers it reaches (the hemicube's visible `accepted`, and the `near` ones its parts
+// serve), at least the unit's unshot power and at most the emitted power. The paper's FEPS weighs
+// every interaction by the whole scene's emitted power; a room lit far more dimly than the rest (an
+// interior the sun enters through a window, beside a sunlit outside that holds most of the power)
+// then stayed coarse: the Blender house's sunlit room 15.2 % median and 34.1 % p90 error as
+// displayed (bench/README.md, "FEPS against the light in view"). In a room that holds the light
+// the receivers hold the emitted power or more, and nothing changes; a lamp's first shot, into
+// receivers still dark, is weighed against its own power, the emitted power where it lights the
+// room alone. A shot's near-field parts keep its scale, and a partial shot (reshoot_split) takes
+// the unit's last whole-scene one.
+double Solver::Impl::interaction_scale(const std::vector<uint32_t>& accepted, const std::vector<uint32_t>& near,
+                                       uint32_t unit, double piece_power) const {
+  double light = 0.0;
+  for (uint32_t e : accepted)
+    if (projected(e) && e_ff[e] > 0.0) light += channel_sum(e_b[e]) * e_area[e];
+  for (uint32_t e : near) light += channel_sum(e_b[e]) * e_area[e];
+  return std::min(emitted_power, std::max({light, u_unshot[unit], piece_power}));
 }
 
 // This shot's radiosity at every accepted receiver (shot_b), and its spread around every vertex

@@ -63,6 +63,14 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, const std::v
     for (const Fragment& f : frags)
       if (!(f.element & detail::kBackFace)) seen_share += static_cast<double>(f.area) * f.trans * (*pixel_weight)[f.pixel];
 
+  const uint32_t unit = p_unit[piece.patch];
+  if (u_feps_scale.size() < u_unshot.size()) u_feps_scale.resize(u_unshot.size(), 0.0);
+  if (whole_scene) {
+    feps_scale = interaction_scale(accepted, near, unit, piece.power);
+    u_feps_scale[unit] = feps_scale;
+  } else if (piece.depth == 0 || !(feps_scale > 0.0)) {
+    feps_scale = u_feps_scale[unit] > 0.0 ? u_feps_scale[unit] : emitted_power;
+  }
   double split_room = std::numeric_limits<double>::infinity();
   const bool settled = refine(piece, shaft, accepted, seen, split_room);
   receiver_form_factors(piece, accepted);

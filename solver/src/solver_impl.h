@@ -304,6 +304,8 @@ struct Solver::Impl {
   bool step();
   uint32_t strongest_unit() const;
   uint32_t lagging_unit() const;
+  double interaction_scale(const std::vector<uint32_t>& accepted, const std::vector<uint32_t>& near, uint32_t unit,
+                           double piece_power) const;
   void fresh_shot(uint32_t unit);
   void clear_unshot(uint32_t unit);
   void receive(uint32_t e, const glm::dvec3& dB, double f);
@@ -577,6 +579,10 @@ struct Solver::Impl {
   bool building_volume = false;  // build_cluster: a volume pool's tree (cut on centres only)
   std::vector<uint32_t> unit_patch, unit_node, p_unit;
   std::vector<double> u_unshot;  // unshot power per unit
+  // The power FEPS weighs the current shot's interactions against (interaction_scale), and per
+  // unit its last whole-scene shot's (0: none yet).
+  double feps_scale = 0.0;
+  std::vector<double> u_feps_scale;
   // Replays: per unit, the form factors of its last shot (replay()).
   std::vector<ShotRecord> u_record;
   size_t record_bytes = 0;

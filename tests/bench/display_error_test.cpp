@@ -7,12 +7,14 @@
 
 #include "hemibake/protocol/bake.h"
 #include "hemibake/protocol/gltf.h"
+#include "hemibake/solver/hemicube.h"
 #include "hemibake/solver/scenes.h"
 #include "hemibake/solver/solver.h"
 
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -713,3 +715,52 @@ TEST(CoverNearSurface, CornersOfAbuttingWallBoxesAreLitWithTheGather) {
 }  // namespace hemibake::bench
 
 
+
+namespace hemibake::bench {
+namespace {
+
+// A small lamp 60 cm over the floor of a closed room with black walls, beside a closed room that
+// glows 10 000 times as strongly: the dim room's floor shows rho E F(x -> lamp) exactly (Lambert's
+// formula; nothing else lights it). The lamp's shot splits the floor by its form factors against
+// the light of what it sees (at least its own power), not against the whole scene's power: weighed
+// by the bright room's power, the pool stayed coarse (median error 44 %, p90 71 % as displayed;
+// 0.4 % and 0.9 % now).
+TEST(LocalTolerance, LampPoolInADimRoomBesideABrightOneIsResolved) {
+  Scene scene = solver::make_closed_box(2.0, 2, dvec3(0.5), dvec3(1.0), false);  // 24 units of power
+  const dvec3 o(4.0, 0.0, 0.0), black(0.0), none(0.0);
+  // The dim room, 2 x 1 x 2 m, faces looking in; its floor the only reflector.
+  const dvec3 a = o, b = o + dvec3(2, 0, 0), c = o + dvec3(2, 0, 2), d = o + dvec3(0, 0, 2);
+  const dvec3 up(0, 1, 0);
+  solver::add_quad(scene, a, d, c, b, dvec3(0.5), none, 1);                             // floor
+  solver::add_quad(scene, a + up, b + up, c + up, d + up, black, none, 2);             // ceiling
+  solver::add_quad(scene, a, b, b + up, a + up, black, none, 2);                       // z = 0
+  solver::add_quad(scene, d, d + up, c + up, c, black, none, 2);                       // z = 2
+  solver::add_quad(scene, a, a + up, d + up, d, black, none, 2);                       // x = 4
+  solver::add_quad(scene, b, c, c + up, b + up, black, none, 2);                       // x = 6
+  const double h = 0.6, s = 0.15;
+  const std::array<dvec3, 4> lamp{o + dvec3(1 - s, h, 1 - s), o + dvec3(1 + s, h, 1 - s), o + dvec3(1 + s, h, 1 + s),
+                                   o + dvec3(1 - s, h, 1 + s)};
+  const double e = 24.0 * 1e-4 / (4 * s * s);
+  solver::add_quad(scene, lamp[0], lamp[1], lamp[2], lamp[3], black, dvec3(e), 3);  // faces down
+  ASSERT_EQ(solver::validate(scene), "");
+  const solver::Mesh mesh = solve(scene, false, true);
+  const double slack = plane_slack(mesh);
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  std::vector<double> errors;
+  while (errors.size() < 300) {
+    const dvec3 x = o + dvec3(0.4 + 1.2 * unit(rng), 0.0, 0.4 + 1.2 * unit(rng));  // within 60 cm of the pool's centre
+    const double truth = 0.5 * e * solver::point_polygon_form_factor(x, up, lamp);
+    dvec3 shown(0.0);
+    ASSERT_TRUE(displayed_value(mesh, x, up, slack, shown));
+    errors.push_back(std::abs(shown.x - truth) / truth);
+  }
+  std::sort(errors.begin(), errors.end());
+  const double median = errors[errors.size() / 2], p90 = errors[errors.size() * 9 / 10];
+  std::printf("dim room's lamp pool as displayed: median %.3f p90 %.3f\n", median, p90);
+  EXPECT_LT(median, 0.05);
+  EXPECT_LT(p90, 0.15);
+}
+
+}  // namespace
+}  // namespace hemibake::bench
