@@ -51,7 +51,7 @@ bool Solver::Impl::refine(const Piece& piece, const detail::Shaft& shaft, std::v
 // interior the sun enters through a window, beside a sunlit outside that holds most of the power)
 // then stayed coarse: the Blender house's sunlit room 15.2 % median and 34.1 % p90 error as
 // displayed (bench/README.md, "FEPS against the light in view"). In a room that holds the light
-// the receivers hold the emitted power or more, and nothing changes; a lamp's first shot, into
+// the receivers hold the emitted power or more, and little changes; a lamp's first shot, into
 // receivers still dark, is weighed against its own power, the emitted power where it lights the
 // room alone. A shot's near-field parts keep its scale, and a partial shot (reshoot_split) takes
 // the unit's last whole-scene one.
