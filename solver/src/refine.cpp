@@ -45,8 +45,8 @@ bool Solver::Impl::refine(const Piece& piece, const detail::Shaft& shaft, std::v
 }
 
 // The power that FEPS is a share of for a whole-scene shot of `unit`: the light (radiosity times
-// area) of the receivers it reaches (the hemicube's visible `accepted`, and the `near` ones its parts
-// serve), at least the unit's unshot power and at most the emitted power. The paper's FEPS weighs
+// area) of the receivers it reaches (the hemicube's visible `accepted`, and the `near` ones its
+// parts serve), at least the unit's unshot power and at most the emitted power. The paper's FEPS weighs
 // every interaction by the whole scene's emitted power; a room lit far more dimly than the rest (an
 // interior the sun enters through a window, beside a sunlit outside that holds most of the power)
 // then stayed coarse: the Blender house's sunlit room 15.2 % median and 34.1 % p90 error as
@@ -59,8 +59,8 @@ double Solver::Impl::interaction_scale(const std::vector<uint32_t>& accepted, co
                                        uint32_t unit, double piece_power) const {
   double light = 0.0;
   for (uint32_t e : accepted)
-    if (projected(e) && e_ff[e] > 0.0) light += channel_sum(e_b[e]) * e_area[e];
-  for (uint32_t e : near) light += channel_sum(e_b[e]) * e_area[e];
+    if (projected(e) && e_ff[e] > 0.0) light += light_of(e);
+  for (uint32_t e : near) light += light_of(e);
   return std::min(emitted_power, std::max({light, u_unshot[unit], piece_power}));
 }
 

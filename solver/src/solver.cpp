@@ -239,7 +239,7 @@ uint32_t Solver::Impl::strongest_unit() const {
 uint32_t Solver::Impl::lagging_unit() const {
   if (first_pass) return kNone;
   std::vector<double> light(u_unshot.size(), 0.0);
-  for (uint32_t e : leaves) light[p_unit[e_patch[e]]] += channel_sum(e_b[e]) * e_area[e];
+  for (uint32_t e : leaves) light[p_unit[e_patch[e]]] += light_of(e);
   const double floor = kLocalFloor * params.convergence * emitted_power;
   uint32_t best = kNone;
   for (uint32_t u = 0; u < u_unshot.size(); ++u) {

@@ -304,6 +304,8 @@ struct Solver::Impl {
   bool step();
   uint32_t strongest_unit() const;
   uint32_t lagging_unit() const;
+  // Element e's light: radiosity (channels summed) times area.
+  double light_of(uint32_t e) const { return channel_sum(e_b[e]) * e_area[e]; }
   double interaction_scale(const std::vector<uint32_t>& accepted, const std::vector<uint32_t>& near, uint32_t unit,
                            double piece_power) const;
   void fresh_shot(uint32_t unit);
