@@ -21,8 +21,9 @@
 // spread evenly over the sphere (a Fibonacci lattice), each of weight S * 4 pi / kSkyDirections:
 // E = S * integral of visible cos(theta) dw. Per receiver the sum is divided by the same sum with
 // nothing hidden (computed from its normal) and multiplied by pi, so that an open surface gets
-// exactly pi S. Refinement re-projects every direction after splits (the directions' fragments
-// are not kept: their memory would grow with the directions).
+// exactly pi S. After splits, each direction is projected again for the new children and what may
+// share their pixels (sky_seen): the directions' fragments are not kept, since their memory would
+// grow with the directions.
 #include "solver_impl.h"
 
 #include <glm/geometric.hpp>
@@ -495,11 +496,12 @@ std::vector<glm::dvec3> Solver::Impl::sky_factors(uint32_t step, std::span<const
   return sums;
 }
 
-// The sky's shot: every leaf's view of the sky, refined by the criteria of refine.cpp (every
-// direction projected again after each round of splits, at most kSkyRounds rounds). The rounds
-// that decide splits look along every kSkyRefineStep-th direction only; the light is then
-// distributed from all of them. A large scene's sky takes a minute (1024 projections of 130 000
-// elements), so the shot goes on over several steps, each projecting directions for about
+// The sky's shot: every leaf's view of the sky, refined by the criteria of refine.cpp (at most
+// kSkyRounds rounds; after the first, each direction is projected again for the new children
+// alone, sky_seen). The rounds that decide splits look along every kSkyRefineStep-th direction
+// only; the light is then distributed from all of them. A large scene's sky takes a quarter of a
+// minute (the first round and the final pass project its 143 000 elements along 512 directions),
+// so the shot goes on over several steps, each projecting directions for about
 // kSkyPartSeconds, and the progress is reported between them; the sums, and so the result, do not
 // depend on where a part ends. Returns whether the shot is complete.
 bool Solver::Impl::shoot_sky_part() {
