@@ -369,10 +369,12 @@ void Solver::Impl::shoot_light(size_t index) {
 // Adds to `sums` (per element of `elements`, indexed by element: visible and open) the sky's parallel
 // projections along directions first, first + step, ... (each of weight 4 pi step / kSkyDirections)
 // but the multiples of `skip` (0: none), until the last or, given `seconds`, once that long has
-// passed. Returns the next direction. `only_fresh`: `elements` are the children of a round's splits,
-// and each view holds what may share a pixel with them (sky_seen) rather than every leaf.
+// passed. Returns the next direction. Given `leaves_in_order` (every leaf, in the order a view of
+// all projects them), `elements` are the children of a round's splits, and each view holds what of
+// those leaves may share a pixel with them (sky_seen).
 uint32_t Solver::Impl::add_sky_directions(uint32_t step, uint32_t skip, uint32_t first, std::span<const uint32_t> elements,
-                                          std::vector<glm::dvec3>& sums, double seconds, bool only_fresh) {
+                                          std::vector<glm::dvec3>& sums, double seconds,
+                                          std::span<const uint32_t> leaves_in_order) {
   const auto t0 = Clock::now();
   sums.resize(e_patch.size(), glm::dvec3(0.0));
   const double omega = 4.0 * kPi * step / kSkyDirections;
@@ -384,8 +386,8 @@ uint32_t Solver::Impl::add_sky_directions(uint32_t step, uint32_t skip, uint32_t
     const glm::dvec3 towards_sky = fibonacci_direction(k, kSkyDirections);
     v = parallel_view(-towards_sky, sky_cube->resolution());
     v.cube = sky_cube.get();
-    if (only_fresh) {
-      sky_seen(v, elements, seen);
+    if (!leaves_in_order.empty()) {
+      sky_seen(v, elements, leaves_in_order, seen);
       project_light_view(v, seen);
     } else {
       project_light_view(v, elements);
@@ -406,14 +408,18 @@ uint32_t Solver::Impl::add_sky_directions(uint32_t step, uint32_t skip, uint32_t
   return k;
 }
 
-// What a sky direction's view must hold for `fresh`, the children of a round's splits: the children,
-// and as occluders, of everything whose projection may share a pixel with one of them, the largest
-// elements that hold no child (gather_seen's rule for a near-field hemicube). A pixel's rule reads
-// only the pixel's own fragments, and an occluder's polygon covers what its leaves cover, so the
-// children get what a view of every leaf gives them. On the atrium the rounds after the first split
-// 70 to 221 elements of 142 000 each, and projecting every leaf along 128 directions per round took
-// 15 s of its 31 s of lights and sky (22 s in all since).
-void Solver::Impl::sky_seen(const LightView& v, std::span<const uint32_t> fresh, std::vector<uint32_t>& seen) {
+// What a sky direction's view must hold for `fresh`, the children of a round's splits: of every
+// leaf (in the order of `leaves`, which holds the children), those whose bounding sphere may reach
+// a pixel of a child's. A pixel's rule reads only the pixel's own fragments, in the order they were
+// projected, so the children get to the bit what a view of every leaf gives them. (Occluders drawn
+// as whole patches rather than their leaves, as for a near-field hemicube, differ by rounding:
+// where a panel lies on a wall, the two surfaces' mean depths in a pixel tie to the last bits, and
+// the pixel went to the other one; a child on the Blender room's panel got up to 11 % more or less.)
+// On the atrium the rounds after the first split 70 to 221 elements of 142 000 each, and
+// projecting every leaf along 128 directions per round took 15 s of its 31 s of lights and sky
+// (23 s in all since).
+void Solver::Impl::sky_seen(const LightView& v, std::span<const uint32_t> fresh, std::span<const uint32_t> leaves,
+                            std::vector<uint32_t>& seen) {
   const int res = static_cast<int>(v.cube->resolution());
   const double cell = 2.0 * v.half / res;
   // The pixels (rows y, columns x) a sphere's projection may touch, and one more on each side
@@ -443,29 +449,13 @@ void Solver::Impl::sky_seen(const LightView& v, std::span<const uint32_t> fresh,
     return table[y1 * side + x1] + table[y0 * side + x0] != table[y0 * side + x1] + table[y1 * side + x0];
   };
   seen.clear();
-  ++mark;
-  for (uint32_t e : fresh)
-    for (uint32_t x = e; x != kNone && e_mark[x] != mark; x = e_parent[x]) e_mark[x] = mark;
-  pool.parallel_for(tree_patch.size(), [&](size_t begin, size_t end, size_t c) {
+  pool.parallel_for(leaves.size(), [&](size_t begin, size_t end, size_t c) {
     std::vector<uint32_t>& out = gather_chunks[c];
     out.clear();
-    std::vector<uint32_t> stack;
-    for (size_t i = begin; i < end; ++i) {
-      stack.push_back(p_root[tree_patch[i]]);
-      while (!stack.empty()) {
-        const uint32_t x = stack.back();
-        stack.pop_back();
-        if (e_mark[x] != mark) {
-          if (meets_fresh(x)) out.push_back(x);
-        } else if (e_child[x] == kNone) {
-          out.push_back(x);  // a child
-        } else {
-          for (uint32_t k = 4; k-- > 0;) stack.push_back(e_child[x] + k);
-        }
-      }
-    }
+    for (size_t i = begin; i < end; ++i)
+      if (meets_fresh(leaves[i])) out.push_back(leaves[i]);
   });
-  for (size_t c = 0; c < pool.chunk_count(tree_patch.size()); ++c)
+  for (size_t c = 0; c < pool.chunk_count(leaves.size()); ++c)
     seen.insert(seen.end(), gather_chunks[c].begin(), gather_chunks[c].end());
 }
 
@@ -516,7 +506,8 @@ bool Solver::Impl::shoot_sky_part() {
   grow_scratch();
   const bool only_fresh = !sh.final_pass && !sh.fresh.empty();
   sh.next = add_sky_directions(step, sh.final_pass && sh.reuse ? kSkyRefineStep : 0, sh.next,
-                               only_fresh ? sh.fresh : sh.accepted, sh.sums, kSkyPartSeconds, only_fresh);
+                               only_fresh ? sh.fresh : sh.accepted, sh.sums, kSkyPartSeconds,
+                               only_fresh ? std::span<const uint32_t>(sh.accepted) : std::span<const uint32_t>());
   if (sh.next < kSkyDirections) return false;
   std::vector<glm::dvec3> f = std::move(sh.sums);
   sh.sums.clear();

@@ -288,8 +288,10 @@ struct Solver::Impl {
   void shoot_light(size_t index);  // lights[index]
   std::vector<glm::dvec3> sky_factors(uint32_t directions_step, std::span<const uint32_t> elements);
   uint32_t add_sky_directions(uint32_t step, uint32_t skip, uint32_t first, std::span<const uint32_t> elements,
-                              std::vector<glm::dvec3>& sums, double seconds, bool only_fresh = false);
-  void sky_seen(const LightView& view, std::span<const uint32_t> fresh, std::vector<uint32_t>& seen);
+                              std::vector<glm::dvec3>& sums, double seconds,
+                              std::span<const uint32_t> leaves_in_order = {});
+  void sky_seen(const LightView& view, std::span<const uint32_t> fresh, std::span<const uint32_t> leaves_in_order,
+                std::vector<uint32_t>& seen);
   void finish_sky_factors(uint32_t step, std::span<const uint32_t> elements, std::vector<glm::dvec3>& sums) const;
   bool shoot_sky_part();
   void light_receive(uint32_t e, const glm::dvec3& irradiance);
