@@ -378,7 +378,7 @@ uint32_t Solver::Impl::add_sky_directions(uint32_t step, uint32_t skip, uint32_t
   const auto t0 = Clock::now();
   sums.resize(e_patch.size(), glm::dvec3(0.0));
   const double omega = 4.0 * kPi * step / kSkyDirections;
-  LightView v;  // one for all the directions: its per-element lists keep their memory
+  LightView v;  // placed anew for each direction
   std::vector<uint32_t> seen;
   uint32_t k = first;
   for (; k < kSkyDirections && (seconds <= 0.0 || seconds_since(t0) < seconds); k += step) {
@@ -504,7 +504,7 @@ bool Solver::Impl::shoot_sky_part() {
   }
   const uint32_t step = sh.final_pass ? 1 : kSkyRefineStep;
   grow_scratch();
-  const bool only_fresh = !sh.final_pass && !sh.fresh.empty();
+  const bool only_fresh = !sh.fresh.empty();  // cleared before the final pass
   sh.next = add_sky_directions(step, sh.final_pass && sh.reuse ? kSkyRefineStep : 0, sh.next,
                                only_fresh ? sh.fresh : sh.accepted, sh.sums, kSkyPartSeconds,
                                only_fresh ? std::span<const uint32_t>(sh.accepted) : std::span<const uint32_t>());
@@ -557,9 +557,8 @@ bool Solver::Impl::shoot_sky_part() {
   // directions, the same geometry).
   for (uint32_t e : to_split)
     for (uint32_t k = 0; k < 4; ++k) sh.fresh.push_back(e_child[e] + k);
-  sh.sums = std::move(round_sums);
+  sh.sums = std::move(round_sums);  // the children, appended by split(), start from zero
   sh.sums.resize(e_patch.size(), glm::dvec3(0.0));
-  for (uint32_t e : sh.fresh) sh.sums[e] = glm::dvec3(0.0);
   return false;
 }
 
