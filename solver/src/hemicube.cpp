@@ -18,6 +18,7 @@
 #include <map>
 #include <numbers>
 #include <numeric>
+#include <stdexcept>
 
 namespace hemibake::solver {
 namespace detail {
@@ -609,9 +610,63 @@ void Hemicube::rasterize(const Face& face, uint32_t element, Method method,
   }
 }
 
+namespace {
+
+// Keeps the part of the polygon in s.poly2 (a face's pixel coordinates) that lies in window w;
+// false when none does. s.inv_depths keeps the whole polygon's corners: rasterize takes only their
+// range from them, to clamp rounding.
+bool keep_to_window(const FaceWindow& w, ProjectScratch& s) {
+  double xmin = s.poly2[0].x, xmax = xmin, ymin = s.poly2[0].y, ymax = ymin;
+  for (const glm::dvec2& p : s.poly2) {
+    xmin = std::min(xmin, p.x);
+    xmax = std::max(xmax, p.x);
+    ymin = std::min(ymin, p.y);
+    ymax = std::max(ymax, p.y);
+  }
+  if (xmax <= w.x0 || xmin >= w.x1 || ymax <= w.y0 || ymin >= w.y1) return false;
+  auto cut = [&s](int axis, double at, bool below) {
+    s.window_cut.resize(2 * s.poly2.size() + 2);
+    s.window_cut.resize(cut_loop(s.poly2.data(), s.poly2.size(), axis, at, below, s.window_cut.data()));
+    std::swap(s.poly2, s.window_cut);
+  };
+  if (xmin < w.x0) cut(0, w.x0, false);
+  if (xmax > w.x1) cut(0, w.x1, true);
+  if (ymin < w.y0) cut(1, w.y0, false);
+  if (ymax > w.y1) cut(1, w.y1, true);
+  return s.poly2.size() >= 3;
+}
+
+}  // namespace
+
+void Hemicube::widen_windows(std::span<const Fragment> fragments, FaceWindows& windows) const {
+  for (const Fragment& fr : fragments) {
+    size_t f = 0;
+    while (f + 1 < face_count_ && fr.pixel >= faces_[f + 1].offset) ++f;
+    const uint32_t local = fr.pixel - faces_[f].offset;
+    const int x = static_cast<int>(local % n_), y = static_cast<int>(local / n_);
+    FaceWindow& w = windows[f];
+    if (w.empty()) {
+      w = {x, y, x + 1, y + 1};
+      continue;
+    }
+    w.x0 = std::min(w.x0, x);
+    w.x1 = std::max(w.x1, x + 1);
+    w.y0 = std::min(w.y0, y);
+    w.y1 = std::max(w.y1, y + 1);
+  }
+}
+
+uint64_t Hemicube::window_pixels(const FaceWindows& windows) const {
+  uint64_t pixels = 0;
+  for (size_t f = 0; f < face_count_; ++f)
+    if (!windows[f].empty())
+      pixels += static_cast<uint64_t>(windows[f].x1 - windows[f].x0) * static_cast<uint64_t>(windows[f].y1 - windows[f].y0);
+  return pixels;
+}
+
 void Hemicube::project(std::span<const glm::dvec3> polygon, uint32_t element, Method method,
                        ProjectScratch& scratch, std::vector<Fragment>& out,
-                       const glm::dvec3* plane_normal) const {
+                       const glm::dvec3* plane_normal, const FaceWindows* windows) const {
   to_local(polygon, scratch);
   bool any_in_front = full_;
   for (int i = 0; i < scratch.local_n; ++i) any_in_front = any_in_front || scratch.local[i].z > 0.0;
@@ -623,7 +678,9 @@ void Hemicube::project(std::span<const glm::dvec3> polygon, uint32_t element, Me
   const int single = common_face(scratch);
   for (size_t f = 0; f < face_count_; ++f) {
     if (single >= 0 && static_cast<int>(f) != single) continue;
+    if (windows != nullptr && (*windows)[f].empty()) continue;
     if (!clip_to_face(f, scratch, single >= 0)) continue;
+    if (windows != nullptr && !keep_to_window((*windows)[f], scratch)) continue;
     rasterize(faces_[f], element, method, normal, offset, {}, false, scratch, out);
   }
 }
@@ -1291,30 +1348,45 @@ double point_polygon_form_factor(const glm::dvec3& eye, const glm::dvec3& normal
 
 namespace {
 
+// Projects polygon i of `polygons` (none facing away from the eye) into `frags`.
+void project_polygon(const detail::Hemicube& cube, const glm::dvec3& eye, std::span<const ReceiverPolygon> polygons,
+                     uint32_t i, Method method, detail::ProjectScratch& scratch, std::vector<detail::Fragment>& frags,
+                     const detail::FaceWindows* windows) {
+  const auto& poly = polygons[i].corners;
+  if (poly.size() < 3) return;
+  const glm::dvec3 pn = detail::newell_normal(poly);
+  if (glm::dot(pn, eye - poly[0]) <= 0.0) return;  // facing away
+  // Long loops are cut into a fan of triangles: the clipper holds a bounded number of corners.
+  if (poly.size() <= 8) {
+    cube.project(poly, i, method, scratch, frags, nullptr, windows);
+    return;
+  }
+  for (size_t k = 1; k + 1 < poly.size(); ++k) {
+    const std::array<glm::dvec3, 3> tri{poly[0], poly[k], poly[k + 1]};
+    cube.project(tri, i, method, scratch, frags, nullptr, windows);
+  }
+}
+
 // Each polygon's visible share of the placed cube's view: its fragments' coverage times their
 // transmission, summed with the pixels' delta form factors (a full cube's: shares of the sphere).
+// With `receivers`, the view is kept to their pixels and only theirs are summed.
 std::vector<double> visible_shares(const detail::Hemicube& cube, const glm::dvec3& eye,
-                                   std::span<const ReceiverPolygon> polygons, Method method) {
+                                   std::span<const ReceiverPolygon> polygons, Method method,
+                                   std::span<const uint32_t> receivers = {}) {
   detail::ProjectScratch scratch;
   std::vector<detail::Fragment> frags;
   std::vector<uint32_t> group_of(polygons.size());
   for (uint32_t i = 0; i < polygons.size(); ++i)
     group_of[i] = polygons[i].group != kNone ? polygons[i].group : 0x80000000u + i;
-  for (uint32_t i = 0; i < polygons.size(); ++i) {
-    const auto& poly = polygons[i].corners;
-    if (poly.size() < 3) continue;
-    const glm::dvec3 pn = detail::newell_normal(poly);
-    if (glm::dot(pn, eye - poly[0]) <= 0.0) continue;  // facing away
-    // Long loops are cut into a fan of triangles: the clipper holds a bounded number of corners.
-    if (poly.size() <= 8) {
-      cube.project(poly, i, method, scratch, frags);
-      continue;
-    }
-    for (size_t k = 1; k + 1 < poly.size(); ++k) {
-      const std::array<glm::dvec3, 3> tri{poly[0], poly[k], poly[k + 1]};
-      cube.project(tri, i, method, scratch, frags);
-    }
+  detail::FaceWindows windows{};
+  for (uint32_t i : receivers) {
+    if (i >= polygons.size()) throw std::invalid_argument("hemicube_form_factors: receiver index out of range");
+    project_polygon(cube, eye, polygons, i, method, scratch, frags, nullptr);
+    cube.widen_windows(frags, windows);
+    frags.clear();
   }
+  for (uint32_t i = 0; i < polygons.size(); ++i)
+    project_polygon(cube, eye, polygons, i, method, scratch, frags, receivers.empty() ? nullptr : &windows);
   // Polygons with a common edge (the same two corner points) are neighbours, as in a solve.
   detail::GroupAdjacency adjacency;
   {
@@ -1373,6 +1445,11 @@ std::vector<double> visible_shares(const detail::Hemicube& cube, const glm::dvec
   std::vector<double> ff(polygons.size(), 0.0);
   const auto& dff = cube.delta_form_factors();
   for (const auto& f : frags) ff[f.element] += static_cast<double>(f.area) * f.trans * dff[f.pixel];
+  if (!receivers.empty()) {
+    std::vector<double> kept(polygons.size(), 0.0);
+    for (uint32_t i : receivers) kept[i] = ff[i];
+    ff = std::move(kept);
+  }
   return ff;
 }
 
@@ -1380,10 +1457,11 @@ std::vector<double> visible_shares(const detail::Hemicube& cube, const glm::dvec
 
 std::vector<double> hemicube_form_factors(const glm::dvec3& eye, const glm::dvec3& normal,
                                           std::span<const ReceiverPolygon> polygons, Method method,
-                                          uint32_t resolution, const glm::dvec3& up_hint) {
+                                          uint32_t resolution, const glm::dvec3& up_hint,
+                                          std::span<const uint32_t> receivers) {
   detail::Hemicube cube(resolution);
   cube.place(eye, glm::normalize(normal), up_hint);
-  return visible_shares(cube, eye, polygons, method);
+  return visible_shares(cube, eye, polygons, method, receivers);
 }
 
 std::vector<double> cube_solid_angles(const glm::dvec3& eye, std::span<const ReceiverPolygon> polygons, Method method,

@@ -106,6 +106,15 @@ class GroupAdjacency {
 double foot_within(std::span<const glm::dvec3> base, const glm::dvec3& n, const glm::dvec3& a, const glm::dvec3& b,
                    double in_plane, double tol);
 
+/// A rectangle of one face's pixels: columns [x0, x1), rows [y0, y1).
+struct FaceWindow {
+  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  bool empty() const { return x0 >= x1 || y0 >= y1; }
+};
+/// Per face of a hemicube (a full cube's six), the pixels a projection keeps to
+/// (Hemicube::project).
+using FaceWindows = std::array<FaceWindow, 6>;
+
 /// A polygon being clipped: at most 4 corners plus one per clip plane.
 struct ClipPolygon {
   static constexpr int kMax = 16;
@@ -119,7 +128,7 @@ struct ProjectScratch {
   ClipPolygon clip_a, clip_b;
   std::array<glm::dvec3, ClipPolygon::kMax> local;  // the polygon in the hemicube's frame
   int local_n = 0;
-  std::vector<glm::dvec2> poly2;
+  std::vector<glm::dvec2> poly2, window_cut;
   std::vector<float> inv_depths;
 };
 
@@ -161,10 +170,16 @@ class Hemicube {
   /// Projects a planar convex polygon (world coordinates, front side facing the eye), appending
   /// its fragments in increasing pixel order. Classical: a fragment per pixel whose centre is
   /// inside; anti-aliased: a fragment per pixel it covers, with the covered area. `plane_normal`,
-  /// when given, is the polygon's plane normal (any length); otherwise it is computed.
+  /// when given, is the polygon's plane normal (any length); otherwise it is computed. `windows`,
+  /// when given, keeps the fragments to those pixels: the part of the polygon inside them is scan
+  /// converted, so their fragments are the whole polygon's but for rounding.
   void project(std::span<const glm::dvec3> polygon, uint32_t element, Method method,
                ProjectScratch& scratch, std::vector<Fragment>& out,
-               const glm::dvec3* plane_normal = nullptr) const;
+               const glm::dvec3* plane_normal = nullptr, const FaceWindows* windows = nullptr) const;
+  /// Grows `windows` to hold the pixels of `fragments` (fragments of this hemicube).
+  void widen_windows(std::span<const Fragment> fragments, FaceWindows& windows) const;
+  /// How many pixels `windows` hold.
+  uint64_t window_pixels(const FaceWindows& windows) const;
 
   /// Projects a polygon that lies inside a parent polygon whose resolved fragments are `parent`
   /// (sorted by pixel), appending its fragments with the parent's transmission per pixel. No other

@@ -409,7 +409,7 @@ uint32_t Solver::Impl::add_sky_directions(uint32_t step, uint32_t skip, uint32_t
 }
 
 // What a sky direction's view must hold for `fresh`, the children of a round's splits: of every
-// leaf (in the order of `leaves`, which holds the children), those whose bounding sphere may reach
+// leaf (in the order of `leaves_in_order`, which holds the children), those whose bounding sphere may reach
 // a pixel of a child's. A pixel's rule reads only the pixel's own fragments, in the order they were
 // projected, so the children get to the bit what a view of every leaf gives them. (Occluders drawn
 // as whole patches rather than their leaves, as for a near-field hemicube, differ by rounding:
@@ -418,7 +418,7 @@ uint32_t Solver::Impl::add_sky_directions(uint32_t step, uint32_t skip, uint32_t
 // On the atrium the rounds after the first split 70 to 221 elements of 142 000 each, and
 // projecting every leaf along 128 directions per round took 15 s of its 31 s of lights and sky
 // (23 s in all since).
-void Solver::Impl::sky_seen(const LightView& v, std::span<const uint32_t> fresh, std::span<const uint32_t> leaves,
+void Solver::Impl::sky_seen(const LightView& v, std::span<const uint32_t> fresh, std::span<const uint32_t> leaves_in_order,
                             std::vector<uint32_t>& seen) {
   const int res = static_cast<int>(v.cube->resolution());
   const double cell = 2.0 * v.half / res;
@@ -449,13 +449,13 @@ void Solver::Impl::sky_seen(const LightView& v, std::span<const uint32_t> fresh,
     return table[y1 * side + x1] + table[y0 * side + x0] != table[y0 * side + x1] + table[y1 * side + x0];
   };
   seen.clear();
-  pool.parallel_for(leaves.size(), [&](size_t begin, size_t end, size_t c) {
+  pool.parallel_for(leaves_in_order.size(), [&](size_t begin, size_t end, size_t c) {
     std::vector<uint32_t>& out = gather_chunks[c];
     out.clear();
     for (size_t i = begin; i < end; ++i)
-      if (meets_fresh(leaves[i])) out.push_back(leaves[i]);
+      if (meets_fresh(leaves_in_order[i])) out.push_back(leaves_in_order[i]);
   });
-  for (size_t c = 0; c < pool.chunk_count(leaves.size()); ++c)
+  for (size_t c = 0; c < pool.chunk_count(leaves_in_order.size()); ++c)
     seen.insert(seen.end(), gather_chunks[c].begin(), gather_chunks[c].end());
 }
 

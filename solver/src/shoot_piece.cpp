@@ -56,10 +56,11 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, const std::v
   // The closed meshes the eye lies in: a volume cluster's centre, or a hair in front of the piece
   // (a piece of a mesh's inside lies on the mesh's outline, where the test could go either way).
   eye_within = enclosing(piece.volume ? piece.centre : piece.centre + piece.normal * (kEyeOffset * prep.diagonal));
-  project(seen);
+  // A shot to some receivers needs only their pixels (project): a near-field piece's, a replay's.
+  project(seen, whole_scene ? std::span<const uint32_t>() : std::span<const uint32_t>(accepted));
   sum_form_factors(accepted);  // the occluders' own form factors are not needed
-  double seen_share = 0.0;  // of a deferred piece's light: what meets a front face
-  if (defer_far)
+  double seen_share = 0.0;  // of a deferred piece's light: what meets a front face (whole-scene shots)
+  if (defer_far && whole_scene)
     for (const Fragment& f : frags)
       if (!(f.element & detail::kBackFace)) seen_share += static_cast<double>(f.area) * f.trans * (*pixel_weight)[f.pixel];
 

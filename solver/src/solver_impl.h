@@ -478,15 +478,27 @@ struct Solver::Impl {
   void gather_seen(const detail::Shaft& shaft, const std::vector<uint32_t>& accepted, std::vector<uint32_t>& seen);
 
   // projection.cpp: onto the placed hemicube. Projects `elements`, but for the patches of the
-  // shooting piece (p_shooting == shooting_stamp).
-  void project(std::span<const uint32_t> elements);
+  // shooting piece (p_shooting == shooting_stamp); with `receivers`, only within their pixels.
+  void project(std::span<const uint32_t> elements, std::span<const uint32_t> receivers = {});
+  bool project_receivers(std::span<const uint32_t> receivers, detail::FaceWindows& windows);
+  bool windowed_view = false;  // the last project() was given receivers (refine projects anew alike)
+  struct RecvAt {
+    uint32_t chunk, begin, end;
+    bool own;  // the fragments are the receiver's own (not its back, as an occluder)
+  };
+  std::vector<std::vector<Fragment>> recv_frags;  // project_receivers: per chunk
+  std::vector<RecvAt> recv_at;                    // ... per receiver: where its fragments are
+  std::vector<uint32_t> e_recv_slot;              // ... per element: its receiver's index + 1, or 0
+  bool project_element(uint32_t el, const glm::dvec3& eye, Corners& poly, detail::ProjectScratch& s,
+                       std::vector<Fragment>& out, const detail::FaceWindows* windows) const;
   bool culled(uint32_t p, double facing) const;
   // The closed double-sided meshes a point lies in (PreparedScene::inner_solid), sorted; and
   // whether patch p faces the inside of one that the eye (in those of `open`) lies outside of.
   std::vector<uint32_t> enclosing(const glm::dvec3& x) const;
   bool sealed(uint32_t p, std::span<const uint32_t> open) const;
   bool project_side(detail::Hemicube& into, uint32_t el, uint32_t id, Corners& poly, double facing, bool plane,
-                    detail::ProjectScratch& s, std::vector<Fragment>& out) const;
+                    detail::ProjectScratch& s, std::vector<Fragment>& out,
+                    const detail::FaceWindows* windows = nullptr) const;
   void join_chunks(std::span<const uint32_t> elements, std::vector<uint32_t>& begin, std::vector<uint32_t>& end,
                    std::vector<Fragment>& all);
   void project_children(const std::vector<uint32_t>& parents);

@@ -271,15 +271,14 @@ struct Shot {
   Poly poly;
 };
 
-// A triangle or convex quad (or a convex polygon of `corners` corners) wholly above the eye's
-// tangent plane, facing the eye, 0.5 to 4 away and spanning about 8 to 40 hemicube pixels.
-Shot random_shot(std::mt19937_64& rng, int corners = 0) {
+// A triangle or convex quad (or a convex polygon of `corners` corners) wholly above the tangent
+// plane of an eye at the pose's origin facing its z, facing the eye, 0.5 to 4 away and spanning
+// about 8 to 40 hemicube pixels; random_shot: one such at a random pose.
+Poly random_polygon_above(std::mt19937_64& rng, const Pose& pose, int corners = 0) {
   std::uniform_real_distribution<double> u(0.0, 1.0);
   Shot s;
-  const Pose pose = random_pose(rng);
   s.eye = pose.origin;
   s.normal = pose.z;
-  s.up = random_up(rng, s.normal);
   for (;;) {
     const double cos_t = 0.1 + 0.9 * u(rng), phi = 2.0 * kPi * u(rng);
     const double sin_t = std::sqrt(1.0 - cos_t * cos_t);
@@ -303,9 +302,18 @@ Shot random_shot(std::mt19937_64& rng, int corners = 0) {
       return glm::dot(s.normal, v - s.eye) > 0.02 * glm::length(v - s.eye);  // 1 degree up
     });
     if (!above) continue;
-    s.poly = facing(p, s.eye);
-    return s;
+    return facing(p, s.eye);
   }
+}
+
+Shot random_shot(std::mt19937_64& rng, int corners = 0) {
+  Shot s;
+  const Pose pose = random_pose(rng);
+  s.eye = pose.origin;
+  s.normal = pose.z;
+  s.up = random_up(rng, s.normal);
+  s.poly = random_polygon_above(rng, pose, corners);
+  return s;
 }
 
 // With exact per-pixel delta form factors and exact coverage, the anti-aliased hemicube errs only
@@ -540,6 +548,65 @@ TEST(AaHemicube, PartlyCoveredPolygonGetsTheFactorOfItsUncoveredPart) {
     EXPECT_NEAR(ff[0], exact, kAaRelativeTolerance * exact) << "trial " << trial << " t " << t;
     EXPECT_NEAR(ff[1], lambert(eye, n, occluder), kAaRelativeTolerance * lambert(eye, n, occluder));
   }
+}
+
+// A view kept to a receiver's pixels (as a solve's shot to a few split receivers keeps it) gives
+// the receiver what the whole view does, though the occluder reaches far beyond those pixels and is
+// cut at their edge: here a small square partly hidden by a large occluder, before a large
+// backdrop, gets the factor of its uncovered part; the others get nothing.
+TEST(AaHemicube, ViewKeptToAReceiverGivesItTheFactorOfItsUncoveredPart) {
+  const uint64_t seed = test_seed();
+  SCOPED_TRACE(seed_note(seed));
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (int trial = 0; trial < 10; ++trial) {
+    const Pose pose = random_pose(rng);
+    const dvec3 eye = pose.origin, n = pose.z, up = random_up(rng, n);
+    // The receiver [0.4, 0.9] x [-0.25, 0.25] at height 4; the occluder at height 2 reaches from
+    // x = -3 to t / 2, whose line projects onto x = t on the receiver, and 3 either side in y.
+    const double t = 0.45 + 0.4 * u(rng);
+    std::vector<ReceiverPolygon> polys(2);
+    polys[0].corners = facing(pose.poly({{0.4, -0.25, 4}, {0.9, -0.25, 4}, {0.9, 0.25, 4}, {0.4, 0.25, 4}}), eye);
+    polys[1].corners = facing(pose.poly({{-3, -3, 2}, {t / 2, -3, 2}, {t / 2, 3, 2}, {-3, 3, 2}}), eye);
+    polys.push_back({facing(pose.poly({{-20, -20, 6}, {20, -20, 6}, {20, 20, 6}, {-20, 20, 6}}), eye)});
+    const Poly uncovered = facing(pose.poly({{t, -0.25, 4}, {0.9, -0.25, 4}, {0.9, 0.25, 4}, {t, 0.25, 4}}), eye);
+    const double exact = lambert(eye, n, uncovered);
+    const std::vector<uint32_t> receivers{0};
+    const std::vector<double> ff = hemicube_form_factors(eye, n, polys, Method::kAntiAliased, kResolution, up, receivers);
+    EXPECT_NEAR(ff[0], exact, kAaRelativeTolerance * exact) << "trial " << trial << " t " << t;
+    for (size_t k = 1; k < ff.size(); ++k) EXPECT_EQ(ff[k], 0.0) << "trial " << trial << " polygon " << k;
+  }
+}
+
+// Crowds of random polygons hiding one another: a view kept to a few of them gives those what the
+// whole view gives them, but for rounding where an occluder is cut at the edge of their pixels.
+TEST(Hemicube, ViewKeptToReceiversGivesThemTheWholeViewsFactors) {
+  const uint64_t seed = test_seed();
+  SCOPED_TRACE(seed_note(seed));
+  std::mt19937_64 rng(seed);
+  size_t hidden = 0;  // receivers that something partly hides
+  for (const Method method : {Method::kAntiAliased, Method::kClassical}) {
+    for (int trial = 0; trial < 20; ++trial) {
+      const Pose pose = random_pose(rng);
+      const dvec3 up = random_up(rng, pose.z);
+      std::vector<ReceiverPolygon> polys;
+      for (int k = 0; k < 40; ++k) polys.push_back({random_polygon_above(rng, pose)});
+      const std::vector<uint32_t> receivers{static_cast<uint32_t>(rng() % 40), static_cast<uint32_t>(rng() % 40)};
+      const std::vector<double> whole = hemicube_form_factors(pose.origin, pose.z, polys, method, kResolution, up);
+      const std::vector<double> kept =
+          hemicube_form_factors(pose.origin, pose.z, polys, method, kResolution, up, receivers);
+      for (uint32_t r : receivers) {
+        EXPECT_NEAR(kept[r], whole[r], 1e-6 * whole[r] + 1e-12) << "trial " << trial << " receiver " << r;
+        if (whole[r] < 0.99 * lambert(pose.origin, pose.z, polys[r].corners)) ++hidden;
+      }
+      for (uint32_t k = 0; k < kept.size(); ++k) {
+        if (std::find(receivers.begin(), receivers.end(), k) == receivers.end()) {
+          EXPECT_EQ(kept[k], 0.0);
+        }
+      }
+    }
+  }
+  EXPECT_GE(hidden, 10u) << "too few receivers were partly hidden for the test to mean much";
 }
 
 // A wall standing on a floor, seen from low in front: in a pixel on its foot the wall's covered part

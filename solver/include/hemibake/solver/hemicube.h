@@ -21,12 +21,15 @@ struct ReceiverPolygon {
 /// Form factors from a differential area at `eye` with unit normal `normal` to each polygon, with
 /// the polygons occluding one another, as a hemicube of the given method and resolution computes
 /// them. Polygons with a common edge (bitwise equal corners) are neighbours: where both cover a
-/// pixel their coverages add, as for the patches of a scene. Polygons facing away from the eye get 0. The hemicube's orientation about the normal is
-/// fixed by `up_hint` (any vector not parallel to the normal).
+/// pixel their coverages add, as for the patches of a scene. Polygons facing away from the eye get
+/// 0. The hemicube's orientation about the normal is fixed by `up_hint` (any vector not parallel
+/// to the normal). With `receivers` (indices into `polygons`), the view is kept to those polygons'
+/// pixels, as a solve's shot to a few receivers keeps it: theirs are computed, the rest get 0.
 std::vector<double> hemicube_form_factors(const glm::dvec3& eye, const glm::dvec3& normal,
                                           std::span<const ReceiverPolygon> polygons, Method method,
                                           uint32_t resolution,
-                                          const glm::dvec3& up_hint = glm::dvec3(0.0, 0.0, 1.0));
+                                          const glm::dvec3& up_hint = glm::dvec3(0.0, 0.0, 1.0),
+                                          std::span<const uint32_t> receivers = {});
 
 /// The solid angle of each polygon visible from `eye`, with the polygons occluding one another,
 /// as the full cube of a volume cluster computes it (six faces of resolution x resolution pixels;
