@@ -317,7 +317,7 @@ TEST_F(Nodes, ClientWaitsForTheDatabaseAndGivesUpClearly) {
   ASSERT_EQ(posted.status, 202) << posted.body;
   const std::string id = posted.js()["id"];
   ASSERT_EQ(wait_finished(a->port(), id, 60s)["state"], "succeeded");
-  const std::string fetched = temp_dir(db_ + "-fetched") + ".glb", baked = temp_dir(db_ + "-baked") + ".glb";
+  const std::string fetched = temp_dir(db_ + "-fetched", ".glb"), baked = temp_dir(db_ + "-baked", ".glb");
   const std::string client = std::string(HEMIBAKE_CLIENT) + " ";
   pg().stop();
   RestartDatabase restart;  // the other tests need the database, whatever happens here

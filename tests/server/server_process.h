@@ -190,9 +190,23 @@ inline std::pair<int, std::string> run(const std::string& command) {
   return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
 }
 
-inline std::string temp_dir(const std::string& name) {
-  const auto d = std::filesystem::temp_directory_path() / ("hemibake-" + name + "-" + std::to_string(getpid()));
+// The directories temp_dir handed out, removed when the test program exits.
+struct TempDirs {
+  std::vector<std::filesystem::path> paths;
+  ~TempDirs() {
+    std::error_code ec;
+    for (const auto& p : paths) std::filesystem::remove_all(p, ec);
+  }
+};
+
+// A fresh path under the temporary directory (nothing there yet), ending in `suffix`, removed with
+// whatever the test put there when the test program exits.
+inline std::string temp_dir(const std::string& name, const std::string& suffix = "") {
+  static TempDirs dirs;
+  const auto d =
+      std::filesystem::temp_directory_path() / ("hemibake-" + name + "-" + std::to_string(getpid()) + suffix);
   std::filesystem::remove_all(d);
+  dirs.paths.push_back(d);
   return d.string();
 }
 

@@ -384,7 +384,7 @@ TEST(Server, SigtermAnswersWaitingPreviews) {
 TEST(Client, BakesOnTheServerAndReportsErrors) {
   ServerProcess server(temp_dir("client"), {"--workers", "1"});
   const std::string url = "http://127.0.0.1:" + std::to_string(server.port());
-  const std::string out = temp_dir("client-out") + ".glb";
+  const std::string out = temp_dir("client-out", ".glb");
   const std::string bake = std::string(HEMIBAKE_CLIENT) + " bake --server " + url + " " HEMIBAKE_SOURCE_DIR
                            "/data/cornell-box.gltf -o " + out + " --convergence 0.05 2>/dev/null >/dev/null";
   ASSERT_EQ(std::system(bake.c_str()), 0) << bake;
@@ -557,7 +557,7 @@ class NotHemibake {
 // --server pointing at some other web server: a clear message and exit status 1, not a crash.
 TEST(Client, ServerThatIsNotHemibakeIsReportedClearly) {
   NotHemibake other;
-  const std::string glb = temp_dir("not-hemibake") + ".glb";
+  const std::string glb = temp_dir("not-hemibake", ".glb");
   for (const std::string& command : std::vector<std::string>{"status abc", "list", "watch abc", "cancel abc", "fetch abc -o " + glb}) {
     const auto [status, out] = run(std::string(HEMIBAKE_CLIENT) + " " + command + " --server " + other.url());
     EXPECT_EQ(status, 1) << command << ": " << out;
