@@ -1348,7 +1348,7 @@ double point_polygon_form_factor(const glm::dvec3& eye, const glm::dvec3& normal
 
 namespace {
 
-// Projects polygon i of `polygons` (none facing away from the eye) into `frags`.
+// Projects polygon i of `polygons` into `frags`, unless it faces away from the eye.
 void project_polygon(const detail::Hemicube& cube, const glm::dvec3& eye, std::span<const ReceiverPolygon> polygons,
                      uint32_t i, Method method, detail::ProjectScratch& scratch, std::vector<detail::Fragment>& frags,
                      const detail::FaceWindows* windows) {
