@@ -65,17 +65,29 @@ bool Solver::Impl::replay(uint32_t unit) {
 // Flags the record's receivers split since it was made (`stale`, per entry), and marks them
 // (e_mark = mark) for reshoot_split. A shot that split a receiver recorded it in its earlier pieces
 // and its children in later ones: the children are shot anew from the whole shooter, so none of
-// their entries replays either. Returns how many entries are stale.
+// their entries replays either. So everything below a split receiver is marked too (its subtree
+// holds only what was split since), and an entry is stale when it is marked: a walk up from every
+// entry took 2.7 % of a profile's samples on the Blender cluttered room (52 000-entry records).
+// Returns how many entries are stale.
 size_t Solver::Impl::mark_stale(const ShotRecord& r, std::vector<uint8_t>& stale) {
   stale.assign(r.recv.size(), 0);
-  size_t stale_count = 0;
   ++mark;
+  std::vector<uint32_t> todo;
+  for (uint32_t e : r.recv) {
+    if (e_child[e] == kNone || e_mark[e] == mark) continue;
+    todo.push_back(e);
+    while (!todo.empty()) {
+      const uint32_t x = todo.back();
+      todo.pop_back();
+      if (e_mark[x] == mark) continue;
+      e_mark[x] = mark;
+      if (e_child[x] != kNone)
+        for (uint32_t k = 0; k < 4; ++k) todo.push_back(e_child[x] + k);
+    }
+  }
+  size_t stale_count = 0;
   for (size_t k = 0; k < r.recv.size(); ++k)
-    if (e_child[r.recv[k]] != kNone) stale[k] = 1, ++stale_count, e_mark[r.recv[k]] = mark;
-  if (stale_count > 0)
-    for (size_t k = 0; k < r.recv.size(); ++k)
-      for (uint32_t x = e_parent[r.recv[k]]; x != kNone && !stale[k]; x = e_parent[x])
-        if (e_mark[x] == mark) stale[k] = 1, ++stale_count;
+    if (e_mark[r.recv[k]] == mark) stale[k] = 1, ++stale_count;
   HEMIBAKE_DCHECK(stale_count <= r.recv.size());
   return stale_count;
 }
