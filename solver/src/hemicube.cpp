@@ -493,7 +493,7 @@ bool Hemicube::clip_to_face(size_t f, ProjectScratch& s, bool inside) const {
 void Hemicube::rasterize(const Face& face, uint32_t element, Method method,
                          const glm::dvec3& plane_normal, double plane_offset,
                          std::span<const Fragment> parent, bool child, ProjectScratch& s,
-                         std::vector<Fragment>& out) const {
+                         std::vector<Fragment>& out, const FaceWindow* keep) const {
   double xmin = s.poly2[0].x, xmax = xmin, ymin = s.poly2[0].y, ymax = ymin;
   for (const glm::dvec2& p : s.poly2) {
     xmin = std::min(xmin, p.x);
@@ -509,6 +509,12 @@ void Hemicube::rasterize(const Face& face, uint32_t element, Method method,
       std::clamp(static_cast<int>(std::ceil(ymax)), win.y0 + 1, static_cast<int>(face.height));
   win.width = x1 - win.x0;
   win.height = y1 - win.y0;
+  if (keep != nullptr) {
+    const int kx0 = std::max(win.x0, keep->x0), ky0 = std::max(win.y0, keep->y0);
+    const int kx1 = std::min(win.x0 + win.width, keep->x1), ky1 = std::min(win.y0 + win.height, keep->y1);
+    if (kx0 >= kx1 || ky0 >= ky1) return;
+    win = {kx0, ky0, kx1 - kx0, ky1 - ky0};
+  }
 
   // Depth: 1/depth is affine in the face's (a, b) for a planar polygon, so it is evaluated from the
   // plane, by default at the centre of the part of the pixel the polygon covers, clamped to the
@@ -614,8 +620,11 @@ namespace {
 
 // Keeps the part of the polygon in s.poly2 (a face's pixel coordinates) that lies in window w;
 // false when none does. s.inv_depths keeps the whole polygon's corners: rasterize takes only their
-// range from them, to clamp rounding.
-bool keep_to_window(const FaceWindow& w, ProjectScratch& s) {
+// range from them, to clamp rounding. `cut`: cut the polygon at the window's edges (anti-aliased);
+// otherwise only whether it meets the window is told, and rasterize keeps to the window's pixels
+// (classical: a cut edge, a hair off the original, would flip the tie-break of pixel centres
+// lying on a shared edge, giving the pixel to both neighbours or to neither).
+bool keep_to_window(const FaceWindow& w, ProjectScratch& s, bool cut_it) {
   double xmin = s.poly2[0].x, xmax = xmin, ymin = s.poly2[0].y, ymax = ymin;
   for (const glm::dvec2& p : s.poly2) {
     xmin = std::min(xmin, p.x);
@@ -624,6 +633,7 @@ bool keep_to_window(const FaceWindow& w, ProjectScratch& s) {
     ymax = std::max(ymax, p.y);
   }
   if (xmax <= w.x0 || xmin >= w.x1 || ymax <= w.y0 || ymin >= w.y1) return false;
+  if (!cut_it) return true;
   auto cut = [&s](int axis, double at, bool below) {
     s.window_cut.resize(2 * s.poly2.size() + 2);
     s.window_cut.resize(cut_loop(s.poly2.data(), s.poly2.size(), axis, at, below, s.window_cut.data()));
@@ -680,8 +690,10 @@ void Hemicube::project(std::span<const glm::dvec3> polygon, uint32_t element, Me
     if (single >= 0 && static_cast<int>(f) != single) continue;
     if (windows != nullptr && (*windows)[f].empty()) continue;
     if (!clip_to_face(f, scratch, single >= 0)) continue;
-    if (windows != nullptr && !keep_to_window((*windows)[f], scratch)) continue;
-    rasterize(faces_[f], element, method, normal, offset, {}, false, scratch, out);
+    const bool cut = method == Method::kAntiAliased;
+    if (windows != nullptr && !keep_to_window((*windows)[f], scratch, cut)) continue;
+    rasterize(faces_[f], element, method, normal, offset, {}, false, scratch, out,
+              windows != nullptr && !cut ? &(*windows)[f] : nullptr);
   }
 }
 

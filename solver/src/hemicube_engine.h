@@ -203,9 +203,11 @@ class Hemicube {
   bool clip_to_face(size_t face, ProjectScratch& scratch, bool inside) const;
   // The face whose frustum holds every corner of the polygon in `scratch.local`, or -1.
   int common_face(const ProjectScratch& scratch) const;
+  // `keep`: scan only those pixels (a classical projection's window: see Hemicube::project).
   void rasterize(const Face& face, uint32_t element, Method method,
                  const glm::dvec3& plane_normal, double plane_offset, std::span<const Fragment> parent,
-                 bool child, ProjectScratch& scratch, std::vector<Fragment>& out) const;
+                 bool child, ProjectScratch& scratch, std::vector<Fragment>& out,
+                 const FaceWindow* keep = nullptr) const;
 
   struct TopFaceTag {};
   Hemicube(uint32_t resolution, TopFaceTag);
