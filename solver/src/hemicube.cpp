@@ -620,7 +620,7 @@ namespace {
 
 // Keeps the part of the polygon in s.poly2 (a face's pixel coordinates) that lies in window w;
 // false when none does. s.inv_depths keeps the whole polygon's corners: rasterize takes only their
-// range from them, to clamp rounding. `cut`: cut the polygon at the window's edges (anti-aliased);
+// range from them, to clamp rounding. `cut_it`: cut the polygon at the window's edges (anti-aliased);
 // otherwise only whether it meets the window is told, and rasterize keeps to the window's pixels
 // (classical: a cut edge, a hair off the original, would flip the tie-break of pixel centres
 // lying on a shared edge, giving the pixel to both neighbours or to neither).
