@@ -490,17 +490,27 @@ bool Hemicube::clip_to_face(size_t f, ProjectScratch& s, bool inside) const {
   return s.poly2.size() >= 3;
 }
 
+namespace {
+
+// The bounding box of a polygon in a face's pixel coordinates: x min, x max, y min, y max.
+std::array<double, 4> bounds_of(const std::vector<glm::dvec2>& poly) {
+  std::array<double, 4> b{poly[0].x, poly[0].x, poly[0].y, poly[0].y};
+  for (const glm::dvec2& p : poly) {
+    b[0] = std::min(b[0], p.x);
+    b[1] = std::max(b[1], p.x);
+    b[2] = std::min(b[2], p.y);
+    b[3] = std::max(b[3], p.y);
+  }
+  return b;
+}
+
+}  // namespace
+
 void Hemicube::rasterize(const Face& face, uint32_t element, Method method,
                          const glm::dvec3& plane_normal, double plane_offset,
                          std::span<const Fragment> parent, bool child, ProjectScratch& s,
                          std::vector<Fragment>& out, const FaceWindow* keep) const {
-  double xmin = s.poly2[0].x, xmax = xmin, ymin = s.poly2[0].y, ymax = ymin;
-  for (const glm::dvec2& p : s.poly2) {
-    xmin = std::min(xmin, p.x);
-    xmax = std::max(xmax, p.x);
-    ymin = std::min(ymin, p.y);
-    ymax = std::max(ymax, p.y);
-  }
+  const auto [xmin, xmax, ymin, ymax] = bounds_of(s.poly2);
   PixelWindow win;
   win.x0 = std::clamp(static_cast<int>(std::floor(xmin)), 0, static_cast<int>(n_) - 1);
   win.y0 = std::clamp(static_cast<int>(std::floor(ymin)), 0, static_cast<int>(face.height) - 1);
@@ -625,13 +635,7 @@ namespace {
 // (classical: a cut edge, a hair off the original, would flip the tie-break of pixel centres
 // lying on a shared edge, giving the pixel to both neighbours or to neither).
 bool keep_to_window(const FaceWindow& w, ProjectScratch& s, bool cut_it) {
-  double xmin = s.poly2[0].x, xmax = xmin, ymin = s.poly2[0].y, ymax = ymin;
-  for (const glm::dvec2& p : s.poly2) {
-    xmin = std::min(xmin, p.x);
-    xmax = std::max(xmax, p.x);
-    ymin = std::min(ymin, p.y);
-    ymax = std::max(ymax, p.y);
-  }
+  const auto [xmin, xmax, ymin, ymax] = bounds_of(s.poly2);
   if (xmax <= w.x0 || xmin >= w.x1 || ymax <= w.y0 || ymin >= w.y1) return false;
   if (!cut_it) return true;
   auto cut = [&s](int axis, double at, bool below) {
@@ -654,15 +658,7 @@ void Hemicube::widen_windows(std::span<const Fragment> fragments, FaceWindows& w
     while (f + 1 < face_count_ && fr.pixel >= faces_[f + 1].offset) ++f;
     const uint32_t local = fr.pixel - faces_[f].offset;
     const int x = static_cast<int>(local % n_), y = static_cast<int>(local / n_);
-    FaceWindow& w = windows[f];
-    if (w.empty()) {
-      w = {x, y, x + 1, y + 1};
-      continue;
-    }
-    w.x0 = std::min(w.x0, x);
-    w.x1 = std::max(w.x1, x + 1);
-    w.y0 = std::min(w.y0, y);
-    w.y1 = std::max(w.y1, y + 1);
+    windows[f].widen({x, y, x + 1, y + 1});
   }
 }
 

@@ -8,6 +8,7 @@
 #include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <span>
@@ -110,6 +111,12 @@ double foot_within(std::span<const glm::dvec3> base, const glm::dvec3& n, const 
 struct FaceWindow {
   int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
   bool empty() const { return x0 >= x1 || y0 >= y1; }
+  /// Grows to hold `o` too.
+  void widen(const FaceWindow& o) {
+    if (o.empty()) return;
+    *this = empty() ? o
+                    : FaceWindow{std::min(x0, o.x0), std::min(y0, o.y0), std::max(x1, o.x1), std::max(y1, o.y1)};
+  }
 };
 /// Per face of a hemicube (a full cube's six), the pixels a projection keeps to
 /// (Hemicube::project).

@@ -144,13 +144,7 @@ bool Solver::Impl::project_receivers(std::span<const uint32_t> receivers, detail
   for (size_t i = 0; i < receivers.size(); ++i) e_recv_slot[receivers[i]] = static_cast<uint32_t>(i + 1);
   windows = {};
   for (const detail::FaceWindows& w : per_chunk)
-    for (size_t f = 0; f < w.size(); ++f) {
-      if (w[f].empty()) continue;
-      detail::FaceWindow& to = windows[f];
-      to = to.empty() ? w[f]
-                      : detail::FaceWindow{std::min(to.x0, w[f].x0), std::min(to.y0, w[f].y0), std::max(to.x1, w[f].x1),
-                                           std::max(to.y1, w[f].y1)};
-    }
+    for (size_t f = 0; f < w.size(); ++f) windows[f].widen(w[f]);
   return 2 * cube->window_pixels(windows) < cube->pixel_count();
 }
 
