@@ -162,7 +162,6 @@ void Solver::Impl::project(std::span<const uint32_t> elements, std::span<const u
   const glm::dvec3 eye = cube->eye();
   detail::FaceWindows windows{};
   const bool windowed = !receivers.empty() && project_receivers(receivers, windows);
-  windowed_view = !receivers.empty();
   pool.parallel_for(elements.size(), [&](size_t b, size_t e, size_t c) {
     auto& out = chunk_frags[c];
     out.clear();

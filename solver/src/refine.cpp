@@ -190,7 +190,7 @@ void Solver::Impl::split_receivers(const std::vector<uint32_t>& to_split, const 
     project_children(to_split);
   } else {
     gather_seen(shaft, accepted, seen);
-    project(seen, windowed_view ? std::span<const uint32_t>(accepted) : std::span<const uint32_t>());
+    project(seen, shaft.whole_scene ? std::span<const uint32_t>() : std::span<const uint32_t>(accepted));
     sum_form_factors(accepted);
   }
 }

@@ -481,7 +481,6 @@ struct Solver::Impl {
   // shooting piece (p_shooting == shooting_stamp); with `receivers`, only within their pixels.
   void project(std::span<const uint32_t> elements, std::span<const uint32_t> receivers = {});
   bool project_receivers(std::span<const uint32_t> receivers, detail::FaceWindows& windows);
-  bool windowed_view = false;  // the last project() was given receivers (refine projects anew alike)
   struct RecvAt {
     uint32_t chunk, begin, end;
     bool own;  // the fragments are the receiver's own (not its back, as an occluder)
