@@ -139,13 +139,16 @@ TEST_P(StoreTest, JobReadAsRunningRunsHereAtOnce) {
   });
   int seen = 0, elsewhere = 0;
   for (size_t i = 0; i < ids.size();) {
+    // Read the flag before the job: a job read as queued after the claimer had finished is a
+    // lost claim, but one read as queued before it finished may have been claimed since.
+    const bool claimer_finished = done;
     const auto rec = store_->get(ids[i]);
     ASSERT_TRUE(rec);
     if (rec->state == JobState::kRunning) {
       if (!store_->runs_here(ids[i])) ++elsewhere;
       ++seen;
       ++i;
-    } else if (done) {
+    } else if (claimer_finished) {
       break;
     }
   }
