@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
 # Sets up (Debian packages), builds everything (Release) and runs every test through CTest; then
 # one instrumented build (clang, Debug with HEMIBAKE_DCHECK, AddressSanitizer and
-# UndefinedBehaviorSanitizer, libFuzzer's coverage counters; in build-sanitize/) runs the unit and
-# integration tests again and gives each libFuzzer target a 10 s run from its seeds (CTest label
-# fuzz); tests labelled heavy (the longest numeric ones) run in the Release build only. Tests labelled slow (the 100-run SIGKILL test) are left to a manual
-# `ctest --test-dir build -L slow`. Arguments go to both ctest runs (e.g. -R Solver). HEMIBAKE_SKIP_SANITIZE=1 skips the second
-# build; HEMIBAKE_SKIP_FUZZ=1 skips the fuzz runs in it. Each stage's wall time is printed.
+# UndefinedBehaviorSanitizer, libFuzzer's coverage counters on the libraries that read untrusted
+# bytes; in build-sanitize/) runs the unit and integration tests again and gives each libFuzzer
+# target a 10 s run from its seeds (CTest label fuzz); tests labelled heavy (those over 15 s
+# instrumented) run in the Release build only. Tests labelled slow (the 100-run SIGKILL test) are
+# left to a manual `ctest --test-dir build -L slow`. Arguments go to both ctest runs (e.g. -R
+# Solver). HEMIBAKE_SKIP_SANITIZE=1 skips the second build; HEMIBAKE_SKIP_FUZZ=1 skips the fuzz
+# runs in it. Each stage's wall time is printed.
 set -euo pipefail
 cd "$(dirname "$0")"
 scripts/setup.sh --test
