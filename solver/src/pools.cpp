@@ -27,6 +27,7 @@
 #include <glm/geometric.hpp>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -206,8 +207,11 @@ void Solver::Impl::take_on_grid(uint32_t e, double radiosity) {
   const glm::dvec3 centre = e_centre[p_root[p]];
   const glm::dvec3 lift = normal * (kGridLift * prep.diagonal);
   for_grid_points(e, [&](uint32_t i, const glm::dvec3& x) {
-    if (grid_stamp[i] == grid_shooter) return;
-    grid_stamp[i] = grid_shooter;
+    // A point shared by elements that threads hand light to at once (distribute) is taken by the
+    // first: each shooter lights it once, with the same radiosity from any of them.
+    std::atomic_ref<uint32_t> claim(grid_stamp[i]);
+    uint32_t was = claim.load(std::memory_order_relaxed);
+    if (was == grid_shooter || !claim.compare_exchange_strong(was, grid_shooter, std::memory_order_relaxed)) return;
     const glm::dvec3 at = x + kGridInset * (centre - x) + lift;
     grid_light[i] += static_cast<float>(radiosity * shooter_light(*shooter_shape, at, normal));
   });

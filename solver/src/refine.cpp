@@ -93,63 +93,86 @@ void Solver::Impl::reset_spread(const std::vector<uint32_t>& accepted) {
 }
 
 // The receivers too coarse for this interaction (criteria a-c), counted by criterion in stats.
+// Each receiver is judged on its own, so the receivers are shared among the threads; their lists
+// are joined in order, as one thread would have made them.
 std::vector<uint32_t> Solver::Impl::too_coarse(const glm::dvec3& dB, double weight,
                                                const std::vector<uint32_t>& accepted) {
-  std::vector<uint32_t> to_split;
-  for (uint32_t e : accepted) {
-    if (e_area[e] < min_sharp_split_area() || covered_emitter(e)) continue;
-    // Under AEPS only a sharp edge of light splits (kSharpJump), but near a punctual light.
-    const bool sharp_only = e_area[e] < min_split_area() && !in_light_pool(e);
-    const double tolerance = sharp_only ? kSharpJump * b_tolerance : b_tolerance;
-    bool split_it = false;
-    if (projected(e)) {
-      // (a) too coarse for this interaction.
-      split_it = !sharp_only && e_ff[e] * weight > params.feps;
-      stats.splits_form_factor += split_it;
-      // (b) partly hidden, and the hidden part matters. Under AEPS (kShadowAreaFactor), a
-      // punctual light's shadow is an edge across the element, a jump of its whole unhidden light
-      // (kSharpJump), whatever share of the element it hides; both parts must matter (an element
-      // in the shadow keeps rounding's crumbs of light).
-      if (!split_it && (!sharp_only || shooting_light != nullptr) && e_ff[e] > 0.0 && e_ff[e] < e_ff_open[e]) {
-        const double open = shot_radiosity(e, dB, f_open[e]);
-        split_it = sharp_only ? e_area[e] >= min_split_area() / kShadowAreaFactor && open > tolerance &&
-                                    shot_b[e] > b_tolerance && open - shot_b[e] > b_tolerance
-                              : open - shot_b[e] > tolerance;
-        stats.splits_visibility += split_it;
+  struct Part {
+    std::vector<uint32_t> split;
+    uint64_t form_factor = 0, visibility = 0, gradient = 0;
+  };
+  std::vector<Part> parts(pool.chunk_count(accepted.size()));
+  pool.parallel_for(accepted.size(), [&](size_t begin, size_t end, size_t c) {
+    Part& part = parts[c];
+    for (size_t i = begin; i < end; ++i) {
+      const uint32_t e = accepted[i];
+      if (e_area[e] < min_sharp_split_area() || covered_emitter(e)) continue;
+      // Under AEPS only a sharp edge of light splits (kSharpJump), but near a punctual light.
+      const bool sharp_only = e_area[e] < min_split_area() && !in_light_pool(e);
+      const double tolerance = sharp_only ? kSharpJump * b_tolerance : b_tolerance;
+      bool split_it = false;
+      if (projected(e)) {
+        // (a) too coarse for this interaction.
+        split_it = !sharp_only && e_ff[e] * weight > params.feps;
+        part.form_factor += split_it;
+        // (b) partly hidden, and the hidden part matters. Under AEPS (kShadowAreaFactor), a
+        // punctual light's shadow is an edge across the element, a jump of its whole unhidden
+        // light (kSharpJump), whatever share of the element it hides; both parts must matter (an
+        // element in the shadow keeps rounding's crumbs of light).
+        if (!split_it && (!sharp_only || shooting_light != nullptr) && e_ff[e] > 0.0 && e_ff[e] < e_ff_open[e]) {
+          const double open = shot_radiosity(e, dB, f_open[e]);
+          split_it = sharp_only ? e_area[e] >= min_split_area() / kShadowAreaFactor && open > tolerance &&
+                                      shot_b[e] > b_tolerance && open - shot_b[e] > b_tolerance
+                                : open - shot_b[e] > tolerance;
+          part.visibility += split_it;
+        }
       }
+      // (c) the shot's radiosity jumps across one of its corners.
+      for (uint32_t k = 0; k < corner_count(e) && !split_it; ++k) {
+        const uint32_t vert = e_corner[e][k];
+        split_it = vmax[vert] - vmin[vert] > tolerance && (!sharp_only || vmax[vert] > kSharpRatio * vmin[vert]);
+        part.gradient += split_it;
+      }
+      if (split_it) part.split.push_back(e);
     }
-    // (c) the shot's radiosity jumps across one of its corners.
-    for (uint32_t k = 0; k < corner_count(e) && !split_it; ++k) {
-      const uint32_t vert = e_corner[e][k];
-      split_it = vmax[vert] - vmin[vert] > tolerance && (!sharp_only || vmax[vert] > kSharpRatio * vmin[vert]);
-      stats.splits_gradient += split_it;
-    }
-    if (split_it) to_split.push_back(e);
+  });
+  std::vector<uint32_t> to_split;
+  for (const Part& part : parts) {
+    to_split.insert(to_split.end(), part.split.begin(), part.split.end());
+    stats.splits_form_factor += part.form_factor;
+    stats.splits_visibility += part.visibility;
+    stats.splits_gradient += part.gradient;
   }
   return to_split;
 }
 
 // For a replay: by how much dB could grow before this round would split something. The criteria
 // scale with dB, so each gives limit / value; the same tests as too_coarse (but a punctual light's
-// shadows under AEPS: lights shoot once, and record nothing).
-double Solver::Impl::split_headroom(const glm::dvec3& dB, double weight, const std::vector<uint32_t>& accepted) const {
+// shadows under AEPS: lights shoot once, and record nothing). The least over the receivers, each
+// thread's share first.
+double Solver::Impl::split_headroom(const glm::dvec3& dB, double weight, const std::vector<uint32_t>& accepted) {
   HEMIBAKE_DCHECK(shooting_light == nullptr);
-  double room = std::numeric_limits<double>::infinity();
-  for (uint32_t e : accepted) {
-    // too_coarse has noted e_cov for the emitters' elements.
-    if (e_area[e] < min_sharp_split_area() || (e_cov[e] == 1 && emits(e))) continue;
-    const bool sharp_only = e_area[e] < min_split_area() && !in_light_pool(e);
-    const double tolerance = sharp_only ? kSharpJump * b_tolerance : b_tolerance;
-    if (projected(e)) {
-      if (!sharp_only) lower_headroom(room, params.feps, e_ff[e] * weight);
-      if (!sharp_only && e_ff[e] > 0.0 && e_ff[e] < e_ff_open[e])
-        lower_headroom(room, tolerance, shot_radiosity(e, dB, f_open[e]) - shot_b[e]);
+  std::vector<double> rooms(pool.chunk_count(accepted.size()), std::numeric_limits<double>::infinity());
+  pool.parallel_for(accepted.size(), [&](size_t begin, size_t end, size_t c) {
+    double room = std::numeric_limits<double>::infinity();
+    for (size_t i = begin; i < end; ++i) {
+      const uint32_t e = accepted[i];
+      // too_coarse has noted e_cov for the emitters' elements.
+      if (e_area[e] < min_sharp_split_area() || (e_cov[e] == 1 && emits(e))) continue;
+      const bool sharp_only = e_area[e] < min_split_area() && !in_light_pool(e);
+      const double tolerance = sharp_only ? kSharpJump * b_tolerance : b_tolerance;
+      if (projected(e)) {
+        if (!sharp_only) lower_headroom(room, params.feps, e_ff[e] * weight);
+        if (!sharp_only && e_ff[e] > 0.0 && e_ff[e] < e_ff_open[e])
+          lower_headroom(room, tolerance, shot_radiosity(e, dB, f_open[e]) - shot_b[e]);
+      }
+      for (uint32_t k = 0; k < corner_count(e); ++k)
+        if (!sharp_only || vmax[e_corner[e][k]] > kSharpRatio * vmin[e_corner[e][k]])
+          lower_headroom(room, tolerance, vmax[e_corner[e][k]] - vmin[e_corner[e][k]]);
     }
-    for (uint32_t k = 0; k < corner_count(e); ++k)
-      if (!sharp_only || vmax[e_corner[e][k]] > kSharpRatio * vmin[e_corner[e][k]])
-        lower_headroom(room, tolerance, vmax[e_corner[e][k]] - vmin[e_corner[e][k]]);
-  }
-  return room;
+    rooms[c] = room;
+  });
+  return rooms.empty() ? std::numeric_limits<double>::infinity() : *std::min_element(rooms.begin(), rooms.end());
 }
 
 // Whether element e is the side of an emitter that a surface just in front of it covers (the top of

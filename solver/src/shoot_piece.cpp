@@ -427,11 +427,22 @@ double Solver::Impl::hemicube_share(const std::vector<uint32_t>& accepted) const
   return sum;
 }
 
-// Southwell step: the piece's unshot radiosity goes to the receivers that took light here.
+// Southwell step: the piece's unshot radiosity goes to the receivers that took light here (receive):
+// each receiver's own light on the threads, then the sums over patches and units, and the shot's,
+// in the receivers' order.
 void Solver::Impl::distribute(const glm::dvec3& dB, const std::vector<uint32_t>& accepted) {
+  HEMIBAKE_DCHECK(dB.x >= 0.0 && dB.y >= 0.0 && dB.z >= 0.0);
+  pool.parallel_for(accepted.size(), [&](size_t begin, size_t end, size_t) {
+    for (size_t i = begin; i < end; ++i) {
+      const uint32_t e = accepted[i];
+      if (!(f_recv[e] > 0.0)) continue;
+      HEMIBAKE_DCHECK(e_child[e] == kNone && f_recv[e] <= 1.0);
+      take_light(e, dB, gain_of(e, dB, f_recv[e]));
+    }
+  });
   for (uint32_t e : accepted)
     if (f_recv[e] > 0.0) {
-      receive(e, dB, f_recv[e]);
+      count_light(e, gain_of(e, dB, f_recv[e]));
       delivered += f_recv[e] * e_area[e] * channel_sum(dB);
     }
 }

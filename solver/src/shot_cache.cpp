@@ -213,7 +213,7 @@ void Solver::Impl::record_piece(const Piece& piece, double split_room, const std
 // weak pieces, the straddle rule, finer hemicubes for strong cluster pieces and (sharp_shadows)
 // strong pieces; and
 // the close receivers left to this hemicube because the point view's error seemed small.
-double Solver::Impl::piece_headroom(const Piece& piece, double split_room, const std::vector<uint32_t>& accepted) const {
+double Solver::Impl::piece_headroom(const Piece& piece, double split_room, const std::vector<uint32_t>& accepted) {
   const double power = piece.power;
   double headroom = split_room;
   const bool patch_piece = piece.points.size() <= 4;
@@ -233,9 +233,16 @@ double Solver::Impl::piece_headroom(const Piece& piece, double split_room, const
     if (params.sharp_shadows && !piece.volume && power < kSharpPower * emitted_power)
       lower_headroom(headroom, kSharpPower * emitted_power, power);
   }
-  if (piece.may_refine)
-    for (uint32_t e : accepted)
-      if (is_close(piece, e)) lower_headroom(headroom, kSavingRuleSlack * kNearError * b_tolerance, near_error(piece, e));
+  if (piece.may_refine) {
+    // The least over the receivers, each thread's share first.
+    std::vector<double> rooms(pool.chunk_count(accepted.size()), headroom);
+    pool.parallel_for(accepted.size(), [&](size_t begin, size_t end, size_t c) {
+      for (size_t i = begin; i < end; ++i)
+        if (is_close(piece, accepted[i]))
+          lower_headroom(rooms[c], kSavingRuleSlack * kNearError * b_tolerance, near_error(piece, accepted[i]));
+    });
+    for (double room : rooms) headroom = std::min(headroom, room);
+  }
   return headroom;
 }
 

@@ -147,18 +147,27 @@ void Solver::Impl::receive(uint32_t e, const glm::dvec3& dB, double f) {
   HEMIBAKE_DCHECK(e < e_child.size() && e_child[e] == kNone);
   HEMIBAKE_DCHECK(f > 0.0 && f <= 1.0);
   HEMIBAKE_DCHECK(dB.x >= 0.0 && dB.y >= 0.0 && dB.z >= 0.0);
+  const glm::dvec3 gain = gain_of(e, dB, f);
+  take_light(e, dB, gain);
+  count_light(e, gain);
+}
+
+void Solver::Impl::take_light(uint32_t e, const glm::dvec3& dB, const glm::dvec3& gain) {
   const uint32_t q = e_patch[e];
-  const glm::dvec3 gain = patches[q].reflectance * dB * f;
   e_b[e] += gain;
   e_gap[e] += gap_share * gain;
   // (find_pools reads the points of leaves too small to split through their ancestors)
   if (shooter_shape != nullptr && p_grid_n[q] != 0)
     take_on_grid(e, mean(patches[q].reflectance * dB));
+  if (p_unit[q] != shooting_unit) e_unshot[e] += gain;
+}
+
+void Solver::Impl::count_light(uint32_t e, const glm::dvec3& gain) {
+  const uint32_t q = e_patch[e];
   if (p_unit[q] == shooting_unit) {
     held.emplace_back(e, gain);  // the shooting unit's own: unshot once it has shot (clear_unshot)
     return;
   }
-  e_unshot[e] += gain;
   p_unshot[q] += channel_sum(gain) * e_area[e];
   u_unshot[p_unit[q]] += channel_sum(gain) * e_area[e];
 }

@@ -314,6 +314,13 @@ struct Solver::Impl {
   void fresh_shot(uint32_t unit);
   void clear_unshot(uint32_t unit);
   void receive(uint32_t e, const glm::dvec3& dB, double f);
+  // receive() in two parts: what is element e's own (its radiosity, its grid points), which
+  // threads may do for different elements at once, and the sums over its patch and unit.
+  glm::dvec3 gain_of(uint32_t e, const glm::dvec3& dB, double f) const {
+    return patches[e_patch[e]].reflectance * dB * f;
+  }
+  void take_light(uint32_t e, const glm::dvec3& dB, const glm::dvec3& gain);
+  void count_light(uint32_t e, const glm::dvec3& gain);
 
   // element_tree.cpp: the elements' quadtree.
   uint32_t corner_count(uint32_t e) const { return patches[e_patch[e]].corner_count; }
@@ -509,7 +516,7 @@ struct Solver::Impl {
   void spread_shot(const glm::dvec3& dB, const std::vector<uint32_t>& accepted);
   void reset_spread(const std::vector<uint32_t>& accepted);
   std::vector<uint32_t> too_coarse(const glm::dvec3& dB, double weight, const std::vector<uint32_t>& accepted);
-  double split_headroom(const glm::dvec3& dB, double weight, const std::vector<uint32_t>& accepted) const;
+  double split_headroom(const glm::dvec3& dB, double weight, const std::vector<uint32_t>& accepted);
   bool covered_emitter(uint32_t e);
   bool in_light_pool(uint32_t e) const;
   const Light* shooting_light = nullptr;  // shoot_light's light while it refines
@@ -541,7 +548,7 @@ struct Solver::Impl {
   ShotRecord reshoot_split(uint32_t unit, const ShotRecord& r);
   void keep_record(uint32_t unit, ShotRecord record);
   void record_piece(const Piece& piece, double split_room, const std::vector<uint32_t>& accepted);
-  double piece_headroom(const Piece& piece, double split_room, const std::vector<uint32_t>& accepted) const;
+  double piece_headroom(const Piece& piece, double split_room, const std::vector<uint32_t>& accepted);
 
   Params params;
   std::vector<Patch> patches;
