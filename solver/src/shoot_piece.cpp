@@ -427,24 +427,9 @@ double Solver::Impl::hemicube_share(const std::vector<uint32_t>& accepted) const
   return sum;
 }
 
-// Southwell step: the piece's unshot radiosity goes to the receivers that took light here (receive):
-// each receiver's own light on the threads, then the sums over patches and units, and the shot's,
-// in the receivers' order.
+// Southwell step: the piece's unshot radiosity goes to the receivers that took light here.
 void Solver::Impl::distribute(const glm::dvec3& dB, const std::vector<uint32_t>& accepted) {
-  HEMIBAKE_DCHECK(dB.x >= 0.0 && dB.y >= 0.0 && dB.z >= 0.0);
-  pool.parallel_for(accepted.size(), [&](size_t begin, size_t end, size_t) {
-    for (size_t i = begin; i < end; ++i) {
-      const uint32_t e = accepted[i];
-      if (!(f_recv[e] > 0.0)) continue;
-      HEMIBAKE_DCHECK(e_child[e] == kNone && f_recv[e] <= 1.0);
-      take_light(e, dB, gain_of(e, dB, f_recv[e]));
-    }
-  });
-  for (uint32_t e : accepted)
-    if (f_recv[e] > 0.0) {
-      count_light(e, gain_of(e, dB, f_recv[e]));
-      delivered += f_recv[e] * e_area[e] * channel_sum(dB);
-    }
+  receive_each(accepted.size(), dB, [&](size_t i) { return accepted[i]; }, [&](size_t i) { return f_recv[accepted[i]]; }, true);
 }
 
 // A top piece's far receivers take their light once its parts have served its near ones, `given` of
@@ -476,14 +461,14 @@ void Solver::Impl::finish_far(FarShare& far, double scale) {
   shooter_shape = &far.shape;
   gap_share = far.gap;
   ++grid_shooter;
+  // The receivers' leaves (distinct: the receivers are), each with its receiver's form factor.
+  std::vector<std::pair<uint32_t, double>> leaves_f;
+  leaves_f.reserve(far.recv.size());
   for (size_t i = 0; i < far.recv.size(); ++i) {
     const double f = std::min(1.0, far.f[i] * scale);
-    if (!(f > 0.0)) continue;
-    for_leaves(far.recv[i], [&](uint32_t leaf) {
-      receive(leaf, far.dB, f);
-      delivered += f * e_area[leaf] * channel_sum(far.dB);
-    });
+    if (f > 0.0) for_leaves(far.recv[i], [&](uint32_t leaf) { leaves_f.emplace_back(leaf, f); });
   }
+  receive_each(leaves_f.size(), far.dB, [&](size_t i) { return leaves_f[i].first; }, [&](size_t i) { return leaves_f[i].second; }, true);
   shooter_shape = nullptr;
   gap_share = 0.0;
   if (recording != nullptr && !record_broken && far.record_piece < recording->pieces.size()) {

@@ -38,8 +38,9 @@ bool Solver::Impl::replay(uint32_t unit) {
     shape.src = std::span(r.src.data() + rp.src_begin, rp.src_end - rp.src_begin);
     shooter_shape = &shape;
     ++grid_shooter;
-    for (uint32_t k = rp.recv_begin; k < rp.recv_end; ++k)
-      if (!stale[k] && r.f[k] > 0.0f) receive(r.recv[k], dBs[i], r.f[k]);
+    // A piece's receivers are distinct (each piece's were its shot's accepted leaves).
+    receive_each(rp.recv_end - rp.recv_begin, dBs[i], [&](size_t j) { return r.recv[rp.recv_begin + j]; },
+                 [&](size_t j) { return stale[rp.recv_begin + j] ? 0.0 : static_cast<double>(r.f[rp.recv_begin + j]); }, false);
     shooter_shape = nullptr;
     gap_share = 0.0;
   }

@@ -321,6 +321,12 @@ struct Solver::Impl {
   }
   void take_light(uint32_t e, const glm::dvec3& dB, const glm::dvec3& gain);
   void count_light(uint32_t e, const glm::dvec3& gain);
+  // receive() for n distinct leaves at once: leaf(i) takes form factor f(i) (nothing where it is
+  // not above 0); with `deliver`, the shot's delivered power counts it. Each leaf's own light is
+  // handed out on the pool's threads, the sums over patches and units follow in the leaves'
+  // order, as n calls of receive() would make them.
+  template <typename Leaf, typename FormFactor>
+  void receive_each(size_t n, const glm::dvec3& dB, Leaf&& leaf, FormFactor&& f, bool deliver);
 
   // element_tree.cpp: the elements' quadtree.
   uint32_t corner_count(uint32_t e) const { return patches[e_patch[e]].corner_count; }
@@ -776,6 +782,27 @@ bool Solver::Impl::find_patch(Near&& near, Found&& found) const {
       if (found(tree_patch[i])) return true;
   }
   return false;
+}
+
+template <typename Leaf, typename FormFactor>
+void Solver::Impl::receive_each(size_t n, const glm::dvec3& dB, Leaf&& leaf, FormFactor&& f, bool deliver) {
+  HEMIBAKE_DCHECK(dB.x >= 0.0 && dB.y >= 0.0 && dB.z >= 0.0);
+  pool.parallel_for(n, [&](size_t begin, size_t end, size_t) {
+    for (size_t i = begin; i < end; ++i) {
+      const double fi = f(i);
+      if (!(fi > 0.0)) continue;
+      const uint32_t e = leaf(i);
+      HEMIBAKE_DCHECK(e < e_child.size() && e_child[e] == kNone && fi <= 1.0);
+      take_light(e, dB, gain_of(e, dB, fi));
+    }
+  });
+  for (size_t i = 0; i < n; ++i) {
+    const double fi = f(i);
+    if (!(fi > 0.0)) continue;
+    const uint32_t e = leaf(i);
+    count_light(e, gain_of(e, dB, fi));
+    if (deliver) delivered += fi * e_area[e] * channel_sum(dB);
+  }
 }
 
 template <typename Fn>
