@@ -29,6 +29,9 @@ bool Solver::Impl::replay(uint32_t unit) {
     keep_record(unit, {});  // splits are for good: it never replays again
     return false;
   }
+  // A covered piece's leaf split since: a fresh shot would cut it along its children.
+  for (uint32_t e : r.covered)
+    if (e_child[e] != kNone) return false;
   std::vector<glm::dvec3> dBs;
   if (!replayed_radiosities(r, dBs)) return false;
   for (size_t i = 0; i < r.pieces.size(); ++i) {
@@ -58,6 +61,9 @@ bool Solver::Impl::replay(uint32_t unit) {
   merged.fresh_pieces = r.fresh_pieces;
   for (const ShotRecord::Piece& rp : r.pieces) merged.append(r, rp, stale.data());
   for (const ShotRecord::Piece& rp : part.pieces) merged.append(part, rp, nullptr);
+  merged.covered = r.covered;
+  for (uint32_t e : part.covered)
+    if (std::find(merged.covered.begin(), merged.covered.end(), e) == merged.covered.end()) merged.covered.push_back(e);
   HEMIBAKE_DCHECK(merged.consistent());
   keep_record(unit, std::move(merged));
   return true;
@@ -259,6 +265,7 @@ void Solver::Impl::keep_record(uint32_t unit, ShotRecord record) {
   record.src.shrink_to_fit();
   record.recv.shrink_to_fit();
   record.f.shrink_to_fit();
+  record.covered.shrink_to_fit();
   if (record_bytes + record.bytes() > static_cast<size_t>(params.shot_cache_mb) << 20) return;
   if (u_record.empty()) u_record.resize(unit_node.size());
   record_bytes += record.bytes();

@@ -243,10 +243,13 @@ struct Solver::Impl {
     std::vector<Piece> pieces;
     std::vector<uint32_t> src, recv;
     std::vector<float> f;
+    // The leaves from which covered pieces were left unshot (shoot_node): a replay leaves them
+    // too, unless one has been split since (a fresh shot would then cut it along its children).
+    std::vector<uint32_t> covered;
     size_t bytes() const {
-      if (pieces.capacity() + src.capacity() + recv.capacity() + f.capacity() == 0) return 0;  // none
+      if (pieces.capacity() + src.capacity() + recv.capacity() + f.capacity() + covered.capacity() == 0) return 0;  // none
       return sizeof(ShotRecord) + pieces.capacity() * sizeof(Piece) +
-             (src.capacity() + recv.capacity()) * sizeof(uint32_t) + f.capacity() * sizeof(float);
+             (src.capacity() + recv.capacity() + covered.capacity()) * sizeof(uint32_t) + f.capacity() * sizeof(float);
     }
     void append(const ShotRecord& from, Piece piece, const uint8_t* skip);
     bool consistent() const;  // for HEMIBAKE_DCHECK: the pieces' ranges tile src and recv
