@@ -25,7 +25,7 @@ bool Solver::Impl::replay(uint32_t unit) {
   // may hide them (as near-field hemicubes do); otherwise the whole shot is made anew.
   std::vector<uint8_t> stale;
   const size_t stale_count = mark_stale(r, stale);
-  if (stale_count * 4 > r.recv.size()) {
+  if (stale_count * 4 > r.entries()) {
     keep_record(unit, {});  // splits are for good: it never replays again
     return false;
   }
@@ -69,19 +69,19 @@ bool Solver::Impl::replay(uint32_t unit) {
   return true;
 }
 
-// Flags the record's receivers split since it was made (`stale`, per entry), and marks them
-// (e_mark = mark) for reshoot_split. A shot that split a receiver recorded it in its earlier pieces
+// Flags the record's receivers split since it was made (`stale`, per entry: recv's, then dark's),
+// and marks them (e_mark = mark) for reshoot_split. A shot that split a receiver recorded it in its earlier pieces
 // and its children in later ones: the children are shot anew from the whole shooter, so none of
 // their entries replays either. So everything below a split receiver is marked too (its subtree
 // holds only what was split since), and an entry is stale when it is marked: a walk up from every
 // entry took 2.7 % of a profile's samples on the Blender cluttered room (52 000-entry records).
 // Returns how many entries are stale.
 size_t Solver::Impl::mark_stale(const ShotRecord& r, std::vector<uint8_t>& stale) {
-  stale.assign(r.recv.size(), 0);
+  stale.assign(r.entries(), 0);
   ++mark;
   std::vector<uint32_t> todo;
-  for (uint32_t e : r.recv) {
-    if (e_child[e] == kNone || e_mark[e] == mark) continue;
+  auto mark_below = [&](uint32_t e) {
+    if (e_child[e] == kNone || e_mark[e] == mark) return;
     todo.push_back(e);
     while (!todo.empty()) {
       const uint32_t x = todo.back();
@@ -91,11 +91,15 @@ size_t Solver::Impl::mark_stale(const ShotRecord& r, std::vector<uint8_t>& stale
       if (e_child[x] != kNone)
         for (uint32_t k = 0; k < 4; ++k) todo.push_back(e_child[x] + k);
     }
-  }
+  };
+  for (uint32_t e : r.recv) mark_below(e);
+  for (uint32_t e : r.dark) mark_below(e);
   size_t stale_count = 0;
   for (size_t k = 0; k < r.recv.size(); ++k)
     if (e_mark[r.recv[k]] == mark) stale[k] = 1, ++stale_count;
-  HEMIBAKE_DCHECK(stale_count <= r.recv.size());
+  for (size_t k = 0; k < r.dark.size(); ++k)
+    if (e_mark[r.dark[k]] == mark) stale[r.recv.size() + k] = 1, ++stale_count;
+  HEMIBAKE_DCHECK(stale_count <= r.entries());
   return stale_count;
 }
 
@@ -130,12 +134,14 @@ bool Solver::Impl::replayed_radiosities(const ShotRecord& r, std::vector<glm::dv
 // (the shot expands them to their leaves), and returns the record of that partial shot.
 Solver::Impl::ShotRecord Solver::Impl::reshoot_split(uint32_t unit, const ShotRecord& r) {
   std::vector<uint32_t> redo;
-  for (size_t k = 0; k < r.recv.size(); ++k) {
-    if (e_mark[r.recv[k]] != mark) continue;
+  auto take = [&](uint32_t e) {
+    if (e_mark[e] != mark) return;
     bool below = false;
-    for (uint32_t x = e_parent[r.recv[k]]; x != kNone && !below; x = e_parent[x]) below = e_mark[x] == mark;
-    if (!below) redo.push_back(r.recv[k]);
-  }
+    for (uint32_t x = e_parent[e]; x != kNone && !below; x = e_parent[x]) below = e_mark[x] == mark;
+    if (!below) redo.push_back(e);
+  };
+  for (uint32_t e : r.recv) take(e);
+  for (uint32_t e : r.dark) take(e);
   std::sort(redo.begin(), redo.end());
   redo.erase(std::unique(redo.begin(), redo.end()), redo.end());
   ShotRecord part;
@@ -149,36 +155,43 @@ Solver::Impl::ShotRecord Solver::Impl::reshoot_split(uint32_t unit, const ShotRe
   return part;
 }
 
-// Appends `from`'s piece `np` with its receivers but those flagged in `skip` (may be null); a piece
-// left with no receivers is dropped.
+// Appends `from`'s piece `np` with its receivers but those flagged in `skip` (may be null; per
+// entry of `from`, as mark_stale's); a piece left with no receivers is dropped.
 void Solver::Impl::ShotRecord::append(const ShotRecord& from, Piece np, const uint8_t* skip) {
   const uint32_t src_begin = np.src_begin, src_end = np.src_end, recv_begin = np.recv_begin, recv_end = np.recv_end;
+  const uint32_t dark_begin = np.dark_begin, dark_end = np.dark_end;
   np.recv_begin = static_cast<uint32_t>(recv.size());
+  np.dark_begin = static_cast<uint32_t>(dark.size());
   for (uint32_t k = recv_begin; k < recv_end; ++k) {
     if (skip != nullptr && skip[k]) continue;
     recv.push_back(from.recv[k]);
     f.push_back(from.f[k]);
   }
+  for (uint32_t k = dark_begin; k < dark_end; ++k)
+    if (skip == nullptr || !skip[from.recv.size() + k]) dark.push_back(from.dark[k]);
   np.recv_end = static_cast<uint32_t>(recv.size());
-  if (np.recv_end == np.recv_begin) return;
+  np.dark_end = static_cast<uint32_t>(dark.size());
+  if (np.recv_end == np.recv_begin && np.dark_end == np.dark_begin) return;
   np.src_begin = static_cast<uint32_t>(src.size());
   src.insert(src.end(), from.src.begin() + src_begin, from.src.begin() + src_end);
   np.src_end = static_cast<uint32_t>(src.size());
   pieces.push_back(np);
 }
 
-// The pieces' receiver ranges follow one another and cover recv (f alongside); their source ranges
-// lie in src; every piece shot from an area.
+// The pieces' receiver ranges follow one another and cover recv (f alongside) and dark; their
+// source ranges lie in src; every piece shot from an area.
 bool Solver::Impl::ShotRecord::consistent() const {
   if (f.size() != recv.size()) return false;
-  uint32_t recv_at = 0;
+  uint32_t recv_at = 0, dark_at = 0;
   for (const Piece& p : pieces) {
     if (p.recv_begin != recv_at || p.recv_end < p.recv_begin) return false;
+    if (p.dark_begin != dark_at || p.dark_end < p.dark_begin) return false;
     if (p.src_begin > p.src_end || p.src_end > src.size()) return false;
     if (!(p.src_area > 0.0 && p.area > 0.0)) return false;
     recv_at = p.recv_end;
+    dark_at = p.dark_end;
   }
-  return recv_at == recv.size();
+  return recv_at == recv.size() && dark_at == dark.size();
 }
 
 // Records a piece's shot: its sources, every accepted receiver with F(element -> piece), and its
@@ -200,13 +213,20 @@ void Solver::Impl::record_piece(const Piece& piece, double split_room, const std
   r.src.insert(r.src.end(), piece.src.begin(), piece.src.end());
   rp.src_end = static_cast<uint32_t>(r.src.size());
   rp.recv_begin = static_cast<uint32_t>(r.recv.size());
+  rp.dark_begin = static_cast<uint32_t>(r.dark.size());
   // Unlit receivers too: once split, their children may be lit (a near receiver's exact form
   // factor, a different route to the sub-pieces), so a replay must know to shoot them anew.
   for (uint32_t e : accepted) {
-    r.recv.push_back(e);
-    r.f.push_back(static_cast<float>(std::max(0.0, f_recv[e])));
+    const float f = static_cast<float>(std::max(0.0, f_recv[e]));
+    if (f > 0.0f) {
+      r.recv.push_back(e);
+      r.f.push_back(f);
+    } else {
+      r.dark.push_back(e);
+    }
   }
   rp.recv_end = static_cast<uint32_t>(r.recv.size());
+  rp.dark_end = static_cast<uint32_t>(r.dark.size());
   rp.src_area = piece.src_area;
   rp.area = piece.area;
   rp.dB = piece.dB;
@@ -264,6 +284,7 @@ void Solver::Impl::keep_record(uint32_t unit, ShotRecord record) {
   record.pieces.shrink_to_fit();
   record.src.shrink_to_fit();
   record.recv.shrink_to_fit();
+  record.dark.shrink_to_fit();
   record.f.shrink_to_fit();
   record.covered.shrink_to_fit();
   if (record_bytes + record.bytes() > static_cast<size_t>(params.shot_cache_mb) << 20) return;
