@@ -70,9 +70,9 @@ bool Solver::Impl::replay(uint32_t unit) {
 }
 
 // Flags the record's receivers split since it was made (`stale`, per entry: recv's, then dark's),
-// and marks them (e_mark = mark) for reshoot_split. A shot that split a receiver recorded it in its earlier pieces
-// and its children in later ones: the children are shot anew from the whole shooter, so none of
-// their entries replays either. So everything below a split receiver is marked too (its subtree
+// and marks them (e_mark = mark) for reshoot_split. A shot that split a receiver recorded it in its
+// earlier pieces and its children in later ones: the children are shot anew from the whole
+// shooter, so none of their entries replays either. So everything below a split receiver is marked too (its subtree
 // holds only what was split since), and an entry is stale when it is marked: a walk up from every
 // entry took 2.7 % of a profile's samples on the Blender cluttered room (52 000-entry records).
 // Returns how many entries are stale.
