@@ -93,12 +93,14 @@ size_t Solver::Impl::mark_stale(const ShotRecord& r, std::vector<uint8_t>& stale
     }
   };
   for (uint32_t e : r.recv) mark_below(e);
-  for (uint32_t e : r.dark) mark_below(e);
+  for (const ShotRecord::Piece& p : r.pieces) r.for_dark(p, [&](uint32_t e, size_t) { mark_below(e); });
   size_t stale_count = 0;
   for (size_t k = 0; k < r.recv.size(); ++k)
     if (e_mark[r.recv[k]] == mark) stale[k] = 1, ++stale_count;
-  for (size_t k = 0; k < r.dark.size(); ++k)
-    if (e_mark[r.dark[k]] == mark) stale[r.recv.size() + k] = 1, ++stale_count;
+  for (const ShotRecord::Piece& p : r.pieces)
+    r.for_dark(p, [&](uint32_t e, size_t k) {
+      if (e_mark[e] == mark) stale[r.recv.size() + k] = 1, ++stale_count;
+    });
   HEMIBAKE_DCHECK(stale_count <= r.entries());
   return stale_count;
 }
@@ -141,7 +143,7 @@ Solver::Impl::ShotRecord Solver::Impl::reshoot_split(uint32_t unit, const ShotRe
     if (!below) redo.push_back(e);
   };
   for (uint32_t e : r.recv) take(e);
-  for (uint32_t e : r.dark) take(e);
+  for (const ShotRecord::Piece& p : r.pieces) r.for_dark(p, [&](uint32_t e, size_t) { take(e); });
   std::sort(redo.begin(), redo.end());
   redo.erase(std::unique(redo.begin(), redo.end()), redo.end());
   ShotRecord part;
@@ -158,17 +160,20 @@ Solver::Impl::ShotRecord Solver::Impl::reshoot_split(uint32_t unit, const ShotRe
 // Appends `from`'s piece `np` with its receivers but those flagged in `skip` (may be null; per
 // entry of `from`, as mark_stale's); a piece left with no receivers is dropped.
 void Solver::Impl::ShotRecord::append(const ShotRecord& from, Piece np, const uint8_t* skip) {
+  const Piece was = np;
   const uint32_t src_begin = np.src_begin, src_end = np.src_end, recv_begin = np.recv_begin, recv_end = np.recv_end;
-  const uint32_t dark_begin = np.dark_begin, dark_end = np.dark_end;
   np.recv_begin = static_cast<uint32_t>(recv.size());
   np.dark_begin = static_cast<uint32_t>(dark.size());
+  np.dark_first = static_cast<uint32_t>(dark_count);
   for (uint32_t k = recv_begin; k < recv_end; ++k) {
     if (skip != nullptr && skip[k]) continue;
     recv.push_back(from.recv[k]);
     f.push_back(from.f[k]);
   }
-  for (uint32_t k = dark_begin; k < dark_end; ++k)
-    if (skip == nullptr || !skip[from.recv.size() + k]) dark.push_back(from.dark[k]);
+  uint32_t last = 0;
+  from.for_dark(was, [&](uint32_t e, size_t k) {
+    if (skip == nullptr || !skip[from.recv.size() + k]) add_dark(last, e);
+  });
   np.recv_end = static_cast<uint32_t>(recv.size());
   np.dark_end = static_cast<uint32_t>(dark.size());
   if (np.recv_end == np.recv_begin && np.dark_end == np.dark_begin) return;
@@ -183,15 +188,17 @@ void Solver::Impl::ShotRecord::append(const ShotRecord& from, Piece np, const ui
 bool Solver::Impl::ShotRecord::consistent() const {
   if (f.size() != recv.size()) return false;
   uint32_t recv_at = 0, dark_at = 0;
+  size_t unlit = 0;
   for (const Piece& p : pieces) {
     if (p.recv_begin != recv_at || p.recv_end < p.recv_begin) return false;
-    if (p.dark_begin != dark_at || p.dark_end < p.dark_begin) return false;
+    if (p.dark_begin != dark_at || p.dark_end < p.dark_begin || p.dark_first != unlit) return false;
     if (p.src_begin > p.src_end || p.src_end > src.size()) return false;
     if (!(p.src_area > 0.0 && p.area > 0.0)) return false;
+    for_dark(p, [&](uint32_t, size_t) { ++unlit; });
     recv_at = p.recv_end;
     dark_at = p.dark_end;
   }
-  return recv_at == recv.size() && dark_at == dark.size();
+  return recv_at == recv.size() && dark_at == dark.size() && unlit == dark_count;
 }
 
 // Records a piece's shot: its sources, every accepted receiver with F(element -> piece), and its
@@ -214,15 +221,17 @@ void Solver::Impl::record_piece(const Piece& piece, double split_room, const std
   rp.src_end = static_cast<uint32_t>(r.src.size());
   rp.recv_begin = static_cast<uint32_t>(r.recv.size());
   rp.dark_begin = static_cast<uint32_t>(r.dark.size());
+  rp.dark_first = static_cast<uint32_t>(r.dark_count);
   // Unlit receivers too: once split, their children may be lit (a near receiver's exact form
   // factor, a different route to the sub-pieces), so a replay must know to shoot them anew.
+  uint32_t last = 0;
   for (uint32_t e : accepted) {
     const float f = static_cast<float>(std::max(0.0, f_recv[e]));
     if (f > 0.0f) {
       r.recv.push_back(e);
       r.f.push_back(f);
     } else {
-      r.dark.push_back(e);
+      r.add_dark(last, e);
     }
   }
   rp.recv_end = static_cast<uint32_t>(r.recv.size());

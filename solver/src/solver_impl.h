@@ -233,7 +233,8 @@ struct Solver::Impl {
   // sources and the receivers that took light with their F(element -> piece).
   struct ShotRecord {
     struct Piece {
-      uint32_t src_begin, src_end, recv_begin, recv_end, dark_begin, dark_end;
+      uint32_t src_begin, src_end, recv_begin, recv_end;
+      uint32_t dark_begin, dark_end, dark_first;  // its bytes of `dark`, and its first unlit entry's index
       double src_area, area;
       glm::dvec3 dB;  // the unshot radiosity it shot when recorded
       double headroom;  // a replay may shoot up to this times dB (piece_headroom)
@@ -243,8 +244,12 @@ struct Solver::Impl {
     std::vector<Piece> pieces;
     // `recv`: the receivers the piece lit, with their form factors in `f`; `dark`: those it faced
     // and did not light (F = 0), which a replay needs only to know whether they were split since.
-    // Most receivers of a whole-scene shot in a large scene are hidden (71 % of the atrium's).
-    std::vector<uint32_t> src, recv, dark;
+    // Most receivers of a whole-scene shot in a large scene are hidden (71 % of the atrium's), and
+    // come in runs of near ids: `dark` holds each piece's as differences from the one before
+    // (zigzag, 7 bits a byte; add_dark, for_dark), `dark_count` of them in all.
+    std::vector<uint32_t> src, recv;
+    std::vector<uint8_t> dark;
+    size_t dark_count = 0;
     std::vector<float> f;
     // The leaves from which covered pieces were left unshot (shoot_node): a replay leaves them
     // too, unless one has been split since (a fresh shot would then cut it along its children).
@@ -253,12 +258,39 @@ struct Solver::Impl {
       if (pieces.capacity() + src.capacity() + recv.capacity() + dark.capacity() + f.capacity() + covered.capacity() == 0)
         return 0;  // none
       return sizeof(ShotRecord) + pieces.capacity() * sizeof(Piece) +
-             (src.capacity() + recv.capacity() + dark.capacity() + covered.capacity()) * sizeof(uint32_t) +
+             (src.capacity() + recv.capacity() + covered.capacity()) * sizeof(uint32_t) + dark.capacity() +
              f.capacity() * sizeof(float);
     }
     void append(const ShotRecord& from, Piece piece, const uint8_t* skip);
     bool consistent() const;  // for HEMIBAKE_DCHECK: the pieces' ranges tile recv and dark, and lie in src
-    size_t entries() const { return recv.size() + dark.size(); }
+    size_t entries() const { return recv.size() + dark_count; }
+    // Appends unlit receiver e to the piece being written, `last` the one before it (0 at first).
+    void add_dark(uint32_t& last, uint32_t e) {
+      const int64_t d = static_cast<int64_t>(e) - static_cast<int64_t>(last);
+      uint64_t z = (static_cast<uint64_t>(d) << 1) ^ static_cast<uint64_t>(d >> 63);
+      for (; z >= 0x80; z >>= 7) dark.push_back(static_cast<uint8_t>(z | 0x80));
+      dark.push_back(static_cast<uint8_t>(z));
+      last = e;
+      ++dark_count;
+    }
+    // Calls fn(e, index) for each unlit receiver of piece p, in order; `index` counts all of the
+    // record's unlit entries.
+    template <typename Fn>
+    void for_dark(const Piece& p, Fn&& fn) const {
+      uint32_t last = 0;
+      size_t index = p.dark_first;
+      for (uint32_t at = p.dark_begin; at < p.dark_end; ++index) {
+        uint64_t z = 0;
+        for (int shift = 0;; shift += 7) {
+          const uint8_t b = dark[at++];
+          z |= static_cast<uint64_t>(b & 0x7f) << shift;
+          if (!(b & 0x80)) break;
+        }
+        const int64_t d = static_cast<int64_t>(z >> 1) ^ -static_cast<int64_t>(z & 1);
+        last = static_cast<uint32_t>(static_cast<int64_t>(last) + d);
+        fn(last, index);
+      }
+    }
   };
   // A node of a cluster's binary tree over its patches (by median cuts of their centres).
   struct ClusterNode {
