@@ -152,27 +152,21 @@ std::vector<uint32_t> Solver::Impl::too_coarse(const glm::dvec3& dB, double weig
 // thread's share first.
 double Solver::Impl::split_headroom(const glm::dvec3& dB, double weight, const std::vector<uint32_t>& accepted) {
   HEMIBAKE_DCHECK(shooting_light == nullptr);
-  std::vector<double> rooms(pool.chunk_count(accepted.size()), std::numeric_limits<double>::infinity());
-  pool.parallel_for(accepted.size(), [&](size_t begin, size_t end, size_t c) {
-    double room = std::numeric_limits<double>::infinity();
-    for (size_t i = begin; i < end; ++i) {
-      const uint32_t e = accepted[i];
-      // too_coarse has noted e_cov for the emitters' elements.
-      if (e_area[e] < min_sharp_split_area() || (e_cov[e] == 1 && emits(e))) continue;
-      const bool sharp_only = e_area[e] < min_split_area() && !in_light_pool(e);
-      const double tolerance = sharp_only ? kSharpJump * b_tolerance : b_tolerance;
-      if (projected(e)) {
-        if (!sharp_only) lower_headroom(room, params.feps, e_ff[e] * weight);
-        if (!sharp_only && e_ff[e] > 0.0 && e_ff[e] < e_ff_open[e])
-          lower_headroom(room, tolerance, shot_radiosity(e, dB, f_open[e]) - shot_b[e]);
-      }
-      for (uint32_t k = 0; k < corner_count(e); ++k)
-        if (!sharp_only || vmax[e_corner[e][k]] > kSharpRatio * vmin[e_corner[e][k]])
-          lower_headroom(room, tolerance, vmax[e_corner[e][k]] - vmin[e_corner[e][k]]);
+  return least_over(accepted.size(), std::numeric_limits<double>::infinity(), [&](size_t i, double& room) {
+    const uint32_t e = accepted[i];
+    // too_coarse has noted e_cov for the emitters' elements.
+    if (e_area[e] < min_sharp_split_area() || (e_cov[e] == 1 && emits(e))) return;
+    const bool sharp_only = e_area[e] < min_split_area() && !in_light_pool(e);
+    const double tolerance = sharp_only ? kSharpJump * b_tolerance : b_tolerance;
+    if (projected(e)) {
+      if (!sharp_only) lower_headroom(room, params.feps, e_ff[e] * weight);
+      if (!sharp_only && e_ff[e] > 0.0 && e_ff[e] < e_ff_open[e])
+        lower_headroom(room, tolerance, shot_radiosity(e, dB, f_open[e]) - shot_b[e]);
     }
-    rooms[c] = room;
+    for (uint32_t k = 0; k < corner_count(e); ++k)
+      if (!sharp_only || vmax[e_corner[e][k]] > kSharpRatio * vmin[e_corner[e][k]])
+        lower_headroom(room, tolerance, vmax[e_corner[e][k]] - vmin[e_corner[e][k]]);
   });
-  return rooms.empty() ? std::numeric_limits<double>::infinity() : *std::min_element(rooms.begin(), rooms.end());
 }
 
 // Whether element e is the side of an emitter that a surface just in front of it covers (the top of

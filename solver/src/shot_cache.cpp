@@ -23,15 +23,15 @@ bool Solver::Impl::replay(uint32_t unit) {
   // Receivers split since need form factors for their children. When they are few, the rest is
   // replayed and the children are shot anew from the same shooter, its hemicubes seeing only what
   // may hide them (as near-field hemicubes do); otherwise the whole shot is made anew.
+  // A covered piece's leaf split since: a fresh shot would cut it along its children.
+  for (uint32_t e : r.covered)
+    if (e_child[e] != kNone) return false;
   std::vector<uint8_t> stale;
   const size_t stale_count = mark_stale(r, stale);
   if (stale_count * 4 > r.entries()) {
     keep_record(unit, {});  // splits are for good: it never replays again
     return false;
   }
-  // A covered piece's leaf split since: a fresh shot would cut it along its children.
-  for (uint32_t e : r.covered)
-    if (e_child[e] != kNone) return false;
   std::vector<glm::dvec3> dBs;
   if (!replayed_radiosities(r, dBs)) return false;
   for (size_t i = 0; i < r.pieces.size(); ++i) {
@@ -72,10 +72,10 @@ bool Solver::Impl::replay(uint32_t unit) {
 // Flags the record's receivers split since it was made (`stale`, per entry: recv's, then dark's),
 // and marks them (e_mark = mark) for reshoot_split. A shot that split a receiver recorded it in its
 // earlier pieces and its children in later ones: the children are shot anew from the whole
-// shooter, so none of their entries replays either. So everything below a split receiver is marked too (its subtree
-// holds only what was split since), and an entry is stale when it is marked: a walk up from every
-// entry took 2.7 % of a profile's samples on the Blender cluttered room (52 000-entry records).
-// Returns how many entries are stale.
+// shooter, so none of their entries replays either. So everything below a split receiver is
+// marked too (its subtree holds only what was split since), and an entry is stale when it is
+// marked: a walk up from every entry took 2.7 % of a profile's samples on the Blender cluttered
+// room (52 000-entry records). Returns how many entries are stale.
 size_t Solver::Impl::mark_stale(const ShotRecord& r, std::vector<uint8_t>& stale) {
   stale.assign(r.entries(), 0);
   ++mark;
@@ -269,16 +269,11 @@ double Solver::Impl::piece_headroom(const Piece& piece, double split_room, const
     if (params.sharp_shadows && !piece.volume && power < kSharpPower * emitted_power)
       lower_headroom(headroom, kSharpPower * emitted_power, power);
   }
-  if (piece.may_refine) {
-    // The least over the receivers, each thread's share first.
-    std::vector<double> rooms(pool.chunk_count(accepted.size()), headroom);
-    pool.parallel_for(accepted.size(), [&](size_t begin, size_t end, size_t c) {
-      for (size_t i = begin; i < end; ++i)
-        if (is_close(piece, accepted[i]))
-          lower_headroom(rooms[c], kSavingRuleSlack * kNearError * b_tolerance, near_error(piece, accepted[i]));
+  if (piece.may_refine)
+    headroom = least_over(accepted.size(), headroom, [&](size_t i, double& room) {
+      if (is_close(piece, accepted[i]))
+        lower_headroom(room, kSavingRuleSlack * kNearError * b_tolerance, near_error(piece, accepted[i]));
     });
-    for (double room : rooms) headroom = std::min(headroom, room);
-  }
   return headroom;
 }
 

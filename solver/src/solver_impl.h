@@ -368,6 +368,10 @@ struct Solver::Impl {
   // order, as n calls of receive() would make them.
   template <typename Leaf, typename FormFactor>
   void receive_each(size_t n, const glm::dvec3& dB, Leaf&& leaf, FormFactor&& f, bool deliver);
+  // The least of `start` and what lower(i, room) leaves in `room` for i in [0, n), on the pool's
+  // threads (each thread's share first; a minimum does not depend on the order).
+  template <typename Lower>
+  double least_over(size_t n, double start, Lower&& lower);
 
   // element_tree.cpp: the elements' quadtree.
   uint32_t corner_count(uint32_t e) const { return patches[e_patch[e]].corner_count; }
@@ -823,6 +827,16 @@ bool Solver::Impl::find_patch(Near&& near, Found&& found) const {
       if (found(tree_patch[i])) return true;
   }
   return false;
+}
+
+template <typename Lower>
+double Solver::Impl::least_over(size_t n, double start, Lower&& lower) {
+  std::vector<double> rooms(pool.chunk_count(n), start);
+  pool.parallel_for(n, [&](size_t begin, size_t end, size_t c) {
+    for (size_t i = begin; i < end; ++i) lower(i, rooms[c]);
+  });
+  for (double room : rooms) start = std::min(start, room);
+  return start;
 }
 
 template <typename Leaf, typename FormFactor>
