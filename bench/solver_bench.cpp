@@ -141,8 +141,41 @@ struct Run {
   uint64_t links = 0;
   Error error;
   double shown_median = 0.0, shown_p90 = 0.0, shown_max = 0.0;  // as displayed (display_error.h)
+  // As displayed, per region of the points (run_method's `region`): points, median error, and the
+  // bake's light over the reference's.
+  static constexpr int kRegions = 8;
+  uint32_t region_points[kRegions] = {};
+  double region_median[kRegions] = {}, region_ratio[kRegions] = {};
   long peak_kib = 0;
 };
+
+// Which region of a bench table a point of the displayed-error measure belongs to (0 to
+// Run::kRegions - 1), or -1 for none.
+using RegionOf = int (*)(const hemibake::bench::SurfacePoint&);
+
+// The per-region figures of `shown` at `points` into `out` (Run::region_*).
+void region_figures(const std::vector<hemibake::bench::SurfacePoint>& points, const Mesh& mesh,
+                    const hemibake::bench::DisplayError& shown, RegionOf region, Run& out) {
+  std::vector<double> errors[Run::kRegions];
+  double bake[Run::kRegions] = {}, ref[Run::kRegions] = {};
+  const double slack = hemibake::bench::plane_slack(mesh);
+  for (size_t i = 0; i < points.size(); ++i) {
+    const int r = region(points[i]);
+    if (r < 0 || r >= Run::kRegions) continue;
+    glm::dvec3 v(0.0);
+    hemibake::bench::displayed_value(mesh, points[i].position, points[i].normal, slack, v);
+    errors[r].push_back(shown.errors[i]);
+    bake[r] += v.x + v.y + v.z;
+    ref[r] += points[i].reference.x + points[i].reference.y + points[i].reference.z;
+  }
+  for (int r = 0; r < Run::kRegions; ++r) {
+    out.region_points[r] = static_cast<uint32_t>(errors[r].size());
+    if (errors[r].empty()) continue;
+    std::sort(errors[r].begin(), errors[r].end());
+    out.region_median[r] = errors[r][errors[r].size() / 2];
+    out.region_ratio[r] = ref[r] > 0.0 ? bake[r] / ref[r] : 0.0;
+  }
+}
 
 // Runs `method` ("aa", "classical" or "hr") with `threads` on `scene` in a child process, through
 // the bake pipeline with the settings of `base`; the error against the reference (`samples` paths
@@ -150,7 +183,7 @@ struct Run {
 // and the fastest counts (this machine is shared).
 Run run_method(const Scene& scene, const std::string& method, uint32_t threads, uint32_t samples,
                const hemibake::protocol::JobSpec& base = {}, uint32_t repeats = 1,
-               const std::vector<hemibake::bench::SurfacePoint>* points = nullptr) {
+               const std::vector<hemibake::bench::SurfacePoint>* points = nullptr, RegionOf region = nullptr) {
   long peak = 0;
   Run r = isolated_value<Run>(
       [&] {
@@ -182,6 +215,7 @@ Run run_method(const Scene& scene, const std::string& method, uint32_t threads, 
           out.shown_median = shown.median;
           out.shown_p90 = shown.p90;
           out.shown_max = shown.max;
+          if (region != nullptr) region_figures(*points, mesh, shown, region, out);
         }
         return out;
       },
@@ -263,8 +297,8 @@ int main(int argc, char** argv) {
   const std::string mode = argc > 1 ? argv[1] : "";
   const bool quick = mode == "--quick";
   if (!mode.empty() && !quick && mode != "--sweep" && mode != "--sweep-room" && mode != "--chamber" && mode != "--scaling" && mode != "--lights" &&
-      mode != "--cluttered" && mode != "--big") {
-    std::fprintf(stderr, "usage: hemibake-bench [--quick | --sweep | --sweep-room | --chamber | --scaling | --lights | --cluttered | --big]\n");
+      mode != "--cluttered" && mode != "--lava" && mode != "--big") {
+    std::fprintf(stderr, "usage: hemibake-bench [--quick | --sweep | --sweep-room | --chamber | --scaling | --lights | --cluttered | --lava | --big]\n");
     return 2;
   }
   const Scene cornell = make_cornell_box();
@@ -413,6 +447,49 @@ int main(int argc, char** argv) {
       print_run(run_method(room, "hr", 0, 0, {}, 1, &points));
       std::printf("\n");
     }
+    return 0;
+  }
+  if (mode == "--lava") {
+    // Many small emitters (issue 18, item 4): the lava field's six glowing spheres light a 20 x 20 m
+    // floor among 36 objects. Error as displayed at 600 points, and on the floor by distance from
+    // the nearest lava sphere's foot: its light pools.
+    const Scene field = make_lava_field();
+    const auto points = points_of(field, 600);
+    // The spheres' centres, as make_lava_field places them.
+    auto region = [](const hemibake::bench::SurfacePoint& p) {
+      if (p.normal.y < 0.99 || std::abs(p.position.y) > 1e-6) return 5;  // the objects
+      double d = 1e300;
+      for (int n = 0; n < 6; ++n) {
+        const double x = -6.4 + 3.2 * (n % 3) * 2.0 + 1.6, z = n < 3 ? -3.2 : 3.2;
+        d = std::min(d, std::hypot(p.position.x - x, p.position.z - z));
+      }
+      return d < 1.0 ? 0 : d < 2.0 ? 1 : d < 3.0 ? 2 : d < 5.0 ? 3 : 4;
+    };
+    std::printf("## Lava field (%zu patches, six emissive spheres; default settings; one run each; 600 points)\n\n",
+                field.patches.size());
+    print_runs_header();
+    std::vector<Run> runs;
+    runs.push_back(run_method(field, "aa", 0, 0, {}, 1, &points, region));
+    print_run(runs.back());
+    JobSpec high;
+    if (const std::string e = hemibake::protocol::apply_params({{"quality", "high"}}, high); !e.empty()) {
+      std::fprintf(stderr, "hemibake-bench: %s\n", e.c_str());
+      return 1;
+    }
+    runs.push_back(run_method(field, "aa", 0, 0, high, 1, &points, region));
+    std::snprintf(runs.back().method, sizeof runs.back().method, "aa, --quality high");
+    print_run(runs.back());
+    runs.push_back(run_method(field, "hr", 0, 0, {}, 1, &points, region));
+    print_run(runs.back());
+    const char* names[] = {"floor, 0-1 m from a lava sphere", "floor, 1-2 m", "floor, 2-3 m", "floor, 3-5 m",
+                           "floor, further", "the objects"};
+    std::printf("\n| region | points | aa: median as displayed | aa: bake / reference | aa high: median | aa high: bake / reference | hr: median | hr: bake / reference |\n");
+    std::printf("|---|---|---|---|---|---|---|---|\n");
+    for (int r = 0; r < 6; ++r)
+      std::printf("| %s | %u | %.1f %% | %.3f | %.1f %% | %.3f | %.1f %% | %.3f |\n", names[r], runs[0].region_points[r],
+                  100.0 * runs[0].region_median[r], runs[0].region_ratio[r], 100.0 * runs[1].region_median[r],
+                  runs[1].region_ratio[r], 100.0 * runs[2].region_median[r], runs[2].region_ratio[r]);
+    std::printf("\n");
     return 0;
   }
   if (mode == "--big") {
