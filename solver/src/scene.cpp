@@ -355,18 +355,20 @@ void find_groups(const Scene& scene, const PointIds& point_of, const EdgePatches
   // two sides, so the patches are neither one smooth surface (their vertices would average across
   // the wall) nor one occlusion group (whose pieces never hide each other: the floor behind the
   // wall would be lit with the floor in front of it).
-  // Patches sharing a whole edge (same two points) may share vertices: one smooth surface.
+  // Patches sharing a whole edge (same two points) may share vertices: one smooth surface, unless
+  // a patch in neither's plane stands on the edge between them (a junction: for coplanar patches,
+  // any patch of another plane there, such as a room's ceiling under the gable that continues its
+  // wall, whose vertices on that line averaged the attic's light with the room's).
   for (const auto& [key, list] : edge_patches) {
-    bool junction = false;
-    for (size_t x = 1; x < list.size() && !junction; ++x)
-      for (size_t y = 0; y < x && !junction; ++y)
-        if (!same_plane(list[x], list[y]))
-          for (size_t z = 0; z < list.size() && !junction; ++z)
-            junction = !same_plane(list[z], list[x]) && !same_plane(list[z], list[y]);
-    if (junction) continue;
+    auto junction = [&](uint32_t a, uint32_t b) {
+      for (uint32_t z : list)
+        if (!same_plane(z, a) && !same_plane(z, b)) return true;
+      return false;
+    };
     for (size_t x = 0; x < list.size(); ++x) {
       for (size_t y = x + 1; y < list.size(); ++y) {
         const uint32_t a = list[x], b = list[y];
+        if (junction(a, b)) continue;
         const double cos_ab = glm::dot(out.normal[a], out.normal[b]);
         if (scene.patches[a].material == scene.patches[b].material &&
             (cos_ab > kCreaseCos || (cos_ab > 0.0 && same_input_vertices(scene, point_of, a, b, key))))

@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
 
+#include <algorithm>
 #include <array>
 #include <cstdio>
 #include <utility>
@@ -265,6 +266,32 @@ TEST(DoubleSided, FloatingPlateIsLitOnTopAndOnlyByTheFloorBelow) {
   EXPECT_NEAR(top2, top1, 0.03 * top1);
   EXPECT_NEAR(bottom2, bottom1, 0.03 * bottom1 + 0.003 * top1);
   EXPECT_LT(bottom2, 0.2 * top2);  // only what the floor sends up
+}
+
+// A room under a lit attic, as Blender's attic export has them: the room a closed box of inward
+// faces, the attic another on top of it, its floor the twin of the room's ceiling. Each wall of the
+// room and the attic wall above it lie in one plane, of one material, and share their whole edge,
+// on which the ceiling and the attic's floor stand. The room is closed and holds no light, so it is
+// dark, and a viewer must show it dark up to that edge: the vertices there once averaged the attic
+// wall's light with the room wall's (the attic's gables read 0.91 of the path tracer's light over
+// their lowest 15 cm, and the room's walls were lit along their top).
+TEST(DoubleSided, RoomUnderALitAtticIsShownDarkUpToTheWallThatContinuesAbove) {
+  Scene scene;
+  add_box(scene, dvec3(0.0), dvec3(2.0, 1.0, 2.0), 1, Faces::kInward, dvec3(0.7), dvec3(0.0), 0);
+  const uint32_t room_end = static_cast<uint32_t>(scene.patches.size());
+  add_box(scene, dvec3(0.0, 1.0, 0.0), dvec3(2.0, 2.0, 2.0), 1, Faces::kInward, dvec3(0.7), dvec3(0.0), 0);
+  const uint32_t attic_end = static_cast<uint32_t>(scene.patches.size());
+  add_ceiling_light(scene, 1.99, 0.7, 1.3, 0.7, 1.3, dvec3(10.0));
+  const Mesh mesh = solve(scene);
+  auto any = [](const dvec3&, const Patch&) { return true; };
+  const double attic = mean_over(scene, mesh, room_end, attic_end, any).mean();
+  double room_vertex = 0.0;  // the brightest vertex of the room's elements
+  for (const auto& e : mesh.elements)
+    if (e.patch < room_end)
+      for (uint32_t k = 0; k < e.corner_count; ++k) room_vertex = std::max(room_vertex, mesh.radiosity[e.corners[k]].x);
+  std::printf("attic %.5f, the room's brightest vertex %.7f\n", attic, room_vertex);
+  EXPECT_GT(attic, 0.05);
+  EXPECT_LT(room_vertex, 1e-4 * attic);
 }
 
 }  // namespace
