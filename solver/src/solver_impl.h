@@ -160,6 +160,10 @@ constexpr double kCoverGap = 0.01;
 // A cover that emits nothing splits the elements along its outline this many levels under the
 // smallest split (split_along_cover_outlines).
 constexpr int kCoverOutlineLevels = 2;
+// The elements around a point where a surface touches another at a corner alone split as far from
+// it as half that surface is wide, at most this share of the scene's diagonal
+// (find_point_contacts).
+constexpr double kContactReach = 0.05;
 // A surface standing on an element splits it (contact_crosses) where the stretch of its foot across
 // the element is at least this share of the side of the smallest element an outline splits to: a
 // chair's 3 cm leg does not split a cluttered room's floor.
@@ -501,6 +505,8 @@ struct Solver::Impl {
                Cover by = Cover::kAny) const;
   void split_along_cover_outlines();
   bool contact_crosses(uint32_t e) const;
+  void find_point_contacts();
+  bool point_contact_near(uint32_t e) const;
   double contact_length(uint32_t e, uint32_t q, double inset) const;
 
   // pools.cpp: where the light an element took varies across it. Each patch large enough to split
@@ -697,6 +703,10 @@ struct Solver::Impl {
   std::vector<uint32_t> f_begin, f_end;  // per element: its fragments in `frags`
   std::vector<uint64_t> e_stamp;         // per element: the hemicube its form factor belongs to
   std::vector<double> e_ff, e_ff_open;   // per element: visible and unoccluded form factor
+  // Per patch: the points where another surface touches it at a corner alone (find_point_contacts),
+  // and all of them, each patch's in a run.
+  std::vector<uint32_t> p_contact_begin;
+  std::vector<glm::dvec4> contact_points;  // the point, and the split's reach from it
   uint64_t stamp = 0;
   std::vector<detail::ProjectScratch> scratch;
   std::vector<std::vector<Fragment>> chunk_frags;
