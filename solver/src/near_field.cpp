@@ -324,38 +324,43 @@ void Solver::Impl::find_point_contacts() {
     uint32_t p;
     glm::dvec4 point;  // the point, and how far the split reaches from it
   };
-  std::vector<Found> found;
-  for (uint32_t q = 0; q < n; ++q) {
-    const Patch& pq = patches[q];
-    for (uint32_t k = 0; k < pq.corner_count; ++k) {
-      const glm::dvec3& v = pq.corners[k];
-      auto near = [&](const glm::dvec3& lo, const glm::dvec3& hi) {
-        return !glm::any(glm::lessThan(v, lo - eps)) && !glm::any(glm::greaterThan(v, hi + eps));
-      };
-      find_patch(near, [&](uint32_t p) {
-        if (p == q || prep.twin[p] == q || prep.occlusion_group[p] == prep.occlusion_group[q] || !near(p_lo[p], p_hi[p]))
+  std::vector<std::vector<Found>> per_chunk(pool.chunk_count(n));
+  pool.parallel_for(n, [&](size_t begin, size_t end, size_t chunk) {
+    std::vector<Found>& found = per_chunk[chunk];
+    for (uint32_t q = static_cast<uint32_t>(begin); q < end; ++q) {
+      const Patch& pq = patches[q];
+      for (uint32_t k = 0; k < pq.corner_count; ++k) {
+        const glm::dvec3& v = pq.corners[k];
+        auto near = [&](const glm::dvec3& lo, const glm::dvec3& hi) {
+          return !glm::any(glm::lessThan(v, lo - eps)) && !glm::any(glm::greaterThan(v, hi + eps));
+        };
+        find_patch(near, [&](uint32_t p) {
+          if (p == q || prep.twin[p] == q || prep.occlusion_group[p] == prep.occlusion_group[q] || !near(p_lo[p], p_hi[p]))
+            return false;
+          const glm::dvec3& np = prep.normal[p];
+          const glm::dvec3& op = patches[p].corners[0];
+          if (std::abs(glm::dot(np, v - op)) > eps) return false;
+          // q reaches in front of p, and neither of its edges at v lies in p's plane.
+          const double before = glm::dot(np, pq.corners[(k + pq.corner_count - 1) % pq.corner_count] - op);
+          const double after = glm::dot(np, pq.corners[(k + 1) % pq.corner_count] - op);
+          if (before <= eps || after <= eps) return false;
+          // v within p's polygon.
+          const Patch& pp = patches[p];
+          for (uint32_t j = 0; j < pp.corner_count; ++j) {
+            const glm::dvec3 m = glm::cross(np, pp.corners[(j + 1) % pp.corner_count] - pp.corners[j]);
+            if (glm::dot(m, v - pp.corners[j]) < -eps * glm::length(m)) return false;
+          }
+          const glm::dvec3 size = group_hi[prep.smoothing_group[q]] - group_lo[prep.smoothing_group[q]];
+          const double reach = std::min(0.5 * std::max({size.x, size.y, size.z}), kContactReach * prep.diagonal);
+          found.push_back({p, glm::dvec4(v, reach)});
           return false;
-        const glm::dvec3& np = prep.normal[p];
-        const glm::dvec3& op = patches[p].corners[0];
-        if (std::abs(glm::dot(np, v - op)) > eps) return false;
-        // q reaches in front of p, and neither of its edges at v lies in p's plane.
-        const double before = glm::dot(np, pq.corners[(k + pq.corner_count - 1) % pq.corner_count] - op);
-        const double after = glm::dot(np, pq.corners[(k + 1) % pq.corner_count] - op);
-        if (before <= eps || after <= eps) return false;
-        // v within p's polygon.
-        const Patch& pp = patches[p];
-        for (uint32_t j = 0; j < pp.corner_count; ++j) {
-          const glm::dvec3 m = glm::cross(np, pp.corners[(j + 1) % pp.corner_count] - pp.corners[j]);
-          if (glm::dot(m, v - pp.corners[j]) < -eps * glm::length(m)) return false;
-        }
-        const glm::dvec3 size = group_hi[prep.smoothing_group[q]] - group_lo[prep.smoothing_group[q]];
-        const double reach = std::min(0.5 * std::max({size.x, size.y, size.z}), kContactReach * prep.diagonal);
-        found.push_back({p, glm::dvec4(v, reach)});
-        return false;
-      });
+        });
+      }
     }
-  }
-  std::sort(found.begin(), found.end(), [](const Found& a, const Found& b) { return a.p < b.p; });
+  });
+  std::vector<Found> found;
+  for (const std::vector<Found>& part : per_chunk) found.insert(found.end(), part.begin(), part.end());
+  std::stable_sort(found.begin(), found.end(), [](const Found& a, const Found& b) { return a.p < b.p; });
   p_contact_begin.assign(n + 1, 0);
   contact_points.clear();
   for (const Found& f : found) {
