@@ -306,8 +306,8 @@ void Solver::Impl::split_along_cover_outlines() {
 // a ball on a floor under a large ceiling light left the floor lit up to its foot (2 to 70 times the
 // path tracer's light within 30 cm of it) and its underside 13 times too bright, through floor
 // elements 1.5 m wide meeting at the foot. The elements around such a point split down to the
-// smallest split before any shot (point_contact_near); a corner within kRoundingLength of the plane
-// touches it. The split reaches as far from the point as half the touching surface is wide (its
+// smallest split before any shot (point_contact_near); a corner within kCloseFacingLength (of the
+// scene's diagonal) of the plane touches it. The split reaches as far from the point as half the touching surface is wide (its
 // smoothing group's box: a ball's shadow on the floor is about as wide as the ball), at most
 // kContactReach of the scene's diagonal.
 void Solver::Impl::find_point_contacts() {

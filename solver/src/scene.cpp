@@ -360,7 +360,7 @@ void find_groups(const Scene& scene, const PointIds& point_of, const EdgePatches
   // any patch of another plane there, such as a room's ceiling under the gable that continues its
   // wall, whose vertices on that line averaged the attic's light with the room's).
   for (const auto& [key, list] : edge_patches) {
-    // (A structured binding cannot be captured before C++20's clang 16.)
+    // A named reference: clang before 16 cannot capture a structured binding in a lambda.
     const std::vector<uint32_t>& on_edge = list;
     auto junction = [&](uint32_t a, uint32_t b) {
       for (uint32_t z : on_edge)
