@@ -20,6 +20,8 @@
 #include <cstring>
 #include <algorithm>
 #include <atomic>
+#include <map>
+#include <functional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -151,7 +153,7 @@ struct Run {
 
 // Which region of a bench table a point of the displayed-error measure belongs to (0 to
 // Run::kRegions - 1), or -1 for none.
-using RegionOf = int (*)(const hemibake::bench::SurfacePoint&);
+using RegionOf = std::function<int(const hemibake::bench::SurfacePoint&)>;
 
 // The per-region figures of `shown` at `points` into `out` (Run::region_*).
 void region_figures(const std::vector<hemibake::bench::SurfacePoint>& points, const Mesh& mesh,
@@ -455,14 +457,20 @@ int main(int argc, char** argv) {
     // the nearest lava sphere's foot: its light pools.
     const Scene field = make_lava_field();
     const auto points = points_of(field, 600);
-    // The spheres' centres, as make_lava_field places them.
-    auto region = [](const hemibake::bench::SurfacePoint& p) {
+    // The lava spheres' feet: the mean corner of each emitting material's patches, on the floor.
+    std::map<uint32_t, std::pair<glm::dvec3, double>> lava;
+    for (const Patch& p : field.patches)
+      if (p.emission.x > 0.0)
+        for (uint32_t k = 0; k < p.corner_count; ++k) {
+          lava[p.material].first += p.corners[k];
+          lava[p.material].second += 1.0;
+        }
+    std::vector<glm::dvec3> feet;
+    for (const auto& [material, sum] : lava) feet.push_back(sum.first / sum.second);
+    auto region = [feet](const hemibake::bench::SurfacePoint& p) {
       if (p.normal.y < 0.99 || std::abs(p.position.y) > 1e-6) return 5;  // the objects
       double d = 1e300;
-      for (int n = 0; n < 6; ++n) {
-        const double x = -6.4 + 3.2 * (n % 3) * 2.0 + 1.6, z = n < 3 ? -3.2 : 3.2;
-        d = std::min(d, std::hypot(p.position.x - x, p.position.z - z));
-      }
+      for (const glm::dvec3& f : feet) d = std::min(d, std::hypot(p.position.x - f.x, p.position.z - f.z));
       return d < 1.0 ? 0 : d < 2.0 ? 1 : d < 3.0 ? 2 : d < 5.0 ? 3 : 4;
     };
     std::printf("## Lava field (%zu patches, six emissive spheres; default settings; one run each; 600 points)\n\n",

@@ -15,6 +15,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <numbers>
 #include <numeric>
 #include <random>
 #include <vector>
@@ -358,8 +359,8 @@ TEST(Refine, BallRestingOnAFloorUnderALargeLightCastsItsContactShadow) {
         // The segment p -> q meets the sphere: its nearest point to the centre lies within it.
         const double t = std::clamp(glm::dot(centre - p, d) / len2, 0.0, 1.0);
         if (glm::distance(p + t * d, centre) < radius) continue;
-        const double cos_p = d.y / std::sqrt(len2), cos_q = d.y / std::sqrt(len2);
-        f += cos_p * cos_q / (M_PI * len2) * da;
+        const double cos = d.y / std::sqrt(len2);  // at the floor and at the light alike (parallel)
+        f += cos * cos / (std::numbers::pi * len2) * da;
       }
     return rho * e * f;
   };
@@ -372,7 +373,7 @@ TEST(Refine, BallRestingOnAFloorUnderALargeLightCastsItsContactShadow) {
   for (const double d : {0.3, 0.4, 0.5}) {
     double shown_sum = 0.0, exact_sum = 0.0;
     for (int a = 0; a < 8; ++a) {
-      const double phi = 2.0 * M_PI * (a + 0.5) / 8.0, x = d * std::cos(phi), z = d * std::sin(phi);
+      const double phi = 2.0 * std::numbers::pi * (a + 0.5) / 8.0, x = d * std::cos(phi), z = d * std::sin(phi);
       const auto shown = shown_on_floor(mesh, 0, 1, x, z);
       ASSERT_TRUE(shown.has_value());
       shown_sum += shown->x / 8.0;
