@@ -52,7 +52,7 @@ std::vector<uint32_t> Solver::Impl::shoot_piece(const Piece& piece, const std::v
   const detail::Shaft shaft = shaft_of(piece, accepted, whole_scene);
   std::vector<uint32_t> seen;
   gather_seen(shaft, accepted, seen);
-  place_hemicube(piece);
+  place_hemicube(piece, seen);
   // The closed meshes the eye lies in: a volume cluster's centre, or a hair in front of the piece
   // (a piece of a mesh's inside lies on the mesh's outline, where the test could go either way).
   eye_within = enclosing(piece.volume ? piece.centre : piece.centre + piece.normal * (kEyeOffset * prep.diagonal));
@@ -172,6 +172,54 @@ bool Solver::Impl::sharp_level(const Piece& piece, double power) const {
   return params.sharp_shadows && params.method == Method::kAntiAliased && !piece.volume && power >= kSharpPower * emitted_power;
 }
 
+// The objects of the scene (p_object_size, p_object_centre): outward-facing solids and closed
+// double-sided meshes, each measured by its bounding box once.
+void Solver::Impl::measure_objects() {
+  p_object_size.assign(patches.size(), 0.0);
+  p_object_centre.assign(patches.size(), glm::dvec3(0.0));
+  auto median_extent = [](const glm::dvec3& lo, const glm::dvec3& hi) {
+    const glm::dvec3 d = hi - lo;
+    return std::max(std::min(d.x, d.y), std::min(std::max(d.x, d.y), d.z));
+  };
+  for (uint32_t q = 0; q < patches.size(); ++q) {
+    const uint32_t s = prep.solid[q];
+    if (s == kNone) continue;
+    p_object_size[q] = median_extent(prep.solid_lo[s], prep.solid_hi[s]);
+    p_object_centre[q] = 0.5 * (prep.solid_lo[s] + prep.solid_hi[s]);
+  }
+  for (uint32_t m = 0; m < prep.closed_outside.size(); ++m)
+    for (uint32_t q : prep.closed_outside[m]) {
+      p_object_size[q] = median_extent(prep.closed_lo[m], prep.closed_hi[m]);
+      p_object_centre[q] = 0.5 * (prep.closed_lo[m] + prep.closed_hi[m]);
+    }
+}
+
+// The resolution a strong piece's hemicube needs to show each object it may see (`seen`: what it
+// projects) at least kObjectPixels pixels wide: an object of size s at distance d spans s / d
+// radians, a pixel at the top face's centre 2 / R. Its near-field pieces halve the resolution per
+// level, since a quarter-size piece serves receivers half as far; but the objects do not shrink
+// with the piece. A table of boxes of 4 to 18 cm, 3 m from a glowing wall, is shot from the wall's
+// sixteenths at resolution 26, where a box is a pixel or less: light then leaks into the crevices
+// between the boxes and a face half behind another stays lit (bench/README.md). 0 where the level's
+// resolution will do, for a volume cluster, or not aa's; whether the piece is strong enough to take
+// it is place_hemicube's to say. Walls of tiles and open sheets are no objects: only solids and
+// closed meshes hide things behind them at every angle.
+uint32_t Solver::Impl::sharp_resolution(const Piece& piece, const std::vector<uint32_t>& seen) const {
+  if (params.method != Method::kAntiAliased || piece.volume) return 0;
+  double least = std::numeric_limits<double>::infinity();  // the narrowest object's angle
+  for (uint32_t e : seen) {
+    const uint32_t q = e_patch[e];
+    const double size = p_object_size[q];
+    if (!(size > 0.0)) continue;
+    const double d = glm::distance(piece.centre, p_object_centre[q]);
+    least = std::min(least, size / std::max(d, size));
+  }
+  if (!std::isfinite(least)) return 0;
+  const double wanted = 2.0 * kObjectPixels / least;
+  const size_t level = std::min<size_t>(static_cast<size_t>(piece.depth), cubes.size() - 1);
+  return wanted > cubes[level].resolution() ? static_cast<uint32_t>(std::ceil(wanted)) : 0;
+}
+
 // Chooses the piece's hemicube, its level's or, for a strong cluster piece, a finer one, and places
 // it at the piece's centre. Weak pieces once took coarser hemicubes (half the resolution under 5 %
 // of the emitted power, a quarter under 0.5 %), as long as those shot under a quarter of all the
@@ -179,12 +227,20 @@ bool Solver::Impl::sharp_level(const Piece& piece, double power) const {
 // refused once the quarter was reached: without them the atrium took 158 000 hemicubes rather than
 // 201 000 (162 s against 188), the cluttered room 0.93 of the time, and the displayed error fell
 // (the gallery's visible points: median 2.6 -> 2.0 %, p90 12.4 -> 11.5 %; bench/README.md).
-void Solver::Impl::place_hemicube(const Piece& piece) {
-  const bool sharp = sharp_level(piece, piece.power);
+// A strong piece that objects ask a finer hemicube of (sharp_resolution) takes the coarsest level's
+// that is fine enough, or the finer one.
+void Solver::Impl::place_hemicube(const Piece& piece, const std::vector<uint32_t>& seen) {
+  const uint32_t wanted = sharp_level(piece, piece.power) ? 0 : sharp_resolution(piece, seen);
+  objects_want_finer = wanted > 0;
+  const bool strong = objects_want_finer && piece.power >= kSharpPower * emitted_power;
+  size_t level = std::min<size_t>(static_cast<size_t>(piece.depth), cubes.size() - 1);
+  if (strong)
+    while (level > 0 && cubes[level].resolution() < wanted) --level;
+  const bool sharp = sharp_level(piece, piece.power) || (strong && cubes[level].resolution() < wanted);
   const bool finer = sharp || finer_level(piece, piece.power);
   ++stats.hemicubes;
   ++stamp;
-  const size_t level = sharp ? 0 : std::min<size_t>(static_cast<size_t>(piece.depth), cubes.size() - 1);
+  if (sharp) level = 0;
   cube = &cubes[level];
   if (piece.volume) {
     VolumeCube& v = volume_cubes[level];

@@ -70,6 +70,7 @@ Solver::Impl::Impl(const Scene& scene, const Params& p, const Impl* first, const
     leaves.push_back(p_root[i]);
   }
   build_patch_bvh();  // clusters look for other objects' surfaces passing through them
+  measure_objects();
   find_standing();
   mark_covered();
   build_clusters();

@@ -137,8 +137,11 @@ constexpr uint32_t kMaxSunResolution = 1024;
 constexpr uint32_t kMaxPointResolution = 256;
 constexpr double kFineLightShare = 0.01;
 // With Params::sharp_shadows, pieces carrying the same share of the emitted power take the finer
-// hemicube at any level (sharp_level, piece_headroom).
+// hemicube at any level (sharp_level, piece_headroom). Without it, such pieces take a finer level's
+// hemicube, or the finer one, where an object they may see would be narrower than kObjectPixels
+// pixels at their own level (sharp_resolution).
 constexpr double kSharpPower = kFineLightShare;
+constexpr double kObjectPixels = 2.0;
 // Lengths under this share of the scene's diagonal are rounding. An eye that near a patch's plane
 // sees it edge-on: project() leaves such patches out and projects backs beyond it, and
 // absorber_close, which predicts which absorbing backs the hemicube will see, must draw the same
@@ -449,7 +452,9 @@ struct Solver::Impl {
                           std::vector<uint32_t>& accepted, std::vector<uint32_t>& near);
   bool finer_level(const Piece& piece, double power) const;
   bool sharp_level(const Piece& piece, double power) const;
-  void place_hemicube(const Piece& piece);
+  void measure_objects();
+  uint32_t sharp_resolution(const Piece& piece, const std::vector<uint32_t>& seen) const;
+  void place_hemicube(const Piece& piece, const std::vector<uint32_t>& seen);
   struct VolumeCube;
   void volume_weights(const Piece& piece, const VolumeCube& v);
   void receiver_form_factors(const Piece& piece, const std::vector<uint32_t>& accepted);
@@ -680,11 +685,20 @@ struct Solver::Impl {
   std::vector<uint32_t> p_surface;     // per patch: its surface for clustering (build_clusters)
   std::vector<uint64_t> p_shooting;    // per patch: part of the piece shooting hemicube `shooting_stamp`
   std::vector<uint32_t> eye_within;    // the closed meshes the placed hemicube's eye lies in (enclosing)
+  // Per patch: the size (the median of its box's three extents) and the centre of the object it
+  // belongs to, an outward-facing solid or a closed double-sided mesh; size 0 for none (a wall of
+  // tiles, an open sheet). sharp_resolution finds the objects a hemicube would show too small.
+  std::vector<double> p_object_size;
+  std::vector<glm::dvec3> p_object_centre;
+  // Whether the placed hemicube's objects asked for more than its level's resolution, whatever the
+  // piece's power (piece_headroom: a stronger replay would place a finer one).
+  bool objects_want_finer = false;
   uint64_t shooting_stamp = 0;
 
   // Per-hemicube scratch.
   // Hemicubes of halving resolution (at least kMinResolution): a quarter-size shooting area serves
-  // receivers half as far, which project as large, so its hemicube needs half the resolution.
+  // receivers half as far, which project as large, so its hemicube needs half the resolution; small
+  // objects do not shrink with it (sharp_resolution).
   std::vector<detail::Hemicube> cubes;
   std::unique_ptr<detail::Hemicube> finer_cube;  // for strong cluster shots (finer_level)
   // Whole cubes for volume clusters, per level as `cubes` (made when first needed), with each
