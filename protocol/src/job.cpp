@@ -83,7 +83,7 @@ const ParamInfo kParams[] = {
      [](const JobSpec& s) { return s.params.pools ? 1.0 : 0.0; },
      [](JobSpec& s, double v) { s.params.pools = v != 0.0; }},
     {"sharp_shadows", "sharp-shadows", Kind::kFlag, 0, 1,
-     "aa: pieces shooting at least 1 % of the light use twice the hemicube resolution (at most 400) at every near-field level: small objects close to a large emitter cast their shadows (off: each level halves the resolution; see README)",
+     "aa: pieces shooting at least 1 % of the light use twice the hemicube resolution (at most 400) at every near-field level: every small object close to a large emitter casts its shadow (off: each level halves the resolution, as far as the objects a piece may see stay two pixels wide; see README)",
      [](const JobSpec& s) { return s.params.sharp_shadows ? 1.0 : 0.0; },
      [](JobSpec& s, double v) { s.params.sharp_shadows = v != 0.0; }},
     {"cluster_size", "cluster-size", Kind::kNumber, 0, kNoLimit,

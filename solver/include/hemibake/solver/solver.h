@@ -115,7 +115,9 @@ struct Params {
                                 ///< a hemicube of twice the resolution (at most 400) at every
                                 ///< near-field level, so that small objects close to a large emitter
                                 ///< cast their shadows and leave their crevices dark (see README);
-                                ///< false: each near-field level halves the resolution
+                                ///< false: each near-field level halves the resolution, but for
+                                ///< such pieces only as far as every solid or closed mesh they may
+                                ///< see stays at least two pixels wide
   uint32_t shot_cache_mb = 1024; ///< memory for the form factors of earlier shots, replayed when the
                                  ///< same shooter shoots again with no more power and an unchanged
                                  ///< mesh (see README); 0 = every shot projects anew; taken as it
