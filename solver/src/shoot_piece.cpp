@@ -204,16 +204,15 @@ void Solver::Impl::measure_objects() {
 // resolution will do, for a volume cluster, or not aa's; whether the piece is strong enough to take
 // it is place_hemicube's to say. Walls of tiles and open sheets are no objects: only solids and
 // closed meshes hide things behind them at every angle.
-uint32_t Solver::Impl::sharp_resolution(const Piece& piece, const std::vector<uint32_t>& seen) const {
+uint32_t Solver::Impl::sharp_resolution(const Piece& piece, const std::vector<uint32_t>& seen) {
   if (params.method != Method::kAntiAliased || piece.volume) return 0;
-  double least = std::numeric_limits<double>::infinity();  // the narrowest object's angle
-  for (uint32_t e : seen) {
-    const uint32_t q = e_patch[e];
+  // The narrowest object's angle, on the pool's threads (a whole-scene shot of the atrium sees
+  // 140 000 elements).
+  const double least = least_over(seen.size(), std::numeric_limits<double>::infinity(), [&](size_t i, double& angle) {
+    const uint32_t q = e_patch[seen[i]];
     const double size = p_object_size[q];
-    if (!(size > 0.0)) continue;
-    const double d = glm::distance(piece.centre, p_object_centre[q]);
-    least = std::min(least, size / std::max(d, size));
-  }
+    if (size > 0.0) angle = std::min(angle, size / std::max(glm::distance(piece.centre, p_object_centre[q]), size));
+  });
   if (!std::isfinite(least)) return 0;
   const double wanted = 2.0 * kObjectPixels / least;
   const size_t level = std::min<size_t>(static_cast<size_t>(piece.depth), cubes.size() - 1);

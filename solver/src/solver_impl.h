@@ -453,7 +453,7 @@ struct Solver::Impl {
   bool finer_level(const Piece& piece, double power) const;
   bool sharp_level(const Piece& piece, double power) const;
   void measure_objects();
-  uint32_t sharp_resolution(const Piece& piece, const std::vector<uint32_t>& seen) const;
+  uint32_t sharp_resolution(const Piece& piece, const std::vector<uint32_t>& seen);
   void place_hemicube(const Piece& piece, const std::vector<uint32_t>& seen);
   struct VolumeCube;
   void volume_weights(const Piece& piece, const VolumeCube& v);
