@@ -200,9 +200,9 @@ void Solver::Impl::measure_objects() {
 // level, since a quarter-size piece serves receivers half as far; but the objects do not shrink
 // with the piece. A table of boxes of 4 to 18 cm, 3 m from a glowing wall, is shot from the wall's
 // sixteenths at resolution 26, where a box is a pixel or less: light then leaks into the crevices
-// between the boxes and a face half behind another stays lit (bench/README.md). 0 where the level's
-// resolution will do, for a volume cluster, or not aa's; whether the piece is strong enough to take
-// it is place_hemicube's to say. Walls of tiles and open sheets are no objects: only solids and
+// between the boxes and a face half behind another stays lit (bench/README.md). 0 where it sees no
+// object, for a volume cluster, or not aa's; whether the piece's level is fine enough, and whether
+// the piece is strong enough to take more, is place_hemicube's to say. Walls of tiles and open sheets are no objects: only solids and
 // closed meshes hide things behind them at every angle.
 uint32_t Solver::Impl::sharp_resolution(const Piece& piece, const std::vector<uint32_t>& seen) {
   if (params.method != Method::kAntiAliased || piece.volume) return 0;
@@ -213,10 +213,7 @@ uint32_t Solver::Impl::sharp_resolution(const Piece& piece, const std::vector<ui
     const double size = p_object_size[q];
     if (size > 0.0) angle = std::min(angle, size / std::max(glm::distance(piece.centre, p_object_centre[q]), size));
   });
-  if (!std::isfinite(least)) return 0;
-  const double wanted = 2.0 * kObjectPixels / least;
-  const size_t level = std::min<size_t>(static_cast<size_t>(piece.depth), cubes.size() - 1);
-  return wanted > cubes[level].resolution() ? static_cast<uint32_t>(std::ceil(wanted)) : 0;
+  return std::isfinite(least) ? static_cast<uint32_t>(std::ceil(2.0 * kObjectPixels / least)) : 0;
 }
 
 // Chooses the piece's hemicube, its level's or, for a strong cluster piece, a finer one, and places
@@ -229,13 +226,14 @@ uint32_t Solver::Impl::sharp_resolution(const Piece& piece, const std::vector<ui
 // A strong piece that objects ask a finer hemicube of (sharp_resolution) takes the coarsest level's
 // that is fine enough, or the finer one.
 void Solver::Impl::place_hemicube(const Piece& piece, const std::vector<uint32_t>& seen) {
-  const uint32_t wanted = sharp_level(piece, piece.power) ? 0 : sharp_resolution(piece, seen);
-  objects_want_finer = wanted > 0;
-  const bool strong = objects_want_finer && piece.power >= kSharpPower * emitted_power;
+  const bool option = sharp_level(piece, piece.power);
+  const uint32_t wanted = option ? 0 : sharp_resolution(piece, seen);
   size_t level = std::min<size_t>(static_cast<size_t>(piece.depth), cubes.size() - 1);
+  objects_want_finer = wanted > cubes[level].resolution();
+  const bool strong = objects_want_finer && piece.power >= kSharpPower * emitted_power;
   if (strong)
     while (level > 0 && cubes[level].resolution() < wanted) --level;
-  const bool sharp = sharp_level(piece, piece.power) || (strong && cubes[level].resolution() < wanted);
+  const bool sharp = option || (strong && cubes[level].resolution() < wanted);
   const bool finer = sharp || finer_level(piece, piece.power);
   ++stats.hemicubes;
   ++stamp;
