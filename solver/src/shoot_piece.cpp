@@ -17,7 +17,7 @@
 namespace hemibake::solver {
 namespace {
 
-// A finer hemicube (finer_level) has at most this resolution: pixels cost memory and time.
+// A finer hemicube (sharp_level, sharp_resolution) has at most this resolution: pixels cost memory and time.
 constexpr uint32_t kMaxFinerResolution = 400;
 // A volume cluster's whole cube has at most this resolution per face (six faces, and per pixel a
 // direction, a solid angle and a weight: 20 MB at 256): a cluster of small objects is a weak,
@@ -144,20 +144,6 @@ void Solver::Impl::classify_receivers(const Piece& piece, const std::vector<uint
   HEMIBAKE_DCHECK(accepted.size() + near.size() == current.size());
 }
 
-// Whether a shooting piece takes a hemicube of twice its level's resolution (kMaxFinerResolution). A
-// cluster shoots for many small patches, and its receivers are the scene's many small patches, whose
-// silhouettes a hemicube resolves coarsely (pixels mixing a piece of furniture and the wall behind
-// it); there a hemicube's cost is mostly per projected element, so twice the resolution costs
-// little more. Whole-scene cluster hemicubes carrying at least kFinePower of the emitted power take
-// it: on the 6758-patch furnished room, RMS error 4.6 % to 3.8 % for 11 % more instructions (from
-// 0.03 % of the power on: 3.6 % for 23 % more), where resolution 140 for every hemicube gives 3.7 %
-// for about 30 % more time.
-bool Solver::Impl::finer_level(const Piece& piece, double power) const {
-  // Clusters at depth 0 are the whole-scene shots (step); their quarters go down the levels.
-  return params.method == Method::kAntiAliased && piece.points.size() > 4 && !piece.volume && piece.depth == 0 &&
-         power >= kFinePower * emitted_power;
-}
-
 // Whether a piece shoots from the finer hemicube whatever its level (Params::sharp_shadows). A
 // large emitter's light reaches much of the scene through its near-field pieces (a glowing wall's
 // quarters, for a table of boxes a few metres from it), whose hemicubes halve the resolution per
@@ -216,8 +202,10 @@ uint32_t Solver::Impl::sharp_resolution(const Piece& piece, const std::vector<ui
   return std::isfinite(least) ? static_cast<uint32_t>(std::ceil(2.0 * kObjectPixels / least)) : 0;
 }
 
-// Chooses the piece's hemicube, its level's or, for a strong cluster piece, a finer one, and places
-// it at the piece's centre. Weak pieces once took coarser hemicubes (half the resolution under 5 %
+// Chooses the piece's hemicube, its level's or a finer one, and places it at the piece's centre.
+// Strong cluster pieces (from 0.1 % of the emitted power) once took the finer hemicube at level 0;
+// measured as displayed it changed the cluttered and furnished rooms' error by under half a point of
+// p90 and cost the cluttered room about a fifth of its time (bench/README.md). Weak pieces once took coarser hemicubes (half the resolution under 5 %
 // of the emitted power, a quarter under 0.5 %), as long as those shot under a quarter of all the
 // power. The hemicube's cost is mostly per element projected, and replays of such shots were
 // refused once the quarter was reached: without them the atrium took 158 000 hemicubes rather than
@@ -234,7 +222,6 @@ void Solver::Impl::place_hemicube(const Piece& piece, const std::vector<uint32_t
   if (strong)
     while (level > 0 && cubes[level].resolution() < wanted) --level;
   const bool sharp = option || (strong && cubes[level].resolution() < wanted);
-  const bool finer = sharp || finer_level(piece, piece.power);
   ++stats.hemicubes;
   ++stamp;
   if (sharp) level = 0;
@@ -259,7 +246,7 @@ void Solver::Impl::place_hemicube(const Piece& piece, const std::vector<uint32_t
     return;
   }
   const uint32_t finer_resolution = std::max(params.resolution, std::min(2 * params.resolution, kMaxFinerResolution));
-  if (finer && finer_resolution > params.resolution) {
+  if (sharp && finer_resolution > params.resolution) {
     // Made when first needed, and none at all where the resolution is that fine already.
     if (!finer_cube) finer_cube = std::make_unique<detail::Hemicube>(finer_resolution);
     cube = finer_cube.get();

@@ -246,8 +246,8 @@ void Solver::Impl::record_piece(const Piece& piece, double split_room, const std
 
 // The least factor on dB at which a fresh shot of this piece would decide anything differently
 // from this one: the split criteria (`split_room`, from refine); power thresholds: refinement of
-// weak pieces, the straddle rule, finer hemicubes for strong cluster pieces and for strong pieces
-// (sharp_shadows, or objects that asked for them); and
+// weak pieces, the straddle rule, finer hemicubes for strong pieces (sharp_shadows, or objects that
+// asked for them); and
 // the close receivers left to this hemicube because the point view's error seemed small.
 double Solver::Impl::piece_headroom(const Piece& piece, double split_room, const std::vector<uint32_t>& accepted) {
   const double power = piece.power;
@@ -265,7 +265,6 @@ double Solver::Impl::piece_headroom(const Piece& piece, double split_room, const
     lower_headroom(headroom, kSavingRuleSlack * params.feps * emitted_power, power);
   if (patch_piece && power < kStraddlePower * emitted_power) lower_headroom(headroom, kStraddlePower * emitted_power, power);
   if (params.method == Method::kAntiAliased) {
-    if (!patch_piece && piece.depth == 0 && power < kFinePower * emitted_power) lower_headroom(headroom, kFinePower * emitted_power, power);
     if ((params.sharp_shadows || objects_want_finer) && !piece.volume && power < kSharpPower * emitted_power)
       lower_headroom(headroom, kSharpPower * emitted_power, power);
   }

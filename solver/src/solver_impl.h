@@ -71,9 +71,6 @@ constexpr uint32_t kMinResolution = 20;
 // The solver keeps this many levels of hemicubes: a patch's pieces go down kMaxShooterDepth levels,
 // a cluster's parts further (the deepest share the last level).
 constexpr int kCubeLevels = kMaxShooterDepth + 3;
-// Cluster pieces carrying at least this share of the emitted power take a finer hemicube
-// (finer_level, piece_headroom).
-constexpr double kFinePower = 1e-3;
 // Once the unshot power is below `convergence` of the emitted, units still holding more than
 // kLocalConvergence times `convergence` of their own light shoot on, unless their unshot power is
 // below kLocalFloor times `convergence` of the emitted (lagging_unit).
@@ -450,7 +447,6 @@ struct Solver::Impl {
   std::vector<uint32_t> current_leaves(const std::vector<uint32_t>& receivers) const;
   void classify_receivers(const Piece& piece, const std::vector<uint32_t>& current,
                           std::vector<uint32_t>& accepted, std::vector<uint32_t>& near);
-  bool finer_level(const Piece& piece, double power) const;
   bool sharp_level(const Piece& piece, double power) const;
   void measure_objects();
   uint32_t sharp_resolution(const Piece& piece, const std::vector<uint32_t>& seen);
@@ -700,7 +696,7 @@ struct Solver::Impl {
   // receivers half as far, which project as large, so its hemicube needs half the resolution; small
   // objects do not shrink with it (sharp_resolution).
   std::vector<detail::Hemicube> cubes;
-  std::unique_ptr<detail::Hemicube> finer_cube;  // for strong cluster shots (finer_level)
+  std::unique_ptr<detail::Hemicube> finer_cube;  // for strong pieces that small objects ask it of
   // Whole cubes for volume clusters, per level as `cubes` (made when first needed), with each
   // pixel's unit direction and solid angle, and the weights of the one in use.
   struct VolumeCube {

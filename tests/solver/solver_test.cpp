@@ -208,8 +208,7 @@ ClosedFormError closed_form_error(const Mesh& mesh, const glm::dvec3& expected) 
 // Many small patches per wall: they shoot in clusters (a wall's patches together, quarters of the
 // cluster for receivers near it, single patches at the closest), and the closed form still holds.
 // Shooting every patch alone is no better: near corners its weak shots see each small patch from
-// its centre (RMS 2.8 %, worst element 9 % on this box). The strong cluster shots here take the
-// finer hemicube (finer_level), so this also checks that path against the closed form.
+// its centre (RMS 2.8 %, worst element 9 % on this box).
 TEST(Solver, ClustersOfSmallPatchesKeepTheClosedForm) {
   const glm::dvec3 rho(0.5, 0.3, 0.7), e(1.0, 2.0, 0.5);
   const glm::dvec3 expected = e / (glm::dvec3(1.0) - rho);
