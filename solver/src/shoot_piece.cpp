@@ -17,7 +17,8 @@
 namespace hemibake::solver {
 namespace {
 
-// A finer hemicube (sharp_level, sharp_resolution) has at most this resolution: pixels cost memory and time.
+// A finer hemicube (sharp_level, sharp_resolution) has at most this resolution: pixels cost memory
+// and time.
 constexpr uint32_t kMaxFinerResolution = 400;
 // A volume cluster's whole cube has at most this resolution per face (six faces, and per pixel a
 // direction, a solid angle and a weight: 20 MB at 256): a cluster of small objects is a weak,
@@ -204,10 +205,10 @@ uint32_t Solver::Impl::sharp_resolution(const Piece& piece, const std::vector<ui
 
 // Chooses the piece's hemicube, its level's or a finer one, and places it at the piece's centre.
 // Strong cluster pieces (from 0.1 % of the emitted power) once took the finer hemicube at level 0;
-// measured as displayed it changed the cluttered and furnished rooms' error by under half a point of
-// p90 and cost the cluttered room about a fifth of its time (bench/README.md). Weak pieces once took coarser hemicubes (half the resolution under 5 %
-// of the emitted power, a quarter under 0.5 %), as long as those shot under a quarter of all the
-// power. The hemicube's cost is mostly per element projected, and replays of such shots were
+// measured as displayed it changed the cluttered and furnished rooms' p90 by under half a point,
+// and cost the furnished room about a sixth of its time (bench/README.md). Weak pieces once took
+// coarser hemicubes (half the resolution under 5 % of the emitted power, a quarter under 0.5 %), as
+// long as those shot under a quarter of all the power. The hemicube's cost is mostly per element projected, and replays of such shots were
 // refused once the quarter was reached: without them the atrium took 158 000 hemicubes rather than
 // 201 000 (162 s against 188), the cluttered room 0.93 of the time, and the displayed error fell
 // (the gallery's visible points: median 2.6 -> 2.0 %, p90 12.4 -> 11.5 %; bench/README.md).
