@@ -208,10 +208,11 @@ uint32_t Solver::Impl::sharp_resolution(const Piece& piece, const std::vector<ui
 // measured as displayed it changed the cluttered and furnished rooms' p90 by under half a point,
 // and cost the furnished room about a sixth of its time (bench/README.md). Weak pieces once took
 // coarser hemicubes (half the resolution under 5 % of the emitted power, a quarter under 0.5 %), as
-// long as those shot under a quarter of all the power. The hemicube's cost is mostly per element projected, and replays of such shots were
-// refused once the quarter was reached: without them the atrium took 158 000 hemicubes rather than
-// 201 000 (162 s against 188), the cluttered room 0.93 of the time, and the displayed error fell
-// (the gallery's visible points: median 2.6 -> 2.0 %, p90 12.4 -> 11.5 %; bench/README.md).
+// long as those shot under a quarter of all the power. The hemicube's cost is mostly per element
+// projected, and replays of such shots were refused once the quarter was reached: without them the
+// atrium took 158 000 hemicubes rather than 201 000 (162 s against 188), the cluttered room 0.93 of
+// the time, and the displayed error fell (the gallery's visible points: median 2.6 -> 2.0 %, p90
+// 12.4 -> 11.5 %; bench/README.md).
 // A strong piece that objects ask a finer hemicube of (sharp_resolution) takes the coarsest level's
 // that is fine enough, or the finer one.
 void Solver::Impl::place_hemicube(const Piece& piece, const std::vector<uint32_t>& seen) {
