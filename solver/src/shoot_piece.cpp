@@ -189,8 +189,8 @@ void Solver::Impl::measure_objects() {
 // sixteenths at resolution 26, where a box is a pixel or less: light then leaks into the crevices
 // between the boxes and a face half behind another stays lit (bench/README.md). 0 where it sees no
 // object, for a volume cluster, or not aa's; whether the piece's level is fine enough, and whether
-// the piece is strong enough to take more, is place_hemicube's to say. Walls of tiles and open sheets are no objects: only solids and
-// closed meshes hide things behind them at every angle.
+// the piece is strong enough to take more, is place_hemicube's to say. Walls of tiles and open
+// sheets are no objects: only solids and closed meshes hide things behind them at every angle.
 uint32_t Solver::Impl::sharp_resolution(const Piece& piece, const std::vector<uint32_t>& seen) {
   if (params.method != Method::kAntiAliased || piece.volume) return 0;
   // The narrowest object's angle, on the pool's threads (a whole-scene shot of the atrium sees
