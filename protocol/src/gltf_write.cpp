@@ -409,7 +409,10 @@ struct VertexWriter {
 
 // The triangles of one output primitive: an element without hanging vertices is one triangle;
 // one with them on its edges is a fan from its centre, which keeps the mesh crack-free without
-// thin triangles along the edges.
+// thin triangles along the edges. The centre is the mean of the loop's vertices that are not
+// interpolated (Mesh::interpolated): the points of other surfaces taken into the loop add no light
+// of their own, and with them a coarse floor element beside a finely cut wall showed at its centre
+// little but the light of its edge along the wall.
 PrimitiveData primitive_triangles(const SceneDocument& doc, const solver::Mesh& mesh, const std::vector<uint32_t>& elements,
                                   uint32_t node, double exposure) {
   VertexWriter writer{doc, world_to_node(doc.node_world[node]), exposure,
@@ -429,11 +432,15 @@ PrimitiveData primitive_triangles(const SceneDocument& doc, const solver::Mesh& 
       continue;
     }
     glm::dvec3 centre(0.0), b(0.0);
+    uint32_t own = 0;
     for (uint32_t k = 0; k < nb; ++k) {
-      centre += mesh.positions[mesh.boundary[el.boundary_begin + k]];
-      b += mesh.radiosity[mesh.boundary[el.boundary_begin + k]];
+      const uint32_t v = mesh.boundary[el.boundary_begin + k];
+      if (v < mesh.interpolated.size() && mesh.interpolated[v]) continue;
+      centre += mesh.positions[v];
+      b += mesh.radiosity[v];
+      ++own;
     }
-    const uint32_t c = writer.add(centre / static_cast<double>(nb), b / static_cast<double>(nb), el.patch, extra_key++);
+    const uint32_t c = writer.add(centre / static_cast<double>(own), b / static_cast<double>(own), el.patch, extra_key++);
     for (uint32_t k = 0; k < nb; ++k) data.indices.insert(data.indices.end(), {c, loop[k], loop[(k + 1) % nb]});
   }
   // Elements run counter-clockwise in world space; under a mirroring node transform glTF reverses
