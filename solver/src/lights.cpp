@@ -318,6 +318,31 @@ void Solver::Impl::light_factors(const Light* light, const std::vector<LightView
   });
 }
 
+// The irradiance per unit of intensity that point or spot light `light` brings to point x of a
+// surface with normal n, with nothing hidden: cos(theta) / d^2, times the spot's falloff and the
+// range window (as light_views and light_factors weigh the pixels). 0 behind the light or the surface.
+double Solver::Impl::light_at(const Light& light, const glm::dvec3& x, const glm::dvec3& n) const {
+  HEMIBAKE_DCHECK(light.type != Light::Type::kDirectional);
+  const glm::dvec3 to_light = light.position - x;
+  const double d2 = glm::dot(to_light, to_light);
+  if (!(d2 > 0.0)) return 0.0;
+  const double d = std::sqrt(d2);
+  const double cos_surface = glm::dot(n, to_light) / d;
+  if (cos_surface <= 0.0) return 0.0;
+  double e = cos_surface / d2;
+  if (light.type == Light::Type::kSpot) {
+    const double cos_outer = std::cos(light.outer_cone);
+    const double scale = 1.0 / std::max(1e-3, std::cos(light.inner_cone) - cos_outer);
+    const double t = std::clamp((glm::dot(-to_light / d, light.direction) - cos_outer) * scale, 0.0, 1.0);
+    e *= t * t;
+  }
+  if (light.range > 0.0) {
+    const double r = d / light.range;
+    e *= std::clamp(1.0 - r * r * r * r, 0.0, 1.0);
+  }
+  return e;
+}
+
 // Element e takes the irradiance E of a light: rho E, radiosity and unshot radiosity alike.
 void Solver::Impl::light_receive(uint32_t e, const glm::dvec3& irradiance) {
   HEMIBAKE_DCHECK(e < e_child.size() && e_child[e] == kNone);
