@@ -75,6 +75,7 @@ bool render_pngs(const solver::Mesh& mesh, const CommandLine& o, const Camera& c
     RenderOptions ro;
     ro.gouraud = !wire;
     ro.wireframe = wire;
+    ro.tone = o.spec.write.tone;
     const auto rgb = render(mesh, cam, ro);
     if (!write_png(path, rgb, ro.width, ro.height)) {
       std::fprintf(c.err, "hemibake: cannot write %s\n", path.c_str());
@@ -236,6 +237,7 @@ int run_render(const CommandLine& o, const Console& c) {
   RenderOptions ro;
   ro.gouraud = !o.flat;
   ro.wireframe = o.wireframe;
+  ro.tone = o.spec.write.tone;
   const auto rgb = render(mesh, o.camera.value_or(frame(mesh)), ro);
   if (!write_png(o.output, rgb, ro.width, ro.height)) {
     std::fprintf(c.err, "hemibake: cannot write %s\n", o.output.c_str());
