@@ -75,6 +75,7 @@ bool render_pngs(const solver::Mesh& mesh, const CommandLine& o, const Camera& c
     RenderOptions ro;
     ro.gouraud = !wire;
     ro.wireframe = wire;
+    ro.tone = o.spec.write.tone;
     const auto rgb = render(mesh, cam, ro);
     if (!write_png(path, rgb, ro.width, ro.height)) {
       std::fprintf(c.err, "hemibake: cannot write %s\n", path.c_str());
@@ -236,6 +237,7 @@ int run_render(const CommandLine& o, const Console& c) {
   RenderOptions ro;
   ro.gouraud = !o.flat;
   ro.wireframe = o.wireframe;
+  ro.tone = o.spec.write.tone;
   const auto rgb = render(mesh, o.camera.value_or(frame(mesh)), ro);
   if (!write_png(o.output, rgb, ro.width, ro.height)) {
     std::fprintf(c.err, "hemibake: cannot write %s\n", o.output.c_str());
@@ -283,8 +285,12 @@ int run_bake(const CommandLine& o, const Console& c) {
     std::fprintf(c.err, "hemibake: cannot write %s\n", o.output.c_str());
     return 1;
   }
-  std::fprintf(c.out, "  wrote %s (%zu bytes%s, exposure %.4g)\n", o.output.c_str(), baked.glb.size(),
+  std::fprintf(c.out, "  wrote %s (%zu bytes%s, exposure %.4g", o.output.c_str(), baked.glb.size(),
                o.spec.write.draco ? ", Draco" : "", baked.exposure);
+  // How far above the clip point the brightest lit surface lies.
+  if (baked.tone.scale > 0.0)
+    std::fprintf(c.out, ", highlights rolled off from %.2g to 1 at %.4g", baked.tone.knee, baked.tone.white);
+  std::fprintf(c.out, ")\n");
   return render_pngs(baked.solution.mesh, o, o.camera.value_or(frame(baked.solution.mesh)), c) ? 0 : 1;
 }
 

@@ -106,23 +106,29 @@ std::vector<uint8_t> render(const solver::Mesh& mesh, const Camera& cam, const R
     }
   }
 
+  std::vector<double> lum;
+  for (size_t i = 0; i < hdr.size(); ++i)
+    if (zbuf[i] > 0.0) lum.push_back((hdr[i].x + hdr[i].y + hdr[i].z) / 3.0);
+  auto percentile = [&](size_t per_cent) {
+    const size_t k = std::min(lum.size() - 1, lum.size() * per_cent / 100);
+    std::nth_element(lum.begin(), lum.begin() + k, lum.end());
+    return lum[k];
+  };
   double exposure = opt.exposure;
   if (exposure <= 0.0) {
-    std::vector<double> lum;
-    for (size_t i = 0; i < hdr.size(); ++i)
-      if (zbuf[i] > 0.0) lum.push_back((hdr[i].x + hdr[i].y + hdr[i].z) / 3.0);
-    if (!lum.empty()) {
-      const size_t k = lum.size() * 95 / 100;
-      std::nth_element(lum.begin(), lum.begin() + k, lum.end());
-      exposure = lum[k] > 0.0 ? 0.8 / lum[k] : 1.0;
-    } else {
-      exposure = 1.0;
-    }
+    const double p95 = lum.empty() ? 0.0 : percentile(95);
+    exposure = p95 > 0.0 ? 0.8 / p95 : 1.0;
   }
+  // The highlights roll off as COLOR_0's do, here to reach 1 at the 99th percentile of what is in
+  // view: the render does not know which surfaces emit, and a lamp in view, usually smaller than
+  // that, clips.
+  const double white = opt.white > 0.0 ? opt.white : lum.empty() ? 1.0 : exposure * percentile(99);
+  const protocol::ToneCurve tone = protocol::tone_curve(opt.tone, white);
   std::vector<uint8_t> rgb(static_cast<size_t>(w) * h * 3);
   for (size_t i = 0; i < hdr.size(); ++i) {
+    const glm::dvec3 shown = tone.map(hdr[i] * exposure);
     for (int c = 0; c < 3; ++c) {
-      double v = std::clamp(hdr[i][c] * exposure, 0.0, 1.0);
+      double v = shown[c];
       v = v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1.0 / 2.4) - 0.055;  // sRGB
       rgb[i * 3 + c] = edge[i] ? 0 : static_cast<uint8_t>(std::lround(v * 255.0));
     }

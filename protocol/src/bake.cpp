@@ -167,6 +167,7 @@ BakeOutput bake(const SceneDocument& document, const JobSpec& spec, const BakeHo
   out.glb = std::move(written.glb);
   out.error = std::move(written.error);
   out.exposure = written.exposure;
+  out.tone = written.tone;
   return out;
 }
 

@@ -146,6 +146,22 @@ double automatic_exposure(const SceneDocument& doc, const solver::Mesh& mesh) {
   return p95 > 0.0 ? 0.9 / p95 : 1.0;
 }
 
+// The tone curve's white point: the exposed light (mean of the channels) of the brightest vertex on
+// a surface that does not emit, the values COLOR_0 is written from (an element's centre is the mean
+// of its loop, never brighter). Its largest, not a percentile: a pool of light under a spot lamp,
+// and a small box standing in it, can be the brightest few hundredths of a percent of a room, and
+// a percentile below them would clip them flat together again.
+double white_point(const SceneDocument& doc, const solver::Mesh& mesh, double exposure) {
+  double brightest = 0.0;
+  for (const auto& el : mesh.elements) {
+    if (mean3(doc.scene.patches[el.patch].emission) > 0.0) continue;
+    const glm::dvec3& base = doc.sources[el.patch].base;
+    for (uint32_t k = el.boundary_begin; k < el.boundary_end; ++k)
+      brightest = std::max(brightest, mean3(light_of(mesh.radiosity[mesh.boundary[k]], base)));
+  }
+  return exposure * brightest;
+}
+
 // The elements of each output primitive, by (node, primitive, back side), in that order.
 using Groups = std::map<std::tuple<uint32_t, uint32_t, bool>, std::vector<uint32_t>>;
 
@@ -378,6 +394,7 @@ struct VertexWriter {
   const SceneDocument& doc;
   glm::dmat4 to_local;
   double exposure = 1.0;
+  ToneCurve tone;
   bool has_uv = false;
   PrimitiveData data;
   std::unordered_map<uint64_t, std::vector<std::pair<glm::dvec2, uint32_t>>> vertex_of;  // by key
@@ -398,7 +415,7 @@ struct VertexWriter {
       data.texcoords.push_back(static_cast<float>(uv.x));
       data.texcoords.push_back(static_cast<float>(uv.y));
     }
-    const glm::dvec3 light = glm::clamp(exposure * light_of(b, src.base), 0.0, 1.0);
+    const glm::dvec3 light = tone.map(exposure * light_of(b, src.base));
     for (int k = 0; k < 3; ++k) {
       data.colors.push_back(static_cast<uint16_t>(std::lround(light[k] * 65535.0)));
       data.radiosity.push_back(static_cast<float>(b[k]));
@@ -414,8 +431,8 @@ struct VertexWriter {
 // of their own, and with them a coarse floor element beside a finely cut wall showed at its centre
 // little but the light of its edge along the wall.
 PrimitiveData primitive_triangles(const SceneDocument& doc, const solver::Mesh& mesh, const std::vector<uint32_t>& elements,
-                                  uint32_t node, double exposure) {
-  VertexWriter writer{doc, world_to_node(doc.node_world[node]), exposure,
+                                  uint32_t node, double exposure, const ToneCurve& tone) {
+  VertexWriter writer{doc, world_to_node(doc.node_world[node]), exposure, tone,
                       doc.sources[mesh.elements[elements[0]].patch].has_uv, {}, {}};
   PrimitiveData& data = writer.data;
   uint64_t extra_key = 1ull << 63;  // element centres are never shared
@@ -632,7 +649,8 @@ void declare_extensions(const tinygltf::Model& in, bool used_draco, tinygltf::Mo
 }
 
 // How it was made: asset.extras.hemibake.
-Value bake_record(Method method, const solver::Params& params, const solver::Stats& stats, double exposure) {
+Value bake_record(Method method, const solver::Params& params, const solver::Stats& stats, double exposure,
+                  const ToneCurve& tone) {
   Value::Object p;
   p["method"] = Value(std::string(to_string(method)));
   p["resolution"] = Value(static_cast<int>(params.resolution));
@@ -650,7 +668,23 @@ Value bake_record(Method method, const solver::Params& params, const solver::Sta
   s["converged"] = Value(stats.converged);
   Value::Object h;
   h["exposure"] = Value(exposure);
-  h["colors"] = Value(std::string("COLOR_0 = exposure * radiosity / base colour, clamped to [0, 1]; _RADIOSITY = radiosity"));
+  // The curve, with the numbers that invert it (README, "GLB out").
+  Value::Object t;
+  t["curve"] = Value(std::string(to_string(tone.tone)));
+  if (tone.tone == Tone::kShoulder) {
+    t["knee"] = Value(tone.knee);
+    t["white"] = Value(tone.white);
+    t["scale"] = Value(tone.scale);
+  }
+  h["tone"] = Value(t);
+  h["colors"] = Value(std::string(
+      tone.tone == Tone::kClamp
+          ? "COLOR_0 = L clamped to [0, 1], L = exposure * radiosity / base colour; _RADIOSITY = radiosity"
+          : "COLOR_0 = L * f(m) / m, each channel clamped to [0, 1], L = exposure * radiosity / base colour, "
+            "m = (L.r + L.g + L.b) / 3; f(m) = m for m <= tone.knee, tone.knee + tone.scale * ln(1 + (m - tone.knee) / "
+            "tone.scale) up to tone.white, 1 above (tone.scale 0: f(m) = min(m, 1)). Where no channel is 1: "
+            "y = (COLOR_0.r + COLOR_0.g + COLOR_0.b) / 3, m = y for y <= tone.knee, else tone.knee + tone.scale * "
+            "(exp((y - tone.knee) / tone.scale) - 1), and L = COLOR_0 * m / y; _RADIOSITY = radiosity"));
   // The units, for whoever turns _RADIOSITY into an engine's lightmap (README, "Units").
   h["radiosity"] = Value(std::string(
       "_RADIOSITY is exitance B: rho * E for a surface of irradiance E, pi * L for an emitter of "
@@ -674,6 +708,7 @@ WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, 
     return result;
   }
   result.exposure = options.exposure > 0.0 ? options.exposure : automatic_exposure(doc, mesh);
+  result.tone = tone_curve(options.tone, white_point(doc, mesh, result.exposure));
   tinygltf::Model out = copy_structure(doc);
   int default_material = -1;
   bool used_draco = false;
@@ -683,7 +718,7 @@ WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, 
   std::vector<OutputPrimitive> prims;
   for (const auto& [key, elements] : groups) {
     if (hidden.count(key)) continue;
-    prims.push_back({key, &elements, primitive_triangles(doc, mesh, elements, std::get<0>(key), result.exposure)});
+    prims.push_back({key, &elements, primitive_triangles(doc, mesh, elements, std::get<0>(key), result.exposure, result.tone)});
   }
   const std::vector<PositionGrid> grids =
       options.draco ? shared_position_grids(doc, mesh, prims, options.position_bits) : std::vector<PositionGrid>(prims.size());
@@ -714,7 +749,7 @@ WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, 
   }
   out.buffers[0].data.resize((out.buffers[0].data.size() + 3) & ~size_t{3}, 0);
   declare_extensions(doc.model, used_draco, out);
-  out.asset.extras = bake_record(method, params, stats, result.exposure);
+  out.asset.extras = bake_record(method, params, stats, result.exposure, result.tone);
 
   std::ostringstream stream;
   tinygltf::TinyGLTF writer;

@@ -117,8 +117,12 @@ const ParamInfo kParams[] = {
     {"draco_speed", "draco-speed", Kind::kWhole, 0, 10, "Draco encode and decode speed (0: smallest file, 10: fastest)",
      [](const JobSpec& s) { return static_cast<double>(s.write.encode_speed); },
      [](JobSpec& s, double v) { s.write.encode_speed = s.write.decode_speed = static_cast<int>(v); }},
-    {"exposure", "exposure", Kind::kNumber, 0, kNoLimit, "radiosity scale for COLOR_0 (0: chosen from the scene)",
+    {"exposure", "exposure", Kind::kNumber, 0, kNoLimit, "radiosity scale for COLOR_0 below the knee (0: chosen from the scene)",
      [](const JobSpec& s) { return s.write.exposure; }, [](JobSpec& s, double v) { s.write.exposure = v; }},
+    {"tone", "tone", Kind::kTone, 0, 1,
+     "COLOR_0's highlights: shoulder (exposure x light below a knee, then rolled off to reach 1 at the brightest lit surface, hue kept) or clamp (exposure x light, each channel clipped at 1)",
+     [](const JobSpec& s) { return static_cast<double>(s.write.tone); },
+     [](JobSpec& s, double v) { s.write.tone = static_cast<Tone>(v); }},
     {"shooter_size", "shooter-size", Kind::kNumber, 0, kNoLimit,
      "a patch shoots from sub-areas no wider than this times the scene's diagonal",
      [](const JobSpec& s) { return s.params.shooter_size; }, [](JobSpec& s, double v) { s.params.shooter_size = v; }},
@@ -235,6 +239,9 @@ std::string parse_param_value(const ParamInfo& p, const std::string& text, doubl
     case Kind::kQuality:
       if (const auto q = quality_from(text)) return value = static_cast<double>(*q), "";
       return "must be draft, default or high" + got;
+    case Kind::kTone:
+      if (const auto t = tone_from(text)) return value = static_cast<double>(*t), "";
+      return "must be shoulder or clamp" + got;
     case Kind::kFlag:
       if (flag(text, value)) return "";
       return "must be true or false" + got;
@@ -286,6 +293,7 @@ std::string params_json(const JobSpec& spec) {
     switch (p.kind) {
       case Kind::kMethod: j[p.name] = to_string(static_cast<Method>(v)); break;
       case Kind::kQuality: j[p.name] = to_string(static_cast<Quality>(v)); break;
+      case Kind::kTone: j[p.name] = to_string(static_cast<Tone>(v)); break;
       case Kind::kFlag: j[p.name] = v != 0.0; break;
       case Kind::kWhole: j[p.name] = static_cast<uint64_t>(v); break;
       case Kind::kNumber: j[p.name] = v; break;
@@ -327,13 +335,14 @@ std::string params_usage() {
     const double v = p.get(defaults);
     std::string head = "  --";
     if (p.kind == Kind::kFlag) head += (v != 0.0 ? std::string("no-") : std::string()) + p.flag;
-    else head += std::string(p.flag) + (p.kind == Kind::kMethod ? " M" : p.kind == Kind::kQuality ? " Q" : p.kind == Kind::kWhole ? " N" : p.kind == Kind::kColour ? " R,G,B" : " X");
+    else head += std::string(p.flag) + (p.kind == Kind::kMethod ? " M" : p.kind == Kind::kQuality ? " Q" : p.kind == Kind::kTone ? " T" : p.kind == Kind::kWhole ? " N" : p.kind == Kind::kColour ? " R,G,B" : " X");
     if (head.size() < 26) head.resize(26, ' ');
     else head += ' ';
     std::string def;
     switch (p.kind) {
       case Kind::kMethod: def = to_string(static_cast<Method>(v)); break;
       case Kind::kQuality: def = to_string(static_cast<Quality>(v)); break;
+      case Kind::kTone: def = to_string(static_cast<Tone>(v)); break;
       case Kind::kFlag: def = v != 0.0 ? "on" : "off"; break;
       case Kind::kColour: {
         const glm::dvec3 c = p.get_colour(defaults);
@@ -363,6 +372,11 @@ std::string params_openapi_json() {
         schema["type"] = "string";
         schema["enum"] = {"draft", "default", "high"};
         schema["default"] = to_string(static_cast<Quality>(v));
+        break;
+      case Kind::kTone:
+        schema["type"] = "string";
+        schema["enum"] = {"shoulder", "clamp"};
+        schema["default"] = to_string(static_cast<Tone>(v));
         break;
       case Kind::kFlag:
         schema["type"] = "boolean";

@@ -66,6 +66,18 @@ glm::dvec3 perpendicular(const glm::dvec3& d) {
   return glm::normalize(glm::cross(d, std::abs(d.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0)));
 }
 
+// KHR_lights_punctual's spot falloff for a direction at cosine `c` to the axis: t^2 with
+// t = (c - cos outer) / (cos inner - cos outer), clamped to [0, 1].
+double spot_falloff(const Light& light, double c) {
+  const double cos_outer = std::cos(light.outer_cone);
+  const double scale = 1.0 / std::max(1e-3, std::cos(light.inner_cone) - cos_outer);
+  const double t = std::clamp((c - cos_outer) * scale, 0.0, 1.0);
+  return t * t;
+}
+
+// KHR_lights_punctual's range window at distance `x` times the range.
+double range_window(double x) { return std::clamp(1.0 - x * x * x * x, 0.0, 1.0); }
+
 }  // namespace
 
 // One projection of the scene for a light: a hemicube placed at a point light, or a parallel
@@ -181,8 +193,6 @@ void Solver::Impl::light_views(const Light& light, std::vector<LightView>& views
   std::vector<glm::dvec3> axes;
   if (light.type == Light::Type::kSpot) axes = {light.direction};
   else axes = {glm::dvec3(0, -1, 0), glm::dvec3(0, 1, 0)};
-  const double cos_outer = std::cos(light.outer_cone);
-  const double scale = 1.0 / std::max(1e-3, std::cos(light.inner_cone) - cos_outer);
   for (const glm::dvec3& axis : axes) {
     LightView v;
     v.cube = fine && fine_light_cube ? fine_light_cube.get() : light_cube.get();
@@ -195,12 +205,8 @@ void Solver::Impl::light_views(const Light& light, std::vector<LightView>& views
     const std::vector<double>& omega = v.cube->delta_form_factors();  // solid angles (prepare_lights)
     for (uint32_t px = 0; px < v.cube->pixel_count(); ++px) {
       double w = omega[px];
-      if (light.type == Light::Type::kSpot) {
-        // KHR_lights_punctual's falloff, at the pixel's centre.
-        const double c = glm::dot(glm::normalize(v.cube->pixel_direction(px)), light.direction);
-        const double t = std::clamp((c - cos_outer) * scale, 0.0, 1.0);
-        w *= t * t;
-      }
+      // The spot's falloff, at the pixel's centre.
+      if (light.type == Light::Type::kSpot) w *= spot_falloff(light, glm::dot(glm::normalize(v.cube->pixel_direction(px)), light.direction));
       v.weight[px] = w;
     }
     if (light.range > 0.0) {
@@ -304,7 +310,7 @@ void Solver::Impl::light_factors(const Light* light, const std::vector<LightView
           if (ranged) {
             const double along = glm::dot(n, v.dirs[f.pixel]);
             const double x = along != 0.0 ? plane / along / light->range : 2.0;
-            a *= std::clamp(1.0 - x * x * x * x, 0.0, 1.0);
+            a *= range_window(x);
           }
           open += a;
           vis += a * f.trans;
@@ -316,6 +322,23 @@ void Solver::Impl::light_factors(const Light* light, const std::vector<LightView
       f_open[e] = open / e_area[e];
     }
   });
+}
+
+// The irradiance per unit of intensity that point or spot light `light` brings to point x of a
+// surface with normal n, with nothing hidden: cos(theta) / d^2, times the spot's falloff and the
+// range window (as light_views and light_factors weigh the pixels). 0 behind the light or the surface.
+double Solver::Impl::light_at(const Light& light, const glm::dvec3& x, const glm::dvec3& n) const {
+  HEMIBAKE_DCHECK(light.type != Light::Type::kDirectional);
+  const glm::dvec3 to_light = light.position - x;
+  const double d2 = glm::dot(to_light, to_light);
+  if (!(d2 > 0.0)) return 0.0;
+  const double d = std::sqrt(d2);
+  const double cos_surface = glm::dot(n, to_light) / d;
+  if (cos_surface <= 0.0) return 0.0;
+  double e = cos_surface / d2;
+  if (light.type == Light::Type::kSpot) e *= spot_falloff(light, glm::dot(-to_light / d, light.direction));
+  if (light.range > 0.0) e *= range_window(d / light.range);
+  return e;
 }
 
 // Element e takes the irradiance E of a light: rho E, radiosity and unshot radiosity alike.

@@ -2,7 +2,8 @@
 // too large for this interaction when (a) its form factor weighted by the shooter's share of the
 // emitted power exceeds FEPS, or (b) it is partly hidden and the hidden part would have changed its
 // radiosity by more than the radiosity tolerance, or (c) the shot's radiosity differs across one of
-// its corners by more than that tolerance. Split elements cancel the shot; it is repeated with
+// its corners by more than that tolerance, or (d) a point or spot light's light varies across it by
+// more than that tolerance. Split elements cancel the shot; it is repeated with
 // their children, whose form factors come from their parent's pixels.
 #include "solver_impl.h"
 
@@ -102,6 +103,7 @@ std::vector<uint32_t> Solver::Impl::too_coarse(const glm::dvec3& dB, double weig
     uint64_t form_factor = 0, visibility = 0, gradient = 0;
   };
   std::vector<Part> parts(pool.chunk_count(accepted.size()));
+  const bool point_light = shooting_light != nullptr && shooting_light->type != Light::Type::kDirectional;
   pool.parallel_for(accepted.size(), [&](size_t begin, size_t end, size_t c) {
     Part& part = parts[c];
     for (size_t i = begin; i < end; ++i) {
@@ -131,6 +133,23 @@ std::vector<uint32_t> Solver::Impl::too_coarse(const glm::dvec3& dB, double weig
       for (uint32_t k = 0; k < corner_count(e) && !split_it; ++k) {
         const uint32_t vert = e_corner[e][k];
         split_it = vmax[vert] - vmin[vert] > tolerance && (!sharp_only || vmax[vert] > kSharpRatio * vmin[vert]);
+        part.gradient += split_it;
+      }
+      // (d) A point or spot light's light varies across the element by more than the tolerance.
+      // The corners' spread (c) compares an element with its neighbours, so an element alone on
+      // its surface never splits by it: a picture's canvas under a spot light stayed one flat
+      // element while the path tracer's light fell by half across it. Taken from the light's
+      // formula at the element's corners and centre (pixel coverage would add its own noise),
+      // scaled by the share of the element the light sees.
+      if (!split_it && !sharp_only && point_light && f_recv[e] > 0.0 && f_open[e] > 0.0) {
+        const glm::dvec3& n = prep.normal[e_patch[e]];
+        double lo = light_at(*shooting_light, e_centre[e], n), hi = lo;
+        for (uint32_t k = 0; k < corner_count(e); ++k) {
+          const double v = light_at(*shooting_light, vpos[e_corner[e][k]], n);
+          lo = std::min(lo, v);
+          hi = std::max(hi, v);
+        }
+        split_it = shot_radiosity(e, dB, hi - lo) * (f_recv[e] / f_open[e]) > tolerance;
         part.gradient += split_it;
       }
       if (split_it) part.split.push_back(e);

@@ -330,6 +330,7 @@ struct Solver::Impl {
   void project_light_view(LightView& view, std::span<const uint32_t> elements);
   void project_light_children(LightView& view, const std::vector<uint32_t>& parents);
   void light_factors(const Light* light, const std::vector<LightView>& views, std::span<const uint32_t> elements);
+  double light_at(const Light& light, const glm::dvec3& x, const glm::dvec3& n) const;
   void shoot_light(size_t index);  // lights[index]
   std::vector<glm::dvec3> sky_factors(uint32_t directions_step, std::span<const uint32_t> elements);
   uint32_t add_sky_directions(uint32_t step, uint32_t skip, uint32_t first, std::span<const uint32_t> elements,

@@ -59,6 +59,8 @@ TEST(CommandLine, EveryParameterHasTheWiresLimits) {
       values = {"aa", "classical", "hr", "reference", "ray"};
     } else if (p.kind == protocol::ParamInfo::Kind::kQuality) {
       values = {"draft", "default", "high", "best"};
+    } else if (p.kind == protocol::ParamInfo::Kind::kTone) {
+      values = {"shoulder", "clamp", "filmic"};
     } else {
       continue;  // flags: --no-FLAG, checked below
     }

@@ -5,6 +5,7 @@
 #include "hemibake/solver/solver.h"
 #include "glb_reader.h"
 #include "gltf_builder.h"
+#include "tone_formula.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -191,9 +192,10 @@ Baked bake(const std::vector<uint8_t>& gltf, bool draco, solver::Params params =
 class ClosedBoxGltf : public ::testing::TestWithParam<bool> {};
 
 // A closed box, every wall emitting E and reflecting rho: _RADIOSITY = E / (1 - rho) everywhere,
-// as read back by Draco's decoder (or from plain accessors); COLOR_0 lies in [0, 1] and is
-// exposure * radiosity / base colour (an emitter's: its emission's hue); the triangles cover the
-// walls exactly.
+// as read back by Draco's decoder (or from plain accessors); COLOR_0 lies in [0, 1] and is the
+// recorded tone curve's map of exposure * radiosity / base colour (an emitter's: its emission's
+// hue), which with no surface that does not emit is that light itself (nothing needs a shoulder);
+// the triangles cover the walls exactly.
 TEST_P(ClosedBoxGltf, BakesToEOverOneMinusRhoReadBackIndependently) {
   const glm::dvec3 rho(0.5, 0.6, 0.4), e(0.3, 0.2, 0.1);
   GltfBuilder b;
@@ -215,12 +217,16 @@ TEST_P(ClosedBoxGltf, BakesToEOverOneMinusRhoReadBackIndependently) {
   const json& base = g.doc["materials"][prim["material"].get<int>()]["pbrMetallicRoughness"]["baseColorFactor"];
   const glm::dvec3 hue = e / std::max({e.x, e.y, e.z});
   for (int c = 0; c < 3; ++c) ASSERT_NEAR(base[c].get<double>(), hue[c], 1e-9);
+  const test::RecordedTone tone = test::recorded_tone(g.doc);
+  EXPECT_TRUE(tone.shoulder);
+  EXPECT_EQ(tone.scale, 0.0);
   for (size_t i = 0; i < d.radiosity.size(); ++i) {
     for (int c = 0; c < 3; ++c) {
       ASSERT_NEAR(d.radiosity[i][c] / expected[c], 1.0, 0.02) << "vertex " << i;
       ASSERT_GE(d.colors[i][c], 0.0);
       ASSERT_LE(d.colors[i][c], 1.0);
-      ASSERT_NEAR(d.colors[i][c], std::min(1.0, baked.exposure * d.radiosity[i][c] / hue[c]), 2e-3);
+      ASSERT_NEAR(d.colors[i][c], test::documented_color(tone, baked.exposure * d.radiosity[i] / hue)[c], 2e-3);
+      ASSERT_NEAR(d.colors[i][c], baked.exposure * d.radiosity[i][c] / hue[c], 2e-3);
     }
   }
   // Node-local positions: the node's translation still applies, and the box is where it was.

@@ -8,6 +8,7 @@
 // with Draco's own decoder or straight from plain accessors.
 #include "gltf_builder.h"
 #include "glb_reader.h"
+#include "tone_formula.h"
 #include "../solver/test_seed.h"
 
 #include "hemibake/protocol/bake.h"
@@ -1244,7 +1245,8 @@ TEST(PunctualLightsFeature, EmissivePanelAndPointLightShareOneUnit) {
 
 // An emitter with a dark base colour (lava: dark rock, glowing) is shown by its emission: its output
 // material's base colour is the emissive factor's hue, and base colour x COLOR_0 is exposure x
-// radiosity (clamped), as bright as the light it gives, brighter than the floor it lights.
+// radiosity (through the recorded tone curve), as bright as the light it gives, brighter than the
+// floor it lights.
 TEST(EmitterDisplayFeature, DarkEmitterShowsItsEmissionNotItsBaseColour) {
   Doc d;
   const int floor = d.quad_node(rect(-1, 1, -1, 1, 0, true), d.material(plain_material(V(0.6))), {{"name", "floor"}});
@@ -1260,18 +1262,19 @@ TEST(EmitterDisplayFeature, DarkEmitterShowsItsEmissionNotItsBaseColour) {
   EXPECT_NEAR(factor[1].get<double>(), 0.3, 1e-9);
   EXPECT_NEAR(factor[2].get<double>(), 0.05, 1e-9);
   const double exposure = b.out.doc["asset"]["extras"]["hemibake"]["exposure"].get<double>();
+  const test::RecordedTone tone = test::recorded_tone(b.out.doc);
   auto shown = [&](int node) {
     std::vector<V> out;
     const json& n = b.out.doc["nodes"][node];
     for (const json& prim : b.out.doc["meshes"][n["mesh"].get<int>()]["primitives"]) {
-      const json base = b.out.doc["materials"][prim["material"].get<int>()]["pbrMetallicRoughness"]["baseColorFactor"];
+      const json f = b.out.doc["materials"][prim["material"].get<int>()]["pbrMetallicRoughness"]["baseColorFactor"];
+      const V base(f[0].get<double>(), f[1].get<double>(), f[2].get<double>());
       const Primitive p = read_primitive(b.out, prim);
       for (size_t i = 0; i < p.colors.size(); ++i) {
-        V v;
-        for (int c = 0; c < 3; ++c) v[c] = base[c].get<double>() * p.colors[i][c];
+        const V v = base * p.colors[i];
         out.push_back(v);
-        for (int c = 0; c < 3; ++c)
-          EXPECT_NEAR(v[c], std::min(base[c].get<double>(), exposure * p.radiosity[i][c]), 2e-3) << "vertex " << i;
+        const V expected = base * test::documented_color(tone, exposure * p.radiosity[i] / base);
+        for (int c = 0; c < 3; ++c) EXPECT_NEAR(v[c], expected[c], 2e-3) << "vertex " << i;
       }
     }
     return out;
@@ -1282,6 +1285,165 @@ TEST(EmitterDisplayFeature, DarkEmitterShowsItsEmissionNotItsBaseColour) {
   for (const V& v : floor_shown) floor_max = std::max(floor_max, v.x);
   for (const V& v : lava_shown) EXPECT_GE(v.x, floor_max);  // red channel: as bright as anything lit
   EXPECT_NEAR(lava_shown[0].x, 1.0, 1e-3);                   // full red, where dark rock was 0.05
+}
+
+// COLOR_0's highlights (README, "GLB out"). A point light of known intensity over two small grey
+// panels beside each other at different heights, and a floor far below: the panels' irradiance is
+// I h / r^3 at their centres, 1.3 times apart, and an explicit exposure puts both far above the
+// knee (the nearer at the scene's brightest), the floor below it. A third panel, lower, lies on the
+// shoulder's first stretch, where no channel reaches 1.
+struct HighlightScene {
+  Doc d;
+  int floor = -1, near = -1, far = -1, mid = -1;
+  double exposure = 0.0;
+  double ratio = 0.0;  ///< near panel's irradiance over the far one's, at their centres
+};
+
+HighlightScene highlight_scene() {
+  HighlightScene s;
+  const V light(0.0, 3.0, 0.0), colour(1.0, 0.9, 0.8);
+  const double intensity = 100.0;
+  const int grey = s.d.material(plain_material(V(0.8), "grey")), ground = s.d.material(plain_material(V(0.5), "ground"));
+  s.floor = s.d.quad_node(rect(-2, 2, -2, 2, 0, true), ground, {{"name", "floor"}});
+  s.near = s.d.quad_node(rect(-0.35, -0.25, -0.05, 0.05, 2.0, true), grey, {{"name", "near"}});
+  s.far = s.d.quad_node(rect(0.25, 0.35, -0.05, 0.05, 1.84, true), grey, {{"name", "far"}});
+  s.mid = s.d.quad_node(rect(-0.05, 0.05, 0.25, 0.35, 1.0, true), grey, {{"name", "mid"}});
+  add_lights(s.d, json::array({json{{"type", "point"}, {"intensity", intensity}, {"color", {colour.x, colour.y, colour.z}}}}));
+  s.d.node({{"translation", {light.x, light.y, light.z}}, {"extensions", light_ref(0)}});
+  auto irradiance = [&](const V& x) {
+    const double r = glm::length(light - x);
+    return intensity * (light.y - x.y) / (r * r * r);
+  };
+  s.ratio = irradiance(V(-0.3, 2.0, 0.0)) / irradiance(V(0.3, 1.84, 0.0));
+  // The near panel's light (mean of the channels) at its centre becomes 4, 5.7 times the knee.
+  s.exposure = 4.0 / (irradiance(V(-0.3, 2.0, 0.0)) * (colour.x + colour.y + colour.z) / 3.0);
+  return s;
+}
+
+Baked bake_with(const HighlightScene& s, Tone tone) {
+  Baked r;
+  r.loaded = load_gltf_memory(s.d.gltf_bytes(), ".");
+  EXPECT_TRUE(r.loaded.document) << r.loaded.error;
+  if (!r.loaded.document) return r;
+  JobSpec spec;
+  spec.params = quick_params();
+  spec.write.draco = false;  // uint16 COLOR_0 exactly as written
+  spec.write.exposure = s.exposure;
+  spec.write.tone = tone;
+  const BakeOutput w = protocol::bake(*r.loaded.document, spec);
+  EXPECT_EQ(w.error, "");
+  const auto parts = test::split_glb(w.glb);
+  EXPECT_TRUE(parts.has_value());
+  if (parts) r.out = {parts->gltf, parts->bin};
+  return r;
+}
+
+// A node's vertices: base colour, exposed light (exposure x radiosity / base) and COLOR_0.
+struct Shown {
+  V base, light, color;
+};
+
+std::vector<Shown> shown_vertices(const Baked& b, int node, double exposure) {
+  std::vector<Shown> out;
+  const json& n = b.out.doc["nodes"][node];
+  for (const json& prim : b.out.doc["meshes"][n["mesh"].get<int>()]["primitives"]) {
+    const json f = b.out.doc["materials"][prim["material"].get<int>()]["pbrMetallicRoughness"]["baseColorFactor"];
+    const V base(f[0].get<double>(), f[1].get<double>(), f[2].get<double>());
+    const Primitive p = read_primitive(b.out, prim);
+    for (size_t i = 0; i < p.colors.size(); ++i) out.push_back({base, exposure * p.radiosity[i] / base, p.colors[i]});
+  }
+  return out;
+}
+
+V mean_of(const std::vector<Shown>& v, V Shown::*what) {
+  V sum(0.0);
+  for (const Shown& s : v) sum += s.*what;
+  return v.empty() ? sum : sum / static_cast<double>(v.size());
+}
+
+double mean3(const V& v) { return (v.x + v.y + v.z) / 3.0; }
+
+TEST(HighlightFeature, SurfacesLitFarAboveTheKneeStayApartInOrder) {
+  const HighlightScene s = highlight_scene();
+  ASSERT_GE(s.ratio, 1.3);
+  const Baked b = bake_with(s, Tone::kShoulder);
+  ASSERT_TRUE(b.loaded.document);
+  const test::RecordedTone tone = test::recorded_tone(b.out.doc);
+  ASSERT_TRUE(tone.shoulder);
+  EXPECT_EQ(b.out.doc["asset"]["extras"]["hemibake"]["exposure"].get<double>(), s.exposure);  // as asked
+  const auto floor = shown_vertices(b, s.floor, s.exposure), near = shown_vertices(b, s.near, s.exposure),
+             far = shown_vertices(b, s.far, s.exposure), mid = shown_vertices(b, s.mid, s.exposure);
+  ASSERT_FALSE(floor.empty());
+  ASSERT_FALSE(mid.empty());
+  ASSERT_FALSE(near.empty());
+  ASSERT_FALSE(far.empty());
+  // The panels' baked light is the closed form's: 1.3 times apart, both far above the knee.
+  const V near_light = mean_of(near, &Shown::light), far_light = mean_of(far, &Shown::light);
+  EXPECT_NEAR(mean3(near_light) / mean3(far_light), s.ratio, 0.03 * s.ratio);
+  EXPECT_GT(mean3(far_light), 3.0 * tone.knee);
+  // White is the brightest vertex's light (mean of the channels) on the surfaces, none of which
+  // emits; it reaches 1 there.
+  double brightest = 0.0;
+  for (const auto* v : {&floor, &near, &far, &mid})
+    for (const Shown& x : *v) brightest = std::max(brightest, mean3(x.light));
+  EXPECT_NEAR(tone.white, brightest, 1e-5 * brightest);
+  EXPECT_LT(tone.knee, 1.0);
+  // Every COLOR_0 in [0, 1] and as the recorded curve makes it from _RADIOSITY; below the knee it
+  // is the asked exposure times the light, as before the curve.
+  size_t below = 0;
+  for (const auto* v : {&floor, &near, &far, &mid})
+    for (const Shown& x : *v) {
+      const V expected = test::documented_color(tone, x.light);
+      for (int c = 0; c < 3; ++c) {
+        ASSERT_GE(x.color[c], 0.0);
+        ASSERT_LE(x.color[c], 1.0);
+        ASSERT_NEAR(x.color[c], expected[c], 1e-4);
+      }
+      if (mean3(x.light) < tone.knee && std::max({x.light.x, x.light.y, x.light.z}) <= 1.0) {
+        ++below;
+        for (int c = 0; c < 3; ++c) ASSERT_NEAR(x.color[c], x.light[c], 1e-4);
+      }
+    }
+  EXPECT_GT(below, floor.size() / 2);
+  // The nearer panel shows brighter, no channel darker, and far enough apart to see in three.js's
+  // 8-bit sRGB output (base colour x COLOR_0) where the clamp showed both at the base colour.
+  const V near_shown = 0.8 * mean_of(near, &Shown::color), far_shown = 0.8 * mean_of(far, &Shown::color);
+  int steps = 0;
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_GE(near_shown[c], far_shown[c]) << "channel " << c;
+    steps = std::max(steps, test::srgb8(near_shown[c]) - test::srgb8(far_shown[c]));
+  }
+  EXPECT_GT(mean3(near_shown), mean3(far_shown));
+  EXPECT_GE(steps, 2) << "near " << near_shown.x << "," << near_shown.y << "," << near_shown.z << " far " << far_shown.x
+                      << "," << far_shown.y << "," << far_shown.z;
+  // The recorded numbers invert COLOR_0 to the light wherever no channel is 1: on the middle
+  // panel, above the knee, too.
+  size_t inverted = 0;
+  for (const auto* v : {&floor, &near, &far, &mid})
+    for (const Shown& x : *v) {
+      if (std::max({x.color.x, x.color.y, x.color.z}) >= 1.0) continue;
+      const V back = test::documented_light(tone, x.color);
+      for (int c = 0; c < 3; ++c) ASSERT_NEAR(back[c], x.light[c], 2e-3 * (x.light[c] + 0.01));
+      inverted += mean3(x.light) > tone.knee;
+    }
+  EXPECT_GE(inverted, mid.size());
+}
+
+// tone=clamp keeps the linear clip: COLOR_0 = min(1, exposure x light) per channel, which shows the
+// two panels alike in the channel that clips.
+TEST(HighlightFeature, ClampToneKeepsTheLinearClip) {
+  const HighlightScene s = highlight_scene();
+  const Baked b = bake_with(s, Tone::kClamp);
+  ASSERT_TRUE(b.loaded.document);
+  EXPECT_EQ(b.out.doc["asset"]["extras"]["hemibake"]["tone"]["curve"], "clamp");
+  EXPECT_FALSE(test::recorded_tone(b.out.doc).shoulder);
+  for (int node : {s.floor, s.near, s.far})
+    for (const Shown& x : shown_vertices(b, node, s.exposure))
+      for (int c = 0; c < 3; ++c) ASSERT_NEAR(x.color[c], std::min(1.0, x.light[c]), 1e-4);
+  const V near = mean_of(shown_vertices(b, s.near, s.exposure), &Shown::color),
+          far = mean_of(shown_vertices(b, s.far, s.exposure), &Shown::color);
+  EXPECT_EQ(near.y, 1.0);
+  EXPECT_EQ(far.y, 1.0);
 }
 
 // A light used by two nodes shines from both: twice the light of one, where they stand together.

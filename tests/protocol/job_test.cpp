@@ -13,7 +13,8 @@ TEST(JobParams, EveryNameIsAppliedAndRoundTrips) {
                                         {"beps", "0.1"}, {"convergence", "0.01"}, {"max_shots", "500"},
                                         {"max_elements", "9000"}, {"threads", "3"}, {"reuse", "false"}, {"cluster_size", "0.3"}, {"shot_cache_mb", "64"}, {"rays", "16"},
                                         {"samples", "64"}, {"draco", "no"}, {"position_bits", "16"},
-                                        {"texcoord_bits", "10"}, {"draco_speed", "3"}, {"exposure", "2.5"}},
+                                        {"texcoord_bits", "10"}, {"draco_speed", "3"}, {"exposure", "2.5"},
+                                        {"tone", "clamp"}},
                                        spec);
   ASSERT_EQ(err, "");
   EXPECT_EQ(spec.method, Method::kClassical);
@@ -36,6 +37,7 @@ TEST(JobParams, EveryNameIsAppliedAndRoundTrips) {
   EXPECT_EQ(spec.write.texcoord_bits, 10);
   EXPECT_EQ(spec.write.encode_speed, 3);
   EXPECT_EQ(spec.write.exposure, 2.5);
+  EXPECT_EQ(spec.write.tone, Tone::kClamp);
   // What params_json writes, parse_params_json reads back to the same text.
   JobSpec again;
   ASSERT_EQ(parse_params_json(params_json(spec), again), "");
@@ -67,7 +69,7 @@ TEST(JobParams, BadValuesAreRefusedByName) {
       {"method", "ray"},      {"resolution", "7"},    {"resolution", "abc"}, {"feps", "nan"},
       {"max_shots", "-1"},    {"threads", "1.5"},     {"reuse", "maybe"},    {"rays", "0"},
       {"samples", "0"},       {"samples", "1e9"},     {"position_bits", "31"}, {"exposure", "-1"},
-      {"convergence", "2"},   {"cluster_size", "-1"}, {"nonsense", "1"}};
+      {"convergence", "2"},   {"cluster_size", "-1"}, {"tone", "filmic"}, {"nonsense", "1"}};
   for (const auto& [key, value] : bad) {
     JobSpec spec;
     const std::string err = apply_params({{key, value}}, spec);
@@ -91,6 +93,7 @@ std::string other_value(const ParamInfo& p, const JobSpec& defaults) {
   switch (p.kind) {
     case ParamInfo::Kind::kMethod: return v == 0.0 ? "classical" : "aa";
     case ParamInfo::Kind::kQuality: return v == 2.0 ? "draft" : "high";
+    case ParamInfo::Kind::kTone: return v == 0.0 ? "clamp" : "shoulder";
     case ParamInfo::Kind::kFlag: return v != 0.0 ? "false" : "true";
     case ParamInfo::Kind::kWhole: return std::to_string(static_cast<uint64_t>(v == p.max ? v - 2 : v + 2));
     case ParamInfo::Kind::kNumber: return std::to_string(v == 0.0 ? 0.25 : v * 0.5);

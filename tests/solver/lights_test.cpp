@@ -296,6 +296,48 @@ TEST(SpotLight, ConeProfileFollowsTheSmoothFalloffAndIsDarkOutside) {
   EXPECT_GT(peak, 0.5 * rho * 5.0 / (h * h));
 }
 
+// A picture under a spot light, in a scene whose light comes mostly from elsewhere (a gallery's
+// spots beside a sunlit skylight): one quad, alone on its surface, whose light falls by a factor of
+// five from its top to its bottom. Its share of the scene's power is under FEPS, and the corners'
+// spread compares it with neighbours it does not have, so nothing split it: it showed one flat
+// value, the light's mean. It must show rho I cos(theta) / d^2 times the cone's falloff across it.
+// The rest of the scene (a floor under a strong lamp) lies behind the canvas's plane: none of its
+// light reaches the canvas's front.
+TEST(SpotLight, LoneCanvasShowsTheLightFallingAcrossIt) {
+  const uint64_t seed = test::test_seed();
+  std::mt19937_64 rng(seed);
+  const double rho = 0.6, intensity = 20.0;
+  Scene scene;
+  // The canvas: 1 x 0.8 m in the plane z = 0, facing +z.
+  scene.patches.push_back(quad(V(-0.5, 1.3, 0), V(0.5, 1.3, 0), V(0.5, 2.1, 0), V(-0.5, 2.1, 0), V(rho)));
+  add_floor(scene, -10, 10, -22, -2, 1, V(0.5), 1);
+  Light spot;
+  spot.type = Light::Type::kSpot;
+  spot.position = V(0.0, 2.6, 0.6);
+  spot.direction = glm::normalize(V(0.0, 1.6, 0.0) - spot.position);
+  spot.intensity = V(intensity);
+  spot.inner_cone = 0.2;
+  spot.outer_cone = 0.9;
+  scene.lights.push_back(spot);
+  Light lamp;
+  lamp.position = V(0.0, 3.0, -12.0);
+  lamp.intensity = V(200.0 * intensity);
+  scene.lights.push_back(lamp);
+  const Mesh mesh = solve(scene);
+  const double cos_outer = std::cos(spot.outer_cone), cos_inner = std::cos(spot.inner_cone);
+  auto truth = [&](const V& x) {
+    const V to = spot.position - x;
+    const double d = glm::length(to);
+    const double t = std::clamp((glm::dot(-to / d, spot.direction) - cos_outer) / (cos_inner - cos_outer), 0.0, 1.0);
+    return rho * intensity * t * t * (to.z / d) / (d * d);
+  };
+  ASSERT_GT(truth(V(0.0, 2.1, 0.0)), 4.0 * truth(V(0.0, 1.3, 0.0)));
+  const auto samples = sample_mesh(mesh, 3000, rng, [](uint32_t p) { return p == 0; });
+  const Errors e = relative_errors(samples, truth, [](const Sample&) { return true; });
+  EXPECT_LE(e.median, 0.03) << test::seed_note(seed) << " elements " << mesh.elements.size();
+  EXPECT_LE(e.p90, 0.08) << test::seed_note(seed);
+}
+
 // ---- A closed room built of wall boxes ----------------------------------------------------------
 
 // An axis-aligned box's six faces, facing out, each one patch; with `both_sides`, each face's other

@@ -1,7 +1,9 @@
 // The 3D view: a baked (or preview) GLB in three.js, orbitable, drawn only when something changed.
 // Three ways to colour it, all from the file the service writes (README, "GLB out"):
-//   baked     - the material as loaded: unlit, base colour x COLOR_0 (= exposure x radiosity);
-//   radiosity - the linear _RADIOSITY attribute times an exposure the user sets;
+//   baked     - the material as loaded: unlit, base colour x COLOR_0 (= exposure x radiosity up to
+//               the knee of the file's tone curve, rolled off above it);
+//   radiosity - the linear _RADIOSITY attribute times an exposure the user sets, its highlights
+//               rolled off by the file's own tone curve (asset.extras.hemibake.tone);
 //   base      - the base colour alone (factor and texture), without light.
 // and the wireframe of the adaptive mesh (every leaf element's triangles) on top.
 import * as THREE from 'three';
@@ -20,13 +22,39 @@ void main() {
   gl_Position = projectionMatrix * modelViewMatrix * vec4(position, 1.0);
 }`;
 
+// The tone curve COLOR_0 was written with (README, "GLB out"): linear up to the knee, then a
+// logarithmic shoulder that reaches 1 at the white point, applied to the mean of the channels with
+// the hue kept; a file written with tone=clamp (or before the curve) clips each channel instead.
+// At 0 EV no lit surface's radiosity reaches the white point (radiosity is base colour x light), so
+// a bright pool rolls off here as in the baked view instead of clipping to white; more exposure
+// pushes it up the shoulder.
 const kRadiosityFragment = /* glsl */ `
 uniform float exposure;
+uniform bool shoulder;
+uniform float knee;
+uniform float white;
+uniform float scale;
 varying vec3 vRadiosity;
 void main() {
-  gl_FragColor = vec4(vRadiosity * exposure, 1.0);
+  vec3 light = vRadiosity * exposure;
+  float m = (light.r + light.g + light.b) / 3.0;
+  if (shoulder && m > knee) {
+    float f = m >= white || scale <= 0.0 ? 1.0 : knee + scale * log(1.0 + (m - knee) / scale);
+    light *= min(f, 1.0) / m;
+  }
+  gl_FragColor = vec4(clamp(light, 0.0, 1.0), 1.0);
   #include <colorspace_fragment>
 }`;
+
+// The file's tone curve, for the shader: an older file, or one baked with tone=clamp, clips.
+function toneOf(json) {
+  const t = json?.asset?.extras?.hemibake?.tone;
+  const knee = Number(t?.knee), white = Number(t?.white), scale = Number(t?.scale);
+  if (t?.curve !== 'shoulder' || !(knee > 0) || !(white >= knee) || !(scale >= 0)) {
+    return { shoulder: false, knee: 1, white: 1, scale: 0 };
+  }
+  return { shoulder: true, knee, white, scale };
+}
 
 export class Viewer {
   constructor(canvas) {
@@ -81,6 +109,7 @@ export class Viewer {
     const gltf = await this.loader.parseAsync(buffer, '');
     const root = gltf.scene;
     this.fileExposure = Number(gltf.parser.json?.asset?.extras?.hemibake?.exposure) || 1;
+    const tone = toneOf(gltf.parser.json);
     this.hasRadiosity = false;
     root.traverse((object) => {
       if (!object.isMesh) return;
@@ -92,7 +121,13 @@ export class Viewer {
       if (object.geometry.getAttribute('_radiosity')) {
         this.hasRadiosity = true;
         object.userData.materials.radiosity = new THREE.ShaderMaterial({
-          uniforms: { exposure: { value: 1 } },
+          uniforms: {
+            exposure: { value: 1 },
+            shoulder: { value: tone.shoulder },
+            knee: { value: tone.knee },
+            white: { value: tone.white },
+            scale: { value: tone.scale },
+          },
           vertexShader: kRadiosityVertex,
           fragmentShader: kRadiosityFragment,
           side: baked.side,

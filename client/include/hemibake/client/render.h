@@ -2,6 +2,7 @@
 // flat shading, optional wireframe.
 #pragma once
 
+#include "hemibake/protocol/tone.h"
 #include "hemibake/solver/solver.h"
 
 #include <glm/vec3.hpp>
@@ -24,7 +25,10 @@ struct RenderOptions {
   uint32_t height = 512;
   bool gouraud = true;    ///< vertex radiosity interpolated; false: flat element radiosity
   bool wireframe = false; ///< element edges drawn in black
-  double exposure = 0.0;  ///< radiosity to [0, 1] scale; 0 picks one from the image
+  double exposure = 0.0;  ///< radiosity to [0, 1] scale below the knee; 0 picks one from the image
+  protocol::Tone tone = protocol::Tone::kShoulder;  ///< highlights as COLOR_0's (protocol/tone.h)
+  double white = 0.0;     ///< exposed radiosity (mean of the channels) shown as 1; 0 picks it from
+                          ///< the image
 };
 
 /// 8-bit sRGB pixels, row-major from the top row.

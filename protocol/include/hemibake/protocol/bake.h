@@ -61,6 +61,7 @@ struct BakeOutput {
   std::vector<uint8_t> glb;  ///< empty when cancelled or on error
   std::string error;         ///< the writer's, for the user
   double exposure = 0.0;     ///< the exposure COLOR_0 was written with
+  ToneCurve tone;            ///< and its tone curve
 };
 
 /// Solves scene_of(document) and writes the baked GLB. Previews, when asked for through the

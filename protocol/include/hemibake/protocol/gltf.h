@@ -3,6 +3,7 @@
 #pragma once
 
 #include "hemibake/protocol/method.h"
+#include "hemibake/protocol/tone.h"
 #include "hemibake/solver/solver.h"
 
 #include <cstdint>
@@ -61,21 +62,25 @@ struct WriteOptions {
   int color_bits = 10;
   int encode_speed = 5;     ///< Draco speed options, 0 (best compression) to 10 (fastest)
   int decode_speed = 5;
-  double exposure = 0.0;    ///< radiosity-to-[0, 1] scale for COLOR_0; 0 chooses one
+  double exposure = 0.0;    ///< COLOR_0's linear scale of light below the knee; 0 chooses one
+  Tone tone = Tone::kShoulder;  ///< what happens above the knee (see ToneCurve)
 };
 
 struct WriteResult {
   std::vector<uint8_t> glb;  ///< empty on error
   std::string error;
   double exposure = 0.0;     ///< the exposure used
+  ToneCurve tone;            ///< the curve used, with the white point chosen from the scene
 };
 
 /// Writes the baked scene: the input's nodes, names, materials, textures and UVs, each mesh
 /// instance replaced by its radiosity mesh (crack-free triangles over the solver's elements),
-/// COLOR_0 = exposure * radiosity / base colour in [0, 1] (materials get KHR_materials_unlit, so
-/// base colour x COLOR_0 shows the light), _RADIOSITY = linear radiosity per vertex, and the
-/// method, parameters, statistics and exposure in asset.extras.hemibake. `mesh` must come from a
-/// solve of scene_of(document).
+/// COLOR_0 = the tone curve's map of exposure * radiosity / base colour, in [0, 1] (materials get
+/// KHR_materials_unlit, so base colour x COLOR_0 shows the light; below the knee it is exactly
+/// exposure x radiosity), _RADIOSITY = linear radiosity per vertex, and the method, parameters,
+/// statistics, exposure and the curve's knee, white point and scale in asset.extras.hemibake. The
+/// white point is the exposed light (mean of the channels) of the brightest vertex on a surface that
+/// does not emit. `mesh` must come from a solve of scene_of(document).
 WriteResult write_baked_glb(const SceneDocument& document, const solver::Mesh& mesh, Method method,
                             const solver::Params& params, const solver::Stats& stats,
                             const WriteOptions& options = {});

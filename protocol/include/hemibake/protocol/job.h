@@ -48,9 +48,10 @@ struct JobSpec {
 /// the aa mesh first).
 solver::Params solver_params(const JobSpec& spec);
 
-/// One job parameter. Values are numbers (a method's index in Method, a flag's 0 or 1).
+/// One job parameter. Values are numbers (a method's index in Method, a tone's in Tone, a flag's 0
+/// or 1).
 struct ParamInfo {
-  enum class Kind : uint8_t { kMethod, kWhole, kNumber, kFlag, kColour, kQuality };
+  enum class Kind : uint8_t { kMethod, kWhole, kNumber, kFlag, kColour, kQuality, kTone };
   const char* name;     ///< on the wire: query, form field, JSON key
   const char* flag;     ///< on the command line, without the dashes; a kFlag that defaults on is
                         ///< turned off by --no-FLAG, any other parameter takes --FLAG VALUE
