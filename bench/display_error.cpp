@@ -166,13 +166,18 @@ bool displayed_value(const solver::Mesh& baked, const glm::dvec3& x, const glm::
       continue;
     }
     // As the writer shows a loop of more than three vertices: a fan from its centre, which takes
-    // the mean of the loop's values.
+    // the mean of the loop's own (not interpolated) vertices.
     const uint32_t* loop = baked.boundary.data() + el.boundary_begin;
     glm::dvec3 centre(0.0), value(0.0);
+    uint32_t own = 0;
     for (uint32_t k = 0; k < nb; ++k) {
-      centre += p[loop[k]] / static_cast<double>(nb);
-      value += b[loop[k]] / static_cast<double>(nb);
+      if (loop[k] < baked.interpolated.size() && baked.interpolated[loop[k]]) continue;
+      centre += p[loop[k]];
+      value += b[loop[k]];
+      ++own;
     }
+    centre /= static_cast<double>(own);
+    value /= static_cast<double>(own);
     for (uint32_t k = 0; k < nb; ++k)
       consider(centre, p[loop[k]], p[loop[(k + 1) % nb]], value, b[loop[k]], b[loop[(k + 1) % nb]]);
   }

@@ -2,7 +2,9 @@
 """Writes a glTF scene for timing scene preparation and the mesh's T-junctions on hostile input: a
 10 m x 10 m floor of one quad, edged along x = 10 by a 5 cm strip of N coplanar tiles of the same
 material (N T-junctions on one edge of the floor), lit by a 1 m emissive square 3 m above the
-floor's middle. Usage: make_tiled_edge_gltf.py OUT.gltf [N] (N defaults to 20000)."""
+floor's middle. With `upright`, the tiles stand on the floor's edge, 5 cm high, facing the floor's
+middle (N seams between surfaces at 90 degrees on one edge). Usage: make_tiled_edge_gltf.py OUT.gltf
+[N] [upright] (N defaults to 20000)."""
 import base64
 import json
 import struct
@@ -10,6 +12,7 @@ import sys
 
 out = sys.argv[1] if len(sys.argv) > 1 else "tiled-edge.gltf"
 n = int(sys.argv[2]) if len(sys.argv) > 2 else 20000
+upright = len(sys.argv) > 3 and sys.argv[3] == "upright"
 positions, floor, lamp = [], [], []
 
 
@@ -24,7 +27,10 @@ quad(floor, (0, 0, 0), (0, 0, 10), (10, 0, 10), (10, 0, 0))
 width = 10.0 / n
 for i in range(n):
     z0, z1 = i * width, (i + 1) * width
-    quad(floor, (10, 0, z0), (10, 0, z1), (10.05, 0, z1), (10.05, 0, z0))
+    if upright:
+        quad(floor, (10, 0, z0), (10, 0, z1), (10, 0.05, z1), (10, 0.05, z0))
+    else:
+        quad(floor, (10, 0, z0), (10, 0, z1), (10.05, 0, z1), (10.05, 0, z0))
 quad(lamp, (4.5, 3, 4.5), (5.5, 3, 4.5), (5.5, 3, 5.5), (4.5, 3, 5.5))
 
 position_bytes = b"".join(struct.pack("<3f", *p) for p in positions)

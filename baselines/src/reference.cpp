@@ -281,6 +281,8 @@ ReferenceBakeStats apply_reference(const solver::Scene& scene, solver::Mesh& mes
   const auto t0 = std::chrono::steady_clock::now();
   ReferenceBakeStats stats;
   const Reference reference(scene);
+  // Every vertex gets its own light, those added on an edge for another surface's point too.
+  mesh.interpolated.clear();
   std::vector<uint32_t> patch_of(mesh.positions.size(), UINT32_MAX);
   for (const auto& el : mesh.elements)
     for (uint32_t i = el.boundary_begin; i < el.boundary_end; ++i) patch_of[mesh.boundary[i]] = el.patch;

@@ -80,15 +80,20 @@ std::vector<uint8_t> render(const solver::Mesh& mesh, const Camera& cam, const R
   };
 
   for (const auto& el : mesh.elements) {
-    // Fan from the element's centre over its boundary loop (which includes hanging vertices).
+    // Fan from the element's centre over its boundary loop (which includes hanging vertices); the
+    // centre is the mean of the loop's own vertices, as the baked file's (Mesh::interpolated).
     glm::dvec3 centre(0.0), centre_colour(0.0);
     const uint32_t nb = el.boundary_end - el.boundary_begin;
+    uint32_t own = 0;
     for (uint32_t i = el.boundary_begin; i < el.boundary_end; ++i) {
-      centre += mesh.positions[mesh.boundary[i]];
-      centre_colour += mesh.radiosity[mesh.boundary[i]];
+      const uint32_t v = mesh.boundary[i];
+      if (v < mesh.interpolated.size() && mesh.interpolated[v]) continue;
+      centre += mesh.positions[v];
+      centre_colour += mesh.radiosity[v];
+      ++own;
     }
-    centre /= nb;
-    centre_colour /= nb;
+    centre /= own;
+    centre_colour /= own;
     ScreenVertex sc;
     if (!to_screen(centre, opt.gouraud ? centre_colour : el.radiosity, sc)) continue;
     for (uint32_t i = 0; i < nb; ++i) {

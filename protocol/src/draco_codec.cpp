@@ -59,7 +59,11 @@ std::string draco_encode(const PrimitiveData& data, const DracoSettings& setting
   out.radiosity_id = static_cast<int>(mesh.attribute(rad)->unique_id());
 
   draco::Encoder encoder;
-  if (settings.position_bits > 0) encoder.SetAttributeQuantization(draco::GeometryAttribute::POSITION, settings.position_bits);
+  if (settings.position_bits > 0 && settings.position_range > 0.0f)
+    encoder.SetAttributeExplicitQuantization(draco::GeometryAttribute::POSITION, settings.position_bits, 3,
+                                             settings.position_origin.data(), settings.position_range);
+  else if (settings.position_bits > 0)
+    encoder.SetAttributeQuantization(draco::GeometryAttribute::POSITION, settings.position_bits);
   if (settings.texcoord_bits > 0) encoder.SetAttributeQuantization(draco::GeometryAttribute::TEX_COORD, settings.texcoord_bits);
   encoder.SetSpeedOptions(settings.encode_speed, settings.decode_speed);
   draco::EncoderBuffer buffer;

@@ -1,6 +1,7 @@
 // Draco mesh encoding for KHR_draco_mesh_compression, and decoding for checks.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -30,6 +31,11 @@ struct DracoSettings {
   int texcoord_bits = 12;
   int encode_speed = 5;
   int decode_speed = 5;
+  /// With position_range > 0, positions are quantized in the cube [origin, origin + range] (every
+  /// position must lie in it), in steps of range / (2^position_bits - 1), instead of in the
+  /// primitive's own bounding cube: primitives given one grid keep the points they share equal.
+  std::array<float, 3> position_origin{};
+  float position_range = 0.0f;
 };
 
 /// Encodes `data`; returns an error message, or an empty string on success.

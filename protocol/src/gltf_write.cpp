@@ -426,7 +426,10 @@ struct VertexWriter {
 
 // The triangles of one output primitive: an element without hanging vertices is one triangle;
 // one with them on its edges is a fan from its centre, which keeps the mesh crack-free without
-// thin triangles along the edges.
+// thin triangles along the edges. The centre is the mean of the loop's vertices that are not
+// interpolated (Mesh::interpolated): the points of other surfaces taken into the loop add no light
+// of their own, and with them a coarse floor element beside a finely cut wall showed at its centre
+// little but the light of its edge along the wall.
 PrimitiveData primitive_triangles(const SceneDocument& doc, const solver::Mesh& mesh, const std::vector<uint32_t>& elements,
                                   uint32_t node, double exposure, const ToneCurve& tone) {
   VertexWriter writer{doc, world_to_node(doc.node_world[node]), exposure, tone,
@@ -446,11 +449,15 @@ PrimitiveData primitive_triangles(const SceneDocument& doc, const solver::Mesh& 
       continue;
     }
     glm::dvec3 centre(0.0), b(0.0);
+    uint32_t own = 0;
     for (uint32_t k = 0; k < nb; ++k) {
-      centre += mesh.positions[mesh.boundary[el.boundary_begin + k]];
-      b += mesh.radiosity[mesh.boundary[el.boundary_begin + k]];
+      const uint32_t v = mesh.boundary[el.boundary_begin + k];
+      if (v < mesh.interpolated.size() && mesh.interpolated[v]) continue;
+      centre += mesh.positions[v];
+      b += mesh.radiosity[v];
+      ++own;
     }
-    const uint32_t c = writer.add(centre / static_cast<double>(nb), b / static_cast<double>(nb), el.patch, extra_key++);
+    const uint32_t c = writer.add(centre / static_cast<double>(own), b / static_cast<double>(own), el.patch, extra_key++);
     for (uint32_t k = 0; k < nb; ++k) data.indices.insert(data.indices.end(), {c, loop[k], loop[(k + 1) % nb]});
   }
   // Elements run counter-clockwise in world space; under a mirroring node transform glTF reverses
@@ -474,11 +481,96 @@ int output_material(int material, tinygltf::Model& out, int& default_material) {
   return default_material;
 }
 
+// One output primitive before encoding: its elements (indices into the mesh), its node and data.
+struct OutputPrimitive {
+  std::tuple<uint32_t, uint32_t, bool> key;  // (node, primitive, back side)
+  const std::vector<uint32_t>* elements;
+  PrimitiveData data;
+};
+
+// Draco's grid for a primitive's positions (DracoSettings::position_origin, position_range).
+struct PositionGrid {
+  std::array<float, 3> origin{};
+  float range = 0.0f;  // 0: Draco's own, fitted to the primitive
+};
+
+// Draco quantizes each primitive's positions on a grid fitted to its own bounding cube, so a point
+// that two primitives share (the floor and a wall at its foot, the two slopes of a roof at the
+// ridge, a gable under them) decoded to two points up to half a step apart, and rasterizers left
+// dotted gaps along such seams (the wedge's ridge and gables in three.js). Primitives that share a
+// point and whose nodes' frames differ at most by a translation are quantized in one cube instead,
+// the bounding cube of them all, placed in world space: a shared point then quantizes and decodes
+// by the same arithmetic in each, to the same value (where the nodes' translations differ, to
+// within a micrometre: Draco passes the cube's origin and size through std::to_string, six
+// decimals, so both are given with six decimals). A primitive that shares no point with another (a
+// vase on a table) keeps its own cube and precision; so do primitives of nodes rotated or scaled
+// otherwise, which cannot share a grid.
+std::vector<PositionGrid> shared_position_grids(const SceneDocument& doc, const solver::Mesh& mesh,
+                                                const std::vector<OutputPrimitive>& prims, int bits) {
+  std::vector<PositionGrid> grids(prims.size());
+  if (bits <= 0) return grids;
+  const size_t n = prims.size();
+  // Primitives sharing a point (equal world positions) and a linear frame: one set.
+  std::vector<uint32_t> parent(n);
+  for (uint32_t i = 0; i < n; ++i) parent[i] = i;
+  auto find = [&](uint32_t i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  };
+  auto world = [&](size_t i) -> const glm::dmat4& { return doc.node_world[std::get<0>(prims[i].key)]; };
+  std::map<Corner, uint32_t> first_at;
+  for (uint32_t i = 0; i < n; ++i)
+    for (uint32_t e : *prims[i].elements) {
+      const auto& el = mesh.elements[e];
+      for (uint32_t k = el.boundary_begin; k < el.boundary_end; ++k) {
+        const auto [it, fresh] = first_at.try_emplace(corner_key(mesh.positions[mesh.boundary[k]]), i);
+        const uint32_t a = find(it->second), b = find(i);
+        if (fresh || a == b || glm::dmat3(world(it->second)) != glm::dmat3(world(i))) continue;
+        parent[std::max(a, b)] = std::min(a, b);
+      }
+    }
+  // Each primitive's box in its node's frame moved by `offset` (the node's translation in its
+  // frame's axes), where the points of all nodes of one linear frame have the same coordinates.
+  std::vector<glm::dvec3> offset(n, glm::dvec3(0.0)), lo(n, glm::dvec3(std::numeric_limits<double>::max())),
+      hi(n, glm::dvec3(std::numeric_limits<double>::lowest()));
+  std::vector<uint32_t> members(n, 0);
+  for (uint32_t i = 0; i < n; ++i) {
+    const glm::dmat3 linear(world(i));
+    if (std::abs(glm::determinant(linear)) > 0.0) offset[i] = glm::inverse(linear) * glm::dvec3(world(i)[3]);
+    const std::vector<float>& p = prims[i].data.positions;
+    for (size_t k = 0; k + 2 < p.size(); k += 3) {
+      const glm::dvec3 x = glm::dvec3(p[k], p[k + 1], p[k + 2]) + offset[i];
+      lo[i] = glm::min(lo[i], x);
+      hi[i] = glm::max(hi[i], x);
+    }
+    const uint32_t r = find(i);
+    ++members[r];
+    if (r != i) {
+      lo[r] = glm::min(lo[r], lo[i]);
+      hi[r] = glm::max(hi[r], hi[i]);
+    }
+  }
+  // The cube starts 2e-6 below the set's box, and each member's origin is that corner in its own
+  // frame rounded to six decimals (within 5e-7, so still below its positions): where the members'
+  // translations differ, their grids then lie within 5e-7 of each other.
+  auto nearest = [](double x) { return std::round(x * 1e6) / 1e6; };
+  for (uint32_t i = 0; i < n; ++i) {
+    const uint32_t r = find(i);
+    if (members[r] < 2 || prims[i].data.positions.empty()) continue;
+    const glm::dvec3 extent = hi[r] - lo[r];
+    grids[i].range = static_cast<float>(std::ceil((std::max({extent.x, extent.y, extent.z}) + 5e-6) * 1e6) / 1e6);
+    for (int c = 0; c < 3; ++c) grids[i].origin[c] = static_cast<float>(nearest(lo[r][c] - 2e-6 - offset[i][c]));
+  }
+  return grids;
+}
+
 // KHR_draco_mesh_compression: one bufferView of Draco data, and fallback accessors without a
 // bufferView that describe the decoded data (Draco may reorder vertices).
-std::string add_draco_attributes(const PrimitiveData& data, const WriteOptions& options, tinygltf::Model& out,
-                                 tinygltf::Primitive& prim) {
+std::string add_draco_attributes(const PrimitiveData& data, const WriteOptions& options, const PositionGrid& grid,
+                                 tinygltf::Model& out, tinygltf::Primitive& prim) {
   DracoSettings ds;
+  ds.position_origin = grid.origin;
+  ds.position_range = grid.range;
   ds.position_bits = options.position_bits;
   ds.texcoord_bits = options.texcoord_bits;
   ds.encode_speed = options.encode_speed;
@@ -623,16 +715,22 @@ WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, 
   std::map<uint32_t, int> node_mesh;  // node -> new mesh
   const Groups groups = group_elements(doc, mesh);
   const auto hidden = closed_insides(doc, groups);
+  std::vector<OutputPrimitive> prims;
   for (const auto& [key, elements] : groups) {
     if (hidden.count(key)) continue;
-    const auto [node_index, prim_index, back] = key;
+    prims.push_back({key, &elements, primitive_triangles(doc, mesh, elements, std::get<0>(key), result.exposure, result.tone)});
+  }
+  const std::vector<PositionGrid> grids =
+      options.draco ? shared_position_grids(doc, mesh, prims, options.position_bits) : std::vector<PositionGrid>(prims.size());
+  for (size_t i = 0; i < prims.size(); ++i) {
+    const auto [node_index, prim_index, back] = prims[i].key;
     const tinygltf::Node& node = doc.model.nodes[node_index];
-    const PrimitiveData data = primitive_triangles(doc, mesh, elements, node_index, result.exposure, result.tone);
+    const PrimitiveData& data = prims[i].data;
     tinygltf::Primitive prim;
     prim.mode = TINYGLTF_MODE_TRIANGLES;
     prim.material = output_material(doc.model.meshes[node.mesh].primitives[prim_index].material, out, default_material);
     if (options.draco) {
-      if (std::string e = add_draco_attributes(data, options, out, prim); !e.empty()) {
+      if (std::string e = add_draco_attributes(data, options, grids[i], out, prim); !e.empty()) {
         result.error = e;
         return result;
       }

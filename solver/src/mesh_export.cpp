@@ -1,5 +1,6 @@
 // The radiosity mesh: leaf elements with shared vertices, vertex radiosity averaged per surface,
-// and the hanging vertices of finer neighbours in each element's boundary loop.
+// and in each element's boundary loop the hanging vertices of finer neighbours and the points of
+// other surfaces that meet its edges (with its own light there).
 #include "solver_impl.h"
 
 #include <algorithm>
@@ -218,25 +219,58 @@ Mesh Solver::mesh(bool ambient) const {
   };
   std::unordered_set<glm::dvec3, PosHash> positions(s.vpos.begin(), s.vpos.end());
   m.positions = s.vpos;
-  std::vector<std::array<uint32_t, 2>> lerp_from;  // for extra vertices: the edge they lie on
-  std::unordered_map<uint64_t, uint32_t> extra;      // edge key -> extra vertex
+  // Extra vertices: points of other surfaces on an element's edge, which take the light of the
+  // element's own surface there, linear along the edge: (1 - w) B(a) + w B(b).
+  struct Lerp {
+    uint32_t a, b;
+    double w;
+  };
+  std::vector<Lerp> lerp_from;                   // per extra vertex, in the order made
+  std::unordered_map<uint64_t, uint32_t> extra;  // edge key -> extra vertex
 
-  // T-junctions between input patches (PreparedScene::t_neighbours): per patch and edge, the
-  // vertices of its T-neighbours' elements that lie strictly inside that edge, by distance from the
-  // edge's first corner. Their elements are cut by halving their own edges, so along a shared line
-  // their vertices fall between this patch's. Such a vertex lies on its own patch's outline: each
-  // patch's outline vertices are listed once, per edge and in order, and a neighbour's edge takes
-  // those within its extent by binary search (a floor edged with 20 000 tiles took seconds when
-  // every pair scanned every vertex).
+  // Vertices of other patches on a patch's edges, per patch and edge, by distance from the edge's
+  // first corner: those of its T-neighbours (PreparedScene::t_neighbours), which are vertices of its
+  // own smoothing group and join its loops as they are, and those of its seam neighbours
+  // (PreparedScene::seam_neighbours: a wall's foot on the floor, the other slope at a roof's ridge),
+  // whose points join its loops as extra vertices with its own light, so that no triangle edge of
+  // the output runs past a vertex of a surface it meets (rasterizers leave dotted gaps along such
+  // an edge where the two sides are cut differently). Elements are cut by halving their own
+  // edges, so along a shared line the other side's vertices fall between this patch's. Such a
+  // vertex lies on its own patch's outline: each patch's outline vertices are listed once, per edge
+  // and in order, and a neighbour's edge takes those within its extent by binary search (a floor
+  // edged with 20 000 tiles took seconds when every pair scanned every vertex).
   const double on_edge = 1e-7 * s.prep.diagonal;
-  using EdgeList = std::vector<std::pair<double, uint32_t>>;
+  struct EdgeVertex {
+    double t;     // distance from the edge's first corner
+    uint32_t v;   // a solver vertex of the other patch
+    bool shared;  // of this patch's smoothing group: joins the loop itself
+  };
+  auto by_t = [](const EdgeVertex& x, const EdgeVertex& y) { return x.t != y.t ? x.t < y.t : x.v < y.v; };
+  using EdgeList = std::vector<EdgeVertex>;
   std::vector<std::array<EdgeList, 4>> t_edges(s.patches.size());
+  // Each patch edge's first corner, direction and length, and where x lies along it (distance from
+  // the first corner) if within on_edge of it, else -1: on_segment without its square roots, since
+  // every leaf's corners and every element's edges are tested against their patch's edges.
+  struct EdgeFrame {
+    glm::dvec3 origin, dir;
+    double length;
+  };
+  std::vector<std::array<EdgeFrame, 4>> frames(s.patches.size());
+  for (uint32_t p = 0; p < s.patches.size(); ++p)
+    for (uint32_t k = 0; k < s.patches[p].corner_count; ++k) {
+      const glm::dvec3& c0 = s.patches[p].corners[k];
+      const glm::dvec3 d = s.patches[p].corners[(k + 1) % s.patches[p].corner_count] - c0;
+      frames[p][k] = {c0, glm::normalize(d), glm::length(d)};
+    }
+  auto on_patch_edge = [&](uint32_t p, uint32_t k, const glm::dvec3& x) {
+    const EdgeFrame& f = frames[p][k];
+    const glm::dvec3 r = x - f.origin;
+    const double t = glm::dot(r, f.dir);
+    if (t < -on_edge || t > f.length + on_edge) return -1.0;
+    const glm::dvec3 off = r - t * f.dir;
+    return glm::dot(off, off) <= on_edge * on_edge ? std::clamp(t, 0.0, f.length) : -1.0;
+  };
   {
-    // Where x lies along edge k of patch p (distance from corner k), if on it; else -1.
-    auto on_patch_edge = [&](uint32_t p, uint32_t k, const glm::dvec3& x) {
-      const Patch& pa = s.patches[p];
-      return on_segment(x, pa.corners[k], pa.corners[(k + 1) % pa.corner_count], on_edge);
-    };
     std::vector<std::pair<size_t, size_t>> range(s.patches.size(), {0, 0});
     for (size_t i = 0; i < leaves.size();) {
       size_t j = i;
@@ -246,75 +280,103 @@ Mesh Solver::mesh(bool ambient) const {
     }
     std::vector<std::array<EdgeList, 4>> outline(s.patches.size());
     for (uint32_t q = 0; q < s.patches.size(); ++q) {
-      if (s.prep.t_neighbours[q].empty()) continue;
+      if (s.prep.t_neighbours[q].empty() && s.prep.seam_neighbours[q].empty()) continue;
       for (size_t i = range[q].first; i < range[q].second; ++i)
         for (uint32_t c = 0; c < s.corner_count(leaves[i]); ++c) {
           const uint32_t v = s.e_corner[leaves[i]][c];
           for (uint32_t k = 0; k < s.patches[q].corner_count; ++k)
-            if (const double t = on_patch_edge(q, k, s.vpos[v]); t >= 0.0) outline[q][k].emplace_back(t, v);
+            if (const double t = on_patch_edge(q, k, s.vpos[v]); t >= 0.0) outline[q][k].push_back({t, v, false});
         }
       for (EdgeList& list : outline[q]) {
-        std::sort(list.begin(), list.end());
-        list.erase(std::unique(list.begin(), list.end()), list.end());
+        std::sort(list.begin(), list.end(), by_t);
+        list.erase(std::unique(list.begin(), list.end(), [](const auto& x, const auto& y) { return x.v == y.v; }), list.end());
       }
     }
-    for (uint32_t p = 0; p < s.patches.size(); ++p) {
+    // Adds to p's edges the vertices of q's outline that lie strictly inside them.
+    auto take = [&](uint32_t p, uint32_t q, bool shared) {
       const Patch& pa = s.patches[p];
-      for (uint32_t q : s.prep.t_neighbours[p])
-        for (uint32_t j = 0; j < s.patches[q].corner_count; ++j) {
-          const EdgeList& theirs = outline[q][j];
-          if (theirs.empty()) continue;
-          const Patch& pq = s.patches[q];
-          const glm::dvec3& q0 = pq.corners[j];
-          const glm::dvec3 dq = pq.corners[(j + 1) % pq.corner_count] - q0;
-          const glm::dvec3 uq = dq / glm::length(dq);
-          auto off_line = [&](const glm::dvec3& x) { return glm::length(x - q0 - uq * glm::dot(x - q0, uq)) > on_edge; };
-          for (uint32_t k = 0; k < pa.corner_count; ++k) {
-            // Edge k of p on the line of q's edge j: the part of q's list within p's edge.
-            const glm::dvec3& a = pa.corners[k];
-            const glm::dvec3& b = pa.corners[(k + 1) % pa.corner_count];
-            if (off_line(a) || off_line(b)) continue;
-            const double sa = glm::dot(a - q0, uq), sb = glm::dot(b - q0, uq);
-            auto it = std::lower_bound(theirs.begin(), theirs.end(), std::make_pair(std::min(sa, sb) - on_edge, uint32_t{0}));
-            for (; it != theirs.end() && it->first <= std::max(sa, sb) + on_edge; ++it)
-              if (const double t = along_segment(s.vpos[it->second], a, b, on_edge); t > 0.0) t_edges[p][k].emplace_back(t, it->second);
-          }
+      const Patch& pq = s.patches[q];
+      for (uint32_t j = 0; j < pq.corner_count; ++j) {
+        const EdgeList& theirs = outline[q][j];
+        if (theirs.empty()) continue;
+        const glm::dvec3& q0 = pq.corners[j];
+        const glm::dvec3 dq = pq.corners[(j + 1) % pq.corner_count] - q0;
+        const glm::dvec3 uq = dq / glm::length(dq);
+        auto off_line = [&](const glm::dvec3& x) { return glm::length(x - q0 - uq * glm::dot(x - q0, uq)) > on_edge; };
+        for (uint32_t k = 0; k < pa.corner_count; ++k) {
+          // Edge k of p on the line of q's edge j: the part of q's list within p's edge.
+          const glm::dvec3& a = pa.corners[k];
+          const glm::dvec3& b = pa.corners[(k + 1) % pa.corner_count];
+          if (off_line(a) || off_line(b)) continue;
+          const double sa = glm::dot(a - q0, uq), sb = glm::dot(b - q0, uq);
+          auto it = std::lower_bound(theirs.begin(), theirs.end(), EdgeVertex{std::min(sa, sb) - on_edge, 0, false}, by_t);
+          for (; it != theirs.end() && it->t <= std::max(sa, sb) + on_edge; ++it)
+            if (const double t = along_segment(s.vpos[it->v], a, b, on_edge); t > 0.0) t_edges[p][k].push_back({t, it->v, shared});
         }
+      }
+    };
+    for (uint32_t p = 0; p < s.patches.size(); ++p) {
+      for (uint32_t q : s.prep.t_neighbours[p]) take(p, q, true);
+      for (uint32_t q : s.prep.seam_neighbours[p]) take(p, q, s.prep.smoothing_group[q] == s.prep.smoothing_group[p]);
+      // One vertex per point: where several surfaces have a vertex (a room's corner, the two sides
+      // of a double-sided wall), the first of this patch's group, or else the first.
       for (EdgeList& list : t_edges[p]) {
-        std::sort(list.begin(), list.end());
-        list.erase(std::unique(list.begin(), list.end(), [](const auto& x, const auto& y) { return x.second == y.second; }),
-                   list.end());
+        std::sort(list.begin(), list.end(), by_t);
+        size_t kept = 0;
+        for (size_t i = 0; i < list.size();) {
+          size_t j = i, pick = i;
+          for (; j < list.size() && list[j].t - list[i].t <= on_edge; ++j)
+            if (list[j].shared && !list[pick].shared) pick = j;
+          list[kept++] = list[pick];
+          i = j;
+        }
+        list.resize(kept);
       }
     }
   }
-  // The T-vertex strictly inside edge (a, b) nearest to a, or kNone: (a, b) lies along an edge of
-  // the patch (both ends on it) and the vertex between them on that edge's list.
-  uint32_t patch_now = kNone;  // the patch whose element's loop is being collected
-  auto junction_on = [&](uint32_t a, uint32_t b) {
-    if (patch_now == kNone) return kNone;
-    const Patch& pa = s.patches[patch_now];
-    for (uint32_t k = 0; k < pa.corner_count; ++k) {
-      const EdgeList& list = t_edges[patch_now][k];
-      if (list.empty()) continue;
-      const glm::dvec3& c0 = pa.corners[k];
-      const glm::dvec3& c1 = pa.corners[(k + 1) % pa.corner_count];
-      const double ta = on_segment(m.positions[a], c0, c1, on_edge), tb = on_segment(m.positions[b], c0, c1, on_edge);
-      if (ta < 0.0 || tb < 0.0) continue;
-      const double lo = std::min(ta, tb) + on_edge, hi = std::max(ta, tb) - on_edge;
-      if (ta < tb) {
-        for (auto it = std::upper_bound(list.begin(), list.end(), std::make_pair(lo, kNone)); it != list.end() && it->first < hi; ++it)
-          if (it->second != a && it->second != b) return it->second;
-      } else {
-        auto it = std::lower_bound(list.begin(), list.end(), std::make_pair(hi, uint32_t{0}));
-        while (it != list.begin()) {
-          --it;
-          if (it->first <= lo) break;
-          if (it->second != a && it->second != b) return it->second;
-        }
-      }
-      return kNone;
+  // The element edge whose loop is being collected, if it lies along an edge of its patch with
+  // vertices of other patches on it: that edge's list, its first corner and direction.
+  const EdgeList* list_now = nullptr;
+  glm::dvec3 edge_origin(0.0), edge_dir(0.0);
+  auto along_patch_edge = [&](uint32_t patch, uint32_t a, uint32_t b) {
+    list_now = nullptr;
+    for (uint32_t k = 0; k < s.patches[patch].corner_count; ++k) {
+      if (t_edges[patch][k].empty()) continue;
+      if (on_patch_edge(patch, k, m.positions[a]) < 0.0 || on_patch_edge(patch, k, m.positions[b]) < 0.0) continue;
+      list_now = &t_edges[patch][k];
+      edge_origin = frames[patch][k].origin;
+      edge_dir = frames[patch][k].dir;
+      return;
     }
-    return kNone;
+  };
+  // The vertex of another patch strictly inside (a, b), a part of the element edge being
+  // collected, nearest to a; or null.
+  auto junction_on = [&](uint32_t a, uint32_t b) -> const EdgeVertex* {
+    if (list_now == nullptr) return nullptr;
+    const EdgeList& list = *list_now;
+    const double ta = glm::dot(m.positions[a] - edge_origin, edge_dir), tb = glm::dot(m.positions[b] - edge_origin, edge_dir);
+    const double lo = std::min(ta, tb) + on_edge, hi = std::max(ta, tb) - on_edge;
+    if (ta < tb) {
+      for (auto it = std::upper_bound(list.begin(), list.end(), EdgeVertex{lo, kNone, false}, by_t); it != list.end() && it->t < hi; ++it)
+        if (it->v != a && it->v != b) return &*it;
+    } else {
+      auto it = std::lower_bound(list.begin(), list.end(), EdgeVertex{hi, 0, false}, by_t);
+      while (it != list.begin()) {
+        --it;
+        if (it->t <= lo) break;
+        if (it->v != a && it->v != b) return &*it;
+      }
+    }
+    return nullptr;
+  };
+  // A new vertex at point x on edge (a, b), lit as the edge there.
+  auto add_extra = [&](uint32_t a, uint32_t b, const glm::dvec3& x) {
+    const uint32_t mid = static_cast<uint32_t>(m.positions.size());
+    const glm::dvec3 d = m.positions[b] - m.positions[a];
+    m.positions.push_back(x);
+    lerp_from.push_back({a, b, std::clamp(glm::dot(x - m.positions[a], d) / glm::dot(d, d), 0.0, 1.0)});
+    extra.emplace(edge_key(a, b), mid);
+    return mid;
   };
   // Collects the vertices strictly inside edge (a, b), in order from a to b.
   std::function<void(uint32_t, uint32_t)> hanging = [&](uint32_t a, uint32_t b) {
@@ -323,16 +385,11 @@ Mesh Solver::mesh(bool ambient) const {
       mid = it->second;
     } else if (auto ex = extra.find(edge_key(a, b)); ex != extra.end()) {
       mid = ex->second;
-    } else if (const uint32_t t = junction_on(a, b); t != kNone) {
-      mid = t;
+    } else if (const EdgeVertex* t = junction_on(a, b)) {
+      mid = t->shared ? t->v : add_extra(a, b, s.vpos[t->v]);
     } else {
       const glm::dvec3 pm = 0.5 * (m.positions[a] + m.positions[b]);
-      if (positions.count(pm)) {
-        mid = static_cast<uint32_t>(m.positions.size());
-        m.positions.push_back(pm);
-        lerp_from.push_back({a, b});
-        extra.emplace(edge_key(a, b), mid);
-      }
+      if (positions.count(pm)) mid = add_extra(a, b, pm);
     }
     if (mid == kNone) return;
     hanging(a, mid);
@@ -407,10 +464,10 @@ Mesh Solver::mesh(bool ambient) const {
     el.radiosity = s.e_b[e] + s.patches[el.patch].reflectance * amb;
     HEMIBAKE_DCHECK(el.radiosity.x >= 0.0 && el.radiosity.y >= 0.0 && el.radiosity.z >= 0.0);
     el.boundary_begin = static_cast<uint32_t>(m.boundary.size());
-    patch_now = el.patch;
     for (uint32_t k = 0; k < el.corner_count; ++k) {
       const uint32_t a = el.corners[k], b = el.corners[(k + 1) % el.corner_count];
       m.boundary.push_back(a);
+      along_patch_edge(el.patch, a, b);
       hanging(a, b);
     }
     el.boundary_end = static_cast<uint32_t>(m.boundary.size());
@@ -439,9 +496,11 @@ Mesh Solver::mesh(bool ambient) const {
   s.show_uncovered_light(leaves, m);
   // Extra vertices were created in order, each from an earlier vertex pair.
   for (size_t i = 0; i < lerp_from.size(); ++i) {
-    const auto [a, b] = lerp_from[i];
-    m.radiosity[s.vpos.size() + i] = 0.5 * (m.radiosity[a] + m.radiosity[b]);
+    const auto [a, b, w] = lerp_from[i];
+    m.radiosity[s.vpos.size() + i] = (1.0 - w) * m.radiosity[a] + w * m.radiosity[b];
   }
+  m.interpolated.assign(m.positions.size(), 0);
+  std::fill(m.interpolated.begin() + static_cast<std::ptrdiff_t>(s.vpos.size()), m.interpolated.end(), 1);
   return m;
 }
 

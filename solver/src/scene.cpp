@@ -330,9 +330,10 @@ bool same_input_vertices(const Scene& scene, const PointIds& point_of, uint32_t 
 }
 
 // Smoothing groups, occlusion groups and the occlusion groups' adjacency; `t_pairs` gets the
-// coplanar patches of one material that touch along an edge (for find_t_neighbours).
+// coplanar patches of one material that touch along an edge (for find_t_neighbours), `touch_pairs`
+// every pair of patches that touch along an edge, once (a < b; for find_seam_neighbours).
 void find_groups(const Scene& scene, const PointIds& point_of, const EdgePatches& edge_patches, PreparedScene& out,
-                 std::vector<std::pair<uint32_t, uint32_t>>& t_pairs) {
+                 std::vector<std::pair<uint32_t, uint32_t>>& t_pairs, std::vector<std::pair<uint32_t, uint32_t>>& touch_pairs) {
   const size_t n = scene.patches.size();
   UnionFind occl(n), smooth(n);
   std::vector<Touch> neighbours;
@@ -381,6 +382,8 @@ void find_groups(const Scene& scene, const PointIds& point_of, const EdgePatches
   // Patches whose edges overlap on a line (shared edges and T-junctions alike) touch: coplanar
   // ones are one occlusion group, the others are adjacent groups.
   neighbours = touching_patches(scene, out.diagonal);
+  for (const Touch& t : neighbours)
+    if (touch_pairs.empty() || touch_pairs.back() != std::pair(t.a, t.b)) touch_pairs.emplace_back(t.a, t.b);
   std::vector<std::vector<uint32_t>> touches(n);
   for (uint32_t i = 0; i < neighbours.size(); ++i) {
     touches[neighbours[i].a].push_back(i);
@@ -554,6 +557,33 @@ void find_t_neighbours(const Scene& scene, const std::vector<std::pair<uint32_t,
   }
 }
 
+// PreparedScene::seam_neighbours: of the patches touching along an edge, those whose vertices
+// there are not already joined into each other's loops: T-neighbours are, and so are patches of one
+// smoothing group sharing a whole edge (the same vertices, split at the same midpoints).
+void find_seam_neighbours(const Scene& scene, const PointIds& point_of, const EdgePatches& edge_patches,
+                          const std::vector<std::pair<uint32_t, uint32_t>>& touch_pairs, PreparedScene& out) {
+  out.seam_neighbours.assign(scene.patches.size(), {});
+  auto share_edge = [&](uint32_t a, uint32_t b) {
+    const uint32_t cc = scene.patches[a].corner_count;
+    for (uint32_t c = 0; c < cc; ++c) {
+      const uint32_t x = point_of[a][c], y = point_of[a][(c + 1) % cc];
+      const auto it = edge_patches.find((static_cast<uint64_t>(std::min(x, y)) << 32) | std::max(x, y));
+      if (it != edge_patches.end() && std::find(it->second.begin(), it->second.end(), b) != it->second.end()) return true;
+    }
+    return false;
+  };
+  for (const auto& [a, b] : touch_pairs) {
+    // T-neighbours are listed both ways: the shorter list is searched (a floor edged with 20 000
+    // tiles has 20 000).
+    const bool by_a = out.t_neighbours[a].size() <= out.t_neighbours[b].size();
+    const std::vector<uint32_t>& listed = out.t_neighbours[by_a ? a : b];
+    if (std::find(listed.begin(), listed.end(), by_a ? b : a) != listed.end()) continue;
+    if (out.smoothing_group[a] == out.smoothing_group[b] && share_edge(a, b)) continue;
+    out.seam_neighbours[a].push_back(b);
+    out.seam_neighbours[b].push_back(a);
+  }
+}
+
 // How many times the ray from x along a fixed direction crosses the patch (a fan of triangles from
 // its first corner; Moller-Trumbore). The direction is one along which no modeller's edge runs.
 int ray_crossings(const Patch& patch, const glm::dvec3& x) {
@@ -659,8 +689,8 @@ PreparedScene prepare(const Scene& scene) {
   measure(scene, out);
   const PointIds point_of = point_ids(scene);
   const EdgePatches edge_patches = patches_by_edge(scene, point_of);
-  std::vector<std::pair<uint32_t, uint32_t>> t_pairs;
-  find_groups(scene, point_of, edge_patches, out, t_pairs);
+  std::vector<std::pair<uint32_t, uint32_t>> t_pairs, touch_pairs;
+  find_groups(scene, point_of, edge_patches, out, t_pairs, touch_pairs);
   out.back_hidden.assign(scene.patches.size(), 0);
   out.twin.assign(scene.patches.size(), kNone);
   hide_twin_backs(scene, point_of, out);
@@ -668,6 +698,7 @@ PreparedScene prepare(const Scene& scene) {
   find_closed_meshes(scene, point_of, edge_patches, out);
   make_vertices(scene, point_of, out);
   find_t_neighbours(scene, t_pairs, out);
+  find_seam_neighbours(scene, point_of, edge_patches, touch_pairs, out);
   return out;
 }
 

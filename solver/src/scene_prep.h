@@ -25,6 +25,12 @@ struct PreparedScene {
   /// (T-junctions: a wall piece beside a window, whose edge holds the corners of the pieces above
   /// and below it); their vertices on its edges are joined into its elements' loops (mesh_export).
   std::vector<std::vector<uint32_t>> t_neighbours;
+  /// Per patch: the other patches that touch it along a part of an edge (collinear, overlapping
+  /// edges) whose vertices there are not its own: other smoothing groups, whatever their plane and
+  /// material (a wall's foot on a floor, a roof's ridge), and patches of its group met other than
+  /// along a whole shared edge or in a T-junction. Their vertices on its edges become vertices of
+  /// its elements' loops, with its own light (mesh_export), so the output has no T-junctions there.
+  std::vector<std::vector<uint32_t>> seam_neighbours;
   /// Per patch: its back needs no projection, since something else always hides what it would:
   /// another patch with the same corners in reverse order (the other side of a double-sided
   /// surface), or the front faces of the outward-facing solid it belongs to (edge-connected

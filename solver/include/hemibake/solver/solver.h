@@ -220,6 +220,11 @@ struct Mesh {
                                        ///< elements around it on the same surface and material
   std::vector<Element> elements;       ///< ordered by patch
   std::vector<uint32_t> boundary;      ///< element boundary loops (see Element)
+  /// Per vertex (or empty: none), 1 where the vertex was added on an element's edge for another
+  /// surface's vertex there (or a neighbour's point at the edge's middle), so that triangles of the
+  /// two sides meet vertex to vertex; its radiosity is then interpolated along that edge and adds
+  /// nothing to what the element shows (a triangulation leaves it out of the element's centre).
+  std::vector<uint8_t> interpolated;
 };
 
 /// A progressive radiosity solution that can be advanced shot by shot and read at any time.
