@@ -46,8 +46,11 @@ constexpr double kGatherAngle = 0.8;
 // dim beside it, would show the bright mean around the lamp.
 constexpr double kGatherUneven = 4.0;
 // The gather's hemicube has this share of the solve's resolution (at least kMinResolution): it
-// sums light that the shots have already resolved, and its cost is mostly per pixel.
-constexpr uint32_t kGatherResolutionDivisor = 2;
+// sums light that the shots have already resolved, with each pixel's fractional coverage, so a
+// coarse one sums it as well. A quarter (26 pixels at the default 100) against a half: p90 as
+// displayed within 0.4 points on six scenes, 21 to 27 % less CPU on the Cornell box and a room lit
+// through a window, the same on glowing spheres, whose cost is the nodes (bench/README.md).
+constexpr uint32_t kGatherResolutionDivisor = 4;
 // A vertex whose elements' centroid lies farther from it than this share of its smallest
 // element's radius is on the surface's outline; it gathers kOutlineStep of the scene's diagonal
 // inside (a step of a tenth of the element instead: one-sided panel room alike, Cornell box p90
