@@ -126,26 +126,6 @@ bool mesh_belongs(const SceneDocument& doc, const solver::Mesh& mesh) {
   return true;
 }
 
-// The 95th percentile (by area) of the light on surfaces that do not emit maps to 0.9: emitters
-// are far brighter than what they light, and would leave the rest dark.
-double automatic_exposure(const SceneDocument& doc, const solver::Mesh& mesh) {
-  std::vector<std::pair<double, double>> light;  // (light, area)
-  double total = 0.0;
-  for (const auto& el : mesh.elements) {
-    if (mean3(doc.scene.patches[el.patch].emission) > 0.0) continue;
-    light.emplace_back(mean3(light_of(el.radiosity, doc.sources[el.patch].base)), el.area);
-    total += el.area;
-  }
-  std::sort(light.begin(), light.end());
-  double acc = 0.0, p95 = 0.0;
-  for (const auto& [l, a] : light) {
-    acc += a;
-    p95 = l;
-    if (acc >= 0.95 * total) break;
-  }
-  return p95 > 0.0 ? 0.9 / p95 : 1.0;
-}
-
 // The tone curve's white point: the exposed light (mean of the channels) of the brightest vertex on
 // a surface that does not emit, the values COLOR_0 is written from (an element's centre is the mean
 // of its loop, never brighter). Its largest, not a percentile: a pool of light under a spot lamp,
@@ -248,6 +228,22 @@ std::set<std::tuple<uint32_t, uint32_t, bool>> closed_insides(const SceneDocumen
     for (const Emitter& e : emitters)
       lit = lit || ((e.node != node || e.primitive != prim) && encloses(e.centre));
     if (!lit) out.insert({node, prim, side > 0});
+  }
+  return out;
+}
+
+// The surfaces the automatic exposure is chosen from (protocol::key_exposure): those written
+// (not the hidden insides of closed meshes, which would count dark area no one sees) that do not
+// emit (emitters are far brighter than what they light), each element's light and area.
+std::vector<LitArea> exposed_surfaces(const SceneDocument& doc, const solver::Mesh& mesh,
+                                      const std::set<std::tuple<uint32_t, uint32_t, bool>>& hidden) {
+  std::vector<LitArea> out;
+  out.reserve(mesh.elements.size());
+  for (const auto& el : mesh.elements) {
+    if (mean3(doc.scene.patches[el.patch].emission) > 0.0) continue;
+    const PatchSource& src = doc.sources[el.patch];
+    if (hidden.count({src.node, src.primitive, src.back})) continue;
+    out.push_back({mean3(light_of(el.radiosity, src.base)), el.area});
   }
   return out;
 }
@@ -707,14 +703,14 @@ WriteResult write_baked_glb(const SceneDocument& doc, const solver::Mesh& mesh, 
     result.error = "the mesh does not belong to this scene";
     return result;
   }
-  result.exposure = options.exposure > 0.0 ? options.exposure : automatic_exposure(doc, mesh);
+  const Groups groups = group_elements(doc, mesh);
+  const auto hidden = closed_insides(doc, groups);
+  result.exposure = options.exposure > 0.0 ? options.exposure : key_exposure(exposed_surfaces(doc, mesh, hidden));
   result.tone = tone_curve(options.tone, white_point(doc, mesh, result.exposure));
   tinygltf::Model out = copy_structure(doc);
   int default_material = -1;
   bool used_draco = false;
   std::map<uint32_t, int> node_mesh;  // node -> new mesh
-  const Groups groups = group_elements(doc, mesh);
-  const auto hidden = closed_insides(doc, groups);
   std::vector<OutputPrimitive> prims;
   for (const auto& [key, elements] : groups) {
     if (hidden.count(key)) continue;

@@ -3,9 +3,10 @@
 // here into plain triangles), points and lines, mirrored transforms (the specification's winding
 // rule for negative determinants), double-sided materials (against single-sided quads facing each
 // way), base colour textures (a PNG written here, the sRGB transfer function written here), material
-// extras, emissiveStrength as an integer, KHR_lights_punctual, and TEXCOORD_0 against the closed form
-// of an affine UV map. Scenes are built here as glTF JSON; results are read back from the baked GLB
-// with Draco's own decoder or straight from plain accessors.
+// extras, emissiveStrength as an integer, KHR_lights_punctual, TEXCOORD_0 against the closed form
+// of an affine UV map, and the automatic exposure against light known in closed form. Scenes are
+// built here as glTF JSON; results are read back from the baked GLB with Draco's own decoder or
+// straight from plain accessors.
 #include "gltf_builder.h"
 #include "glb_reader.h"
 #include "tone_formula.h"
@@ -1444,6 +1445,102 @@ TEST(HighlightFeature, ClampToneKeepsTheLinearClip) {
           far = mean_of(shown_vertices(b, s.far, s.exposure), &Shown::color);
   EXPECT_EQ(near.y, 1.0);
   EXPECT_EQ(far.y, 1.0);
+}
+
+// The automatic exposure (README, "GLB out"; protocol::key_exposure).
+Baked bake_spec(const Doc& d, const JobSpec& spec) {
+  Baked r;
+  r.loaded = load_gltf_memory(d.gltf_bytes(), ".");
+  EXPECT_TRUE(r.loaded.document) << r.loaded.error;
+  if (!r.loaded.document) return r;
+  const BakeOutput w = protocol::bake(*r.loaded.document, spec);
+  EXPECT_EQ(w.error, "");
+  const auto parts = test::split_glb(w.glb);
+  EXPECT_TRUE(parts.has_value());
+  if (parts) r.out = {parts->gltf, parts->bin};
+  return r;
+}
+
+// A square plate of side 2 h centred at c, its front facing n, two of its edges along u (u and n
+// orthogonal unit vectors), corners counter-clockwise seen from the front.
+std::vector<V> plate(const V& c, const V& n, const V& u, double h) {
+  const V w = glm::cross(n, u);  // cross(u, w) = n
+  return {c - h * u - h * w, c + h * u - h * w, c + h * u + h * w, c - h * u + h * w};
+}
+
+// An open floor under a uniform sky of radiance s receives E = pi s from every direction it sees
+// (nothing else is there), so its light is the same everywhere: the exposure puts it at the key,
+// kExposureKey / (pi mean(s)), and COLOR_0 is the key times the sky's hue.
+TEST(ExposureFeature, UniformSkyLightMapsToTheKey) {
+  Doc d;
+  const V sky(0.5, 0.4, 0.3), base(0.7, 0.6, 0.5);
+  const int floor = d.quad_node(rect(-1, 1, -1, 1, 0, true), d.material(plain_material(base, "floor")), {{"name", "floor"}});
+  JobSpec spec;
+  spec.params = quick_params();
+  spec.write.draco = false;
+  spec.sky = sky;
+  const Baked b = bake_spec(d, spec);
+  ASSERT_TRUE(b.loaded.document);
+  const double expected = kExposureKey / (std::numbers::pi * mean3(sky));
+  const double exposure = b.out.doc["asset"]["extras"]["hemibake"]["exposure"].get<double>();
+  EXPECT_NEAR(exposure, expected, 1e-3 * expected);
+  const auto shown = shown_vertices(b, floor, exposure);
+  ASSERT_FALSE(shown.empty());
+  for (const Shown& x : shown)
+    for (int c = 0; c < 3; ++c) ASSERT_NEAR(x.color[c], kExposureKey * sky[c] / mean3(sky), 2e-3) << "channel " << c;
+}
+
+// A stand-in for a room lit through a window beside a sunlit outside, with its light in closed
+// form: a sun straight down (E lux) on a ground facing it, a smaller plate tilted to cos 0.6 (a
+// second sunlit value), and a "room" wall of the ground's area turned nearly edge-on, to cos 0.01,
+// a hundred times dimmer. None of them sees another's lit side, so each has its direct light
+// alone. The old rule put the 95th percentile, the ground, at 0.9 and the wall at 0.009; the wall
+// must now be readable, COLOR_0 at least 0.08 (a white wall at sRGB 79 of 255 or more; the interiors
+// reported nearly black read 0.01 to 0.05), while the two sunlit values, pushed up the shoulder,
+// stay apart and in order (not clipped to one flat colour).
+TEST(ExposureFeature, WallAHundredTimesDimmerThanTheSunlitGroundIsReadableAndTheSunlitStayInOrder) {
+  Doc d;
+  const double sun = 1000.0, dim_cos = 0.01;
+  const int mat = d.material(plain_material(V(0.8), "plaster"));
+  const int ground = d.quad_node(rect(-6, -2, -2, 2, 0, true), mat, {{"name", "ground"}});
+  const int tilted = d.quad_node(plate(V(-10, -2, 0), V(0.8, 0.6, 0), V(-0.6, 0.8, 0), 1.0), mat, {{"name", "tilted"}});
+  const double s = std::sqrt(1.0 - dim_cos * dim_cos);
+  const int wall = d.quad_node(plate(V(4, -3, 0), V(s, dim_cos, 0), V(-dim_cos, s, 0), 2.0), mat, {{"name", "wall"}});
+  add_lights(d, json::array({json{{"type", "directional"}, {"intensity", sun}}}));
+  // -90 degrees about x takes the light's -z to -y.
+  d.node({{"rotation", {-std::sqrt(0.5), 0.0, 0.0, std::sqrt(0.5)}}, {"extensions", light_ref(0)}});
+  JobSpec spec;
+  spec.params = quick_params();
+  spec.write.draco = false;
+  const Baked b = bake_spec(d, spec);
+  ASSERT_TRUE(b.loaded.document);
+  const double exposure = b.out.doc["asset"]["extras"]["hemibake"]["exposure"].get<double>();
+  const test::RecordedTone tone = test::recorded_tone(b.out.doc);
+  ASSERT_TRUE(tone.shoulder);
+  const auto g = shown_vertices(b, ground, exposure), t = shown_vertices(b, tilted, exposure),
+             w = shown_vertices(b, wall, exposure);
+  ASSERT_FALSE(g.empty());
+  ASSERT_FALSE(t.empty());
+  ASSERT_FALSE(w.empty());
+  // The baked light is the closed form's: E, 0.6 E and 0.01 E.
+  const double gl = mean3(mean_of(g, &Shown::light)) / exposure, tl = mean3(mean_of(t, &Shown::light)) / exposure,
+               wl = mean3(mean_of(w, &Shown::light)) / exposure;
+  EXPECT_NEAR(gl, sun, 0.01 * sun);
+  EXPECT_NEAR(tl, 0.6 * sun, 0.01 * sun);
+  EXPECT_NEAR(wl, dim_cos * sun, 0.02 * dim_cos * sun);
+  // The wall reads.
+  for (const Shown& x : w) ASSERT_GE(mean3(x.color), 0.08);
+  // The sunlit two: the tilted plate is below 1 in every channel, the ground brighter, far enough
+  // apart to see in three.js's 8-bit sRGB output (base colour x COLOR_0), and each COLOR_0 as the
+  // recorded curve makes it.
+  const V gc = mean_of(g, &Shown::color), tc = mean_of(t, &Shown::color);
+  for (int c = 0; c < 3; ++c) EXPECT_LT(tc[c], 1.0);
+  EXPECT_GE(test::srgb8(0.8 * mean3(gc)) - test::srgb8(0.8 * mean3(tc)), 2) << mean3(gc) << " " << mean3(tc);
+  for (const auto* v : {&g, &t, &w})
+    for (const Shown& x : *v) {
+      const V expected = test::documented_color(tone, x.light);
+      for (int c = 0; c < 3; ++c) ASSERT_NEAR(x.color[c], expected[c], 1e-4);
+    }
 }
 
 // A light used by two nodes shines from both: twice the light of one, where they stand together.

@@ -1,7 +1,8 @@
 // The tone curve's contract (protocol/tone.h), checked on the curve's defining properties: it is
 // the identity up to the knee, leaves it with slope 1 (a finite difference here), climbs without
 // ever falling, reaches 1 exactly at the white point, and its stated inverse undoes it. Knees and
-// white points are drawn at random (the seed is printed) besides the default's.
+// white points are drawn at random (the seed is printed) besides the default's. The automatic
+// exposure against log-averages and percentiles known in closed form.
 #include "tone_formula.h"
 #include "../solver/test_seed.h"
 
@@ -9,6 +10,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <utility>
@@ -110,6 +112,53 @@ TEST(ToneCurve, DocumentedFormulaIsWhatTheCodeComputes) {
       for (int k = 0; k < 3; ++k) ASSERT_NEAR(c[k], d[k], 1e-12) << test::seed_note(seed);
     }
   }
+}
+
+// The automatic exposure (protocol::key_exposure) on lists of surfaces whose log-average and
+// percentiles are known in closed form.
+
+// Light the same everywhere: its log-average and every percentile are that light, so the key sets
+// the exposure whatever the areas, and unlit or empty entries change nothing.
+TEST(KeyExposure, UniformLightMapsToTheKey) {
+  const uint64_t seed = test::test_seed();
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> log_light(std::log(1e-3), std::log(1e4)), area(0.01, 10.0);
+  for (int i = 0; i < 20; ++i) {
+    const double light = std::exp(log_light(rng));
+    std::vector<LitArea> s;
+    for (int k = 0; k < 50; ++k) s.push_back({light, area(rng)});
+    s.push_back({0.0, area(rng)});
+    s.push_back({light, 0.0});
+    std::shuffle(s.begin(), s.end(), rng);
+    EXPECT_NEAR(key_exposure(s), kExposureKey / light, 1e-12 * kExposureKey / light) << test::seed_note(seed);
+  }
+}
+
+// Two lights a hundred times apart on equal areas: the log-average is their geometric mean, a
+// tenth of the brighter, and the key alone would show the dim half at a tenth of the key; the
+// darker quarter lies in the dim half, so the exposure shows it at kDarkQuarterLevel instead.
+TEST(KeyExposure, DimHalfAHundredTimesBelowIsRaisedToTheDarkQuarterLevel) {
+  const double bright = 2000.0, dim = bright / 100.0;
+  const std::vector<LitArea> s = {{bright, 5.0}, {dim, 3.0}, {dim, 2.0}};
+  const double key_alone = kExposureKey / std::sqrt(bright * dim);
+  EXPECT_LT(key_alone * dim, kDarkQuarterLevel);
+  EXPECT_NEAR(key_exposure(s), kDarkQuarterLevel / dim, 1e-12 / dim);
+  // A dim tenth of the area is not a quarter: the key decides, on the log-average
+  // bright^0.9 dim^0.1.
+  const std::vector<LitArea> t = {{bright, 9.0}, {dim, 1.0}};
+  const double log_average = std::pow(bright, 0.9) * std::pow(dim, 0.1);
+  EXPECT_NEAR(key_exposure(t), kExposureKey / log_average, 1e-12 * kExposureKey / log_average);
+}
+
+// Faces lit more than 2^10 times below the brightest twentieth (an unseen underside) are left out:
+// half the area at 1e-5 of the rest leaves the exposure as if it were not there, and nothing lit at
+// all gives 1.
+TEST(KeyExposure, FacesFarBelowTheBrightestTwentiethAreLeftOut) {
+  const double light = 700.0;
+  const std::vector<LitArea> s = {{light, 10.0}, {1e-5 * light, 10.0}};
+  EXPECT_NEAR(key_exposure(s), kExposureKey / light, 1e-12 * kExposureKey / light);
+  EXPECT_EQ(key_exposure(std::vector<LitArea>{{0.0, 3.0}}), 1.0);
+  EXPECT_EQ(key_exposure(std::vector<LitArea>{}), 1.0);
 }
 
 TEST(ToneNames, AreShoulderAndClamp) {
