@@ -45,11 +45,12 @@ constexpr double kGatherAngle = 0.8;
 // node of a ceiling straddling the outline of a lamp hung just under it, bright above the lamp and
 // dim beside it, would show the bright mean around the lamp.
 constexpr double kGatherUneven = 4.0;
-// The gather's hemicube has this share of the solve's resolution (at least kMinResolution): it
-// sums light that the shots have already resolved, with each pixel's fractional coverage, so a
-// coarse one sums it as well. A quarter (26 pixels at the default 100) against a half: p90 as
-// displayed within 0.4 points on six scenes, 21 to 27 % less CPU on the Cornell box and a room lit
-// through a window, the same on glowing spheres, whose cost is the nodes (bench/README.md).
+// The gather's hemicube has this share of the solve's resolution (at least kMinResolution): each
+// node it sees counts with its exact form factor, and the cube only finds the share of it in view,
+// pixels partly covered counting in part, so a coarse cube sums nearly the same light. A quarter
+// (26 pixels at the default 100) against a half: p90 as displayed within 0.4 points on five
+// scenes, 21 to 27 % less CPU on the Cornell box and a room lit through a window, the same on
+// glowing spheres, whose cost is the nodes (bench/README.md).
 constexpr uint32_t kGatherResolutionDivisor = 4;
 // A vertex whose elements' centroid lies farther from it than this share of its smallest
 // element's radius is on the surface's outline; it gathers kOutlineStep of the scene's diagonal
