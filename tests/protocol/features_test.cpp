@@ -1321,22 +1321,27 @@ HighlightScene highlight_scene() {
   return s;
 }
 
-Baked bake_with(const HighlightScene& s, Tone tone) {
+// Bakes `d` with `spec` and reads the GLB back.
+Baked bake_spec(const Doc& d, const JobSpec& spec) {
   Baked r;
-  r.loaded = load_gltf_memory(s.d.gltf_bytes(), ".");
+  r.loaded = load_gltf_memory(d.gltf_bytes(), ".");
   EXPECT_TRUE(r.loaded.document) << r.loaded.error;
   if (!r.loaded.document) return r;
-  JobSpec spec;
-  spec.params = quick_params();
-  spec.write.draco = false;  // uint16 COLOR_0 exactly as written
-  spec.write.exposure = s.exposure;
-  spec.write.tone = tone;
   const BakeOutput w = protocol::bake(*r.loaded.document, spec);
   EXPECT_EQ(w.error, "");
   const auto parts = test::split_glb(w.glb);
   EXPECT_TRUE(parts.has_value());
   if (parts) r.out = {parts->gltf, parts->bin};
   return r;
+}
+
+Baked bake_with(const HighlightScene& s, Tone tone) {
+  JobSpec spec;
+  spec.params = quick_params();
+  spec.write.draco = false;  // uint16 COLOR_0 exactly as written
+  spec.write.exposure = s.exposure;
+  spec.write.tone = tone;
+  return bake_spec(s.d, spec);
 }
 
 // A node's vertices: base colour, exposed light (exposure x radiosity / base) and COLOR_0.
@@ -1448,18 +1453,6 @@ TEST(HighlightFeature, ClampToneKeepsTheLinearClip) {
 }
 
 // The automatic exposure (README, "GLB out"; protocol::key_exposure).
-Baked bake_spec(const Doc& d, const JobSpec& spec) {
-  Baked r;
-  r.loaded = load_gltf_memory(d.gltf_bytes(), ".");
-  EXPECT_TRUE(r.loaded.document) << r.loaded.error;
-  if (!r.loaded.document) return r;
-  const BakeOutput w = protocol::bake(*r.loaded.document, spec);
-  EXPECT_EQ(w.error, "");
-  const auto parts = test::split_glb(w.glb);
-  EXPECT_TRUE(parts.has_value());
-  if (parts) r.out = {parts->gltf, parts->bin};
-  return r;
-}
 
 // A square plate of side 2 h centred at c, its front facing n, two of its edges along u (u and n
 // orthogonal unit vectors), corners counter-clockwise seen from the front.
