@@ -80,6 +80,7 @@ std::vector<uint8_t> render(const solver::Mesh& mesh, const Camera& cam, const R
   };
 
   for (const auto& el : mesh.elements) {
+    if (el.buried) continue;  // pressed against a face that is seen: a depth tie along its edge
     // Fan from the element's centre over its boundary loop (which includes hanging vertices); the
     // centre is the mean of the loop's own vertices, as the baked file's (Mesh::interpolated).
     glm::dvec3 centre(0.0), centre_colour(0.0);

@@ -134,7 +134,7 @@ bool mesh_belongs(const SceneDocument& doc, const solver::Mesh& mesh) {
 double white_point(const SceneDocument& doc, const solver::Mesh& mesh, double exposure) {
   double brightest = 0.0;
   for (const auto& el : mesh.elements) {
-    if (mean3(doc.scene.patches[el.patch].emission) > 0.0) continue;
+    if (el.buried || mean3(doc.scene.patches[el.patch].emission) > 0.0) continue;
     const glm::dvec3& base = doc.sources[el.patch].base;
     for (uint32_t k = el.boundary_begin; k < el.boundary_end; ++k)
       brightest = std::max(brightest, mean3(light_of(mesh.radiosity[mesh.boundary[k]], base)));
@@ -142,12 +142,16 @@ double white_point(const SceneDocument& doc, const solver::Mesh& mesh, double ex
   return exposure * brightest;
 }
 
-// The elements of each output primitive, by (node, primitive, back side), in that order.
+// The elements of each output primitive, by (node, primitive, back side), in that order. Buried
+// elements (Mesh::Element::buried) are not written: each lies in the plane of a face that is seen,
+// and where the two meet at an edge a viewer's depth test showed the buried one's dark in dots (a
+// wall box's end against the next wall, along a room's corner in the Blender house, in three.js).
 using Groups = std::map<std::tuple<uint32_t, uint32_t, bool>, std::vector<uint32_t>>;
 
 Groups group_elements(const SceneDocument& doc, const solver::Mesh& mesh) {
   Groups groups;
   for (uint32_t i = 0; i < mesh.elements.size(); ++i) {
+    if (mesh.elements[i].buried) continue;
     const PatchSource& s = doc.sources[mesh.elements[i].patch];
     groups[{s.node, s.primitive, s.back}].push_back(i);
   }
@@ -240,7 +244,7 @@ std::vector<LitArea> exposed_surfaces(const SceneDocument& doc, const solver::Me
   std::vector<LitArea> out;
   out.reserve(mesh.elements.size());
   for (const auto& el : mesh.elements) {
-    if (mean3(doc.scene.patches[el.patch].emission) > 0.0) continue;
+    if (el.buried || mean3(doc.scene.patches[el.patch].emission) > 0.0) continue;
     const PatchSource& src = doc.sources[el.patch];
     if (hidden.count({src.node, src.primitive, src.back})) continue;
     out.push_back({mean3(light_of(el.radiosity, src.base)), el.area});

@@ -462,6 +462,7 @@ Mesh Solver::mesh(bool ambient) const {
     el.corners = s.e_corner[e];
     el.area = s.e_area[e];
     el.radiosity = s.e_b[e] + s.patches[el.patch].reflectance * amb;
+    el.buried = s.buried(e);
     HEMIBAKE_DCHECK(el.radiosity.x >= 0.0 && el.radiosity.y >= 0.0 && el.radiosity.z >= 0.0);
     el.boundary_begin = static_cast<uint32_t>(m.boundary.size());
     for (uint32_t k = 0; k < el.corner_count; ++k) {

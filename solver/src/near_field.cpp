@@ -228,12 +228,21 @@ bool Solver::Impl::partly_open(uint32_t e) const {
   return covered(e_patch[e], e_centre[e], reach, true, Cover::kNonEmitters) && corner_covered_unlike(e, reach, Cover::kAny, true);
 }
 
+// Whether element e lies pressed against a surface facing it (in contact, kCloseFacingLength) at
+// its centre and at each of its corners pulled a little towards the centre (Mesh::Element::buried).
+// Only elements covered at their centre within the cover gap (their kCoveredBit) are looked at.
+bool Solver::Impl::buried(uint32_t e) const {
+  if ((e_group[e] & kCoveredBit) == 0 || !covered(e_patch[e], e_centre[e])) return false;
+  return !corner_covered_unlike(e, 0.0, Cover::kAny, true, false);
+}
+
 // Whether one of element e's corners, pulled a little towards its centre, is covered (within
-// `reach`, facing either way, by `by`) where `centre` says the centre is not, or the other way round.
-bool Solver::Impl::corner_covered_unlike(uint32_t e, double reach, Cover by, bool centre) const {
+// `reach`, by `by`; facing either way with `any_facing`, else only by surfaces facing it) where
+// `centre` says the centre is not, or the other way round.
+bool Solver::Impl::corner_covered_unlike(uint32_t e, double reach, Cover by, bool centre, bool any_facing) const {
   const Corners c = corners_of_copy(e);
   for (uint32_t k = 0; k < corner_count(e); ++k)
-    if (covered(e_patch[e], c[k] + 0.02 * (e_centre[e] - c[k]), reach, true, by) != centre) return true;
+    if (covered(e_patch[e], c[k] + 0.02 * (e_centre[e] - c[k]), reach, any_facing, by) != centre) return true;
   return false;
 }
 

@@ -533,7 +533,8 @@ struct Solver::Impl {
   std::vector<std::array<uint32_t, 2>> standing_on(const std::vector<uint32_t>& leaves) const;
   bool leaf_covered(uint32_t e);
   bool partly_open(uint32_t e) const;
-  bool corner_covered_unlike(uint32_t e, double reach, Cover by, bool centre) const;
+  bool buried(uint32_t e) const;
+  bool corner_covered_unlike(uint32_t e, double reach, Cover by, bool centre, bool any_facing = true) const;
   double covered_share(std::span<const uint32_t> sources);
   static double point_piece_form_factor(const Piece& piece, const glm::dvec3& x, const glm::dvec3& n);
   double element_piece_form_factor(const Piece& piece, uint32_t e, int side) const;

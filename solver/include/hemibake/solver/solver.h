@@ -213,6 +213,11 @@ struct Mesh {
     double area = 0.0;
     uint32_t boundary_begin = 0;       ///< its loop in `boundary`: corners and the vertices of
     uint32_t boundary_end = 0;         ///< finer neighbours on its edges, counter-clockwise
+    /// Pressed against another surface that faces it over all of it (a wall box's end against the
+    /// next wall, a floor under a block's bottom): no viewpoint sees it, and writers leave it out,
+    /// since a viewer's depth test lets it through in dots along the edge it shares with a face
+    /// that is seen.
+    bool buried = false;
   };
   std::vector<glm::dvec3> positions;   ///< per vertex
   std::vector<glm::dvec3> radiosity;   ///< per vertex: gathered at the vertex (Params::gather, once
