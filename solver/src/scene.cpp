@@ -351,6 +351,41 @@ void find_groups(const Scene& scene, const PointIds& point_of, const EdgePatches
   };
   auto coplanar = [&](uint32_t a, uint32_t b) { return in_plane(a, b, false); };
   auto same_plane = [&](uint32_t a, uint32_t b) { return in_plane(a, b, true); };
+  // Whether patches z and f, both on the line through p along unit u, lie on the same side of it
+  // (a box's bottom and the top of the box it stands on, both reaching into the wall; not a shelf
+  // reaching into the room from a line where a bottom reaching into the wall also ends).
+  auto same_side = [&](uint32_t z, uint32_t f, const glm::dvec3& p, const glm::dvec3& u) {
+    auto off = [&](uint32_t q) {
+      const Patch& pq = scene.patches[q];
+      glm::dvec3 c(0.0);
+      for (uint32_t k = 0; k < pq.corner_count; ++k) c += pq.corners[k];
+      const glm::dvec3 r = c / static_cast<double>(pq.corner_count) - p;
+      return r - u * glm::dot(r, u);
+    };
+    return glm::dot(off(z), off(f)) > 0.0;
+  };
+  // Whether z and f face each other in one plane, within the touches' tolerance (1e-7 of the
+  // diagonal): two boxes an exporter stacked lie 6e-8 m apart in single precision (the Blender
+  // house's wall under its window), more than coplanar's 1e-9.
+  auto facing_in_plane = [&](uint32_t z, uint32_t f) {
+    if (glm::dot(out.normal[z], out.normal[f]) > -1.0 + 1e-6) return false;
+    const Patch& pz = scene.patches[z];
+    const Patch& pf = scene.patches[f];
+    for (uint32_t c = 0; c < pf.corner_count; ++c)
+      if (std::abs(glm::dot(out.normal[z], pf.corners[c] - pz.corners[0])) > 1e-7 * out.diagonal) return false;
+    return true;
+  };
+  // Twins: the two sides of one double-sided face (the same points, facing the other way).
+  auto twins = [&](uint32_t a, uint32_t b) {
+    const uint32_t count = scene.patches[a].corner_count;
+    if (count != scene.patches[b].corner_count) return false;
+    for (uint32_t i = 0; i < count; ++i) {
+      bool found = false;
+      for (uint32_t j = 0; j < count; ++j) found = found || point_of[a][i] == point_of[b][j];
+      if (!found) return false;
+    }
+    return true;
+  };
   // A junction: a surface of another plane stands on the edge between two patches (a wall on the
   // line between two rooms' floors, a shelf on a seam of the wall behind it). Light differs on its
   // two sides, so the patches are neither one smooth surface (their vertices would average across
@@ -363,9 +398,22 @@ void find_groups(const Scene& scene, const PointIds& point_of, const EdgePatches
   for (const auto& [key, list] : edge_patches) {
     // A named reference: clang before 16 cannot capture a structured binding in a lambda.
     const std::vector<uint32_t>& on_edge = list;
+    // A patch pressed against another that faces it, in its plane, on this edge (two stacked wall
+    // boxes of one width) is no junction (see the T-junctions' rule below).
     auto junction = [&](uint32_t a, uint32_t b) {
-      for (uint32_t z : on_edge)
-        if (!same_plane(z, a) && !same_plane(z, b)) return true;
+      glm::dvec3 ends[2] = {glm::dvec3(0.0), glm::dvec3(0.0)};
+      for (uint32_t c = 0; c < scene.patches[a].corner_count; ++c) {
+        if (point_of[a][c] == static_cast<uint32_t>(key >> 32)) ends[0] = scene.patches[a].corners[c];
+        if (point_of[a][c] == static_cast<uint32_t>(key & 0xffffffffu)) ends[1] = scene.patches[a].corners[c];
+      }
+      const glm::dvec3 u = glm::normalize(ends[1] - ends[0]);
+      for (uint32_t z : on_edge) {
+        if (same_plane(z, a) || same_plane(z, b)) continue;
+        bool pressed = false;
+        for (uint32_t f : on_edge)
+          pressed = pressed || (facing_in_plane(z, f) && !twins(z, f) && same_side(z, f, ends[0], u));
+        if (!pressed) return true;
+      }
       return false;
     };
     for (size_t x = 0; x < list.size(); ++x) {
@@ -390,21 +438,41 @@ void find_groups(const Scene& scene, const PointIds& point_of, const EdgePatches
     touches[neighbours[i].b].push_back(i);
   }
   const double tol = 1e-7 * out.diagonal;
-  // Whether a patch of another plane than coplanar a and b touches a along their common edge.
-  // A patch touching one of them along the common edge touches the other there too: the one with
-  // fewer touches is searched (a floor edged with 20 000 tiles has 20 000).
+  // Whether a patch of another plane than coplanar a and b touches a along their common edge, and
+  // is seen there: a patch pressed against another that faces it, in its plane, all along the part
+  // of the edge it touches, is no junction. Two wall boxes stacked under a window (the top of the
+  // one below pressed against the bottom of the one above) keep their room faces one surface: with
+  // the faces between them as a junction, each box's face showed its own light, with steps across
+  // the wall where the boxes meet (the Blender house's south wall in three.js). The two sides of a
+  // double-sided plate are no such pair: the plate parts the light on its two sides. A patch
+  // touching one of them along the common edge touches the other there too: the one with fewer
+  // touches is searched (a floor edged with 20 000 tiles has 20 000).
   auto junction = [&](const Touch& t) {
     const glm::dvec3 d = t.q - t.p;
     const double len = glm::length(d);
     const bool by_a = touches[t.a].size() <= touches[t.b].size();
     const uint32_t self = by_a ? t.a : t.b, other = by_a ? t.b : t.a;
+    // The patches of other planes on the common edge, and the part of it each touches.
+    struct Standing {
+      uint32_t patch;
+      double from, to;
+    };
+    std::vector<Standing> standing;
     for (uint32_t i : touches[self]) {
       const Touch& u = neighbours[i];
       const uint32_t c = u.a == self ? u.b : u.a;
       if (c == other || same_plane(t.a, c)) continue;
       const double s0 = glm::dot(u.p - t.p, d) / len, s1 = glm::dot(u.q - t.p, d) / len;
       const bool on_line = glm::length(glm::cross(u.p - t.p, d)) / len <= tol && glm::length(glm::cross(u.q - t.p, d)) / len <= tol;
-      if (on_line && std::min(std::max(s0, s1), len) - std::max(std::min(s0, s1), 0.0) > tol) return true;
+      const double from = std::max(std::min(s0, s1), 0.0), to = std::min(std::max(s0, s1), len);
+      if (on_line && to - from > tol) standing.push_back({c, from, to});
+    }
+    for (const Standing& c : standing) {
+      bool pressed = false;
+      for (const Standing& f : standing)
+        pressed = pressed || (facing_in_plane(c.patch, f.patch) && !twins(c.patch, f.patch) && f.from <= c.from + tol &&
+                              f.to >= c.to - tol && same_side(c.patch, f.patch, t.p, d / len));
+      if (!pressed) return true;
     }
     return false;
   };

@@ -4,6 +4,7 @@
 #include "display_error.h"
 
 #include "../solver/add_box.h"
+#include "../solver/stacked_wall.h"
 
 #include "hemibake/protocol/bake.h"
 #include "hemibake/protocol/gltf.h"
@@ -328,6 +329,33 @@ std::pair<double, double> error_at(const Scene& scene, const solver::Mesh& mesh,
   }
   const double n = static_cast<double>(points.size());
   return {abs_error / n, reference / n};
+}
+
+// A wall of stacked boxes (a lower box, a narrower one above it pressed on its top), lit by a lamp
+// under the ceiling, alone and with a shelf standing on the boxes' seam: the wall within 10 cm of
+// the seam, both boxes' faces, shows the path tracer's light. The faces pressed between the boxes
+// stand on no seam a viewer sees, so the wall is one surface there; the shelf's bottom is seen, so
+// the wall under it keeps its shadow apart from the light above.
+TEST(CoverNearSurface, WallOfStackedBoxesNearTheirSeamShowsThePathTracersLight) {
+  for (const bool shelf : {false, true}) {
+    const solver::StackedWall w = solver::stacked_wall_room(shelf);
+    const solver::Mesh mesh = solve(w.scene);
+    std::mt19937_64 rng(5);
+    std::uniform_real_distribution<double> uni(0.0, 1.0);
+    std::vector<SurfacePoint> near_seam;
+    for (int i = 0; i < 80; ++i) {
+      SurfacePoint p;
+      p.position = dvec3(0.0, 0.9 + 0.2 * uni(rng), 0.1 + 2.3 * uni(rng));
+      if (shelf && p.position.y > 1.0 && p.position.y < 1.04 + 1e-3 && p.position.z > 0.5 && p.position.z < 2.0) continue;
+      p.patch = p.position.y < 1.0 ? w.lower_face : w.upper_face;
+      p.normal = dvec3(1.0, 0.0, 0.0);
+      near_seam.push_back(p);
+    }
+    const auto [error, reference] = error_at(w.scene, mesh, near_seam);
+    std::printf("%s: wall within 10 cm of the seam: reference %.4f, mean error %.4f\n", shelf ? "shelf" : "no shelf",
+                reference, error);
+    EXPECT_LT(error, 0.08 * reference) << (shelf ? "with the shelf" : "without the shelf");
+  }
 }
 
 // A box without a bottom on open ground in the sun, the sun shining on its front. Its sides stand on
