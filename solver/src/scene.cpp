@@ -398,13 +398,14 @@ void find_groups(const Scene& scene, const PointIds& point_of, const EdgePatches
   for (const auto& [key, list] : edge_patches) {
     // A named reference: clang before 16 cannot capture a structured binding in a lambda.
     const std::vector<uint32_t>& on_edge = list;
+    const uint64_t edge = key;
     // A patch pressed against another that faces it, in its plane, on this edge (two stacked wall
     // boxes of one width) is no junction (see the T-junctions' rule below).
     auto junction = [&](uint32_t a, uint32_t b) {
       glm::dvec3 ends[2] = {glm::dvec3(0.0), glm::dvec3(0.0)};
       for (uint32_t c = 0; c < scene.patches[a].corner_count; ++c) {
-        if (point_of[a][c] == static_cast<uint32_t>(key >> 32)) ends[0] = scene.patches[a].corners[c];
-        if (point_of[a][c] == static_cast<uint32_t>(key & 0xffffffffu)) ends[1] = scene.patches[a].corners[c];
+        if (point_of[a][c] == static_cast<uint32_t>(edge >> 32)) ends[0] = scene.patches[a].corners[c];
+        if (point_of[a][c] == static_cast<uint32_t>(edge & 0xffffffffu)) ends[1] = scene.patches[a].corners[c];
       }
       const glm::dvec3 u = glm::normalize(ends[1] - ends[0]);
       for (uint32_t z : on_edge) {
