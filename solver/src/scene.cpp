@@ -386,6 +386,11 @@ void find_groups(const Scene& scene, const PointIds& point_of, const EdgePatches
     }
     return true;
   };
+  // Whether z, standing on the line through p along unit u, is pressed there against f: they face
+  // each other in one plane and reach to the same side of the line, and are not one plate's sides.
+  auto pressed_against = [&](uint32_t z, uint32_t f, const glm::dvec3& p, const glm::dvec3& u) {
+    return facing_in_plane(z, f) && !twins(z, f) && same_side(z, f, p, u);
+  };
   // A junction: a surface of another plane stands on the edge between two patches (a wall on the
   // line between two rooms' floors, a shelf on a seam of the wall behind it). Light differs on its
   // two sides, so the patches are neither one smooth surface (their vertices would average across
@@ -412,7 +417,7 @@ void find_groups(const Scene& scene, const PointIds& point_of, const EdgePatches
         if (same_plane(z, a) || same_plane(z, b)) continue;
         bool pressed = false;
         for (uint32_t f : on_edge)
-          pressed = pressed || (facing_in_plane(z, f) && !twins(z, f) && same_side(z, f, ends[0], u));
+          pressed = pressed || pressed_against(z, f, ends[0], u);
         if (!pressed) return true;
       }
       return false;
@@ -471,8 +476,7 @@ void find_groups(const Scene& scene, const PointIds& point_of, const EdgePatches
     for (const Standing& c : standing) {
       bool pressed = false;
       for (const Standing& f : standing)
-        pressed = pressed || (facing_in_plane(c.patch, f.patch) && !twins(c.patch, f.patch) && f.from <= c.from + tol &&
-                              f.to >= c.to - tol && same_side(c.patch, f.patch, t.p, d / len));
+        pressed = pressed || (f.from <= c.from + tol && f.to >= c.to - tol && pressed_against(c.patch, f.patch, t.p, d / len));
       if (!pressed) return true;
     }
     return false;
