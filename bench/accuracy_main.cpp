@@ -22,7 +22,8 @@ void usage() {
                "  --seed N            their seed (1)\n"
                "  --max-se X          trace each point until its standard error is at most X of its value (0.015)\n"
                "  --reference FILE    read the reference points from FILE if it exists, else trace and write them\n"
-               "  --per-point FILE    write each point's position, reference and displayed values (first bake)\n"
+               "  --per-point FILE    write each point's patch, position, reference, displayed value, error and\n"
+               "                      whether no viewer sees it (first bake)\n"
                "  --sky R,G,B         the uniform sky the bakes had (a job parameter, not in the file; 0)\n");
 }
 
@@ -96,17 +97,19 @@ int main(int argc, char** argv) {
     return 1;
   }
   std::vector<bench::SurfacePoint> points;
+  solver::Scene lit = protocol::scene_of(*scene.document);
+  if (sky != glm::dvec3(0.0)) lit.sky = sky;
   if (reference_file.empty() || !read_points(reference_file, points)) {
     const auto t0 = std::chrono::steady_clock::now();
-    solver::Scene lit = protocol::scene_of(*scene.document);
-    if (sky != glm::dvec3(0.0)) lit.sky = sky;
     points = bench::reference_points(lit, options);
     std::fprintf(stderr, "reference: %zu points traced in %.1f s\n", points.size(),
                  std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     if (!reference_file.empty()) write_points(reference_file, points);
   }
-  std::printf("| bake | median | p90 | max | bake/reference | missed | reference s.e. (worst) |\n");
-  std::printf("|---|---|---|---|---|---|---|\n");
+  bench::mark_pressed(lit, points);
+  std::printf("| bake | median | p90 | max | bake/reference | missed | reference s.e. (worst) | seen | seen: median | p90 "
+              "| max | bake/reference |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (size_t f = 1; f < files.size(); ++f) {
     solver::Mesh baked;
     if (std::string e = protocol::read_baked_mesh(files[f], baked); !e.empty()) {
@@ -114,8 +117,10 @@ int main(int argc, char** argv) {
       return 1;
     }
     const bench::DisplayError err = bench::displayed_error(points, baked);
-    std::printf("| %s | %.1f %% | %.1f %% | %.0f %% | %.3f | %u | %.1f %% |\n", files[f].c_str(), 100.0 * err.median,
-                100.0 * err.p90, 100.0 * err.max, err.mean_ratio, err.missed, 100.0 * err.worst_std_error);
+    std::printf("| %s | %.1f %% | %.1f %% | %.0f %% | %.3f | %u | %.1f %% | %u | %.1f %% | %.1f %% | %.0f %% | %.3f |\n",
+                files[f].c_str(), 100.0 * err.median, 100.0 * err.p90, 100.0 * err.max, err.mean_ratio, err.missed,
+                100.0 * err.worst_std_error, err.seen.points, 100.0 * err.seen.median, 100.0 * err.seen.p90,
+                100.0 * err.seen.max, err.seen.mean_ratio);
     if (f == 1 && !per_point_file.empty()) {
       std::FILE* out = std::fopen(per_point_file.c_str(), "w");
       if (out == nullptr) continue;
@@ -123,9 +128,10 @@ int main(int argc, char** argv) {
       for (size_t i = 0; i < points.size(); ++i) {
         glm::dvec3 shown(0.0);
         bench::displayed_value(baked, points[i].position, points[i].normal, slack, shown);
-        std::fprintf(out, "%u %.6g %.6g %.6g %.6g %.6g %.6g %.6g %.6g %.6g %.4f\n", points[i].patch,
+        std::fprintf(out, "%u %.6g %.6g %.6g %.6g %.6g %.6g %.6g %.6g %.6g %.4f %d\n", points[i].patch,
                      points[i].position.x, points[i].position.y, points[i].position.z, points[i].reference.x,
-                     points[i].reference.y, points[i].reference.z, shown.x, shown.y, shown.z, err.errors[i]);
+                     points[i].reference.y, points[i].reference.z, shown.x, shown.y, shown.z, err.errors[i],
+                     err.hidden[i]);
       }
       std::fclose(out);
     }

@@ -119,6 +119,49 @@ void trace_reference(const solver::Scene& scene, std::vector<SurfacePoint>& poin
   });
 }
 
+void mark_pressed(const solver::Scene& scene, std::vector<SurfacePoint>& points) {
+  glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
+  for (const auto& p : scene.patches)
+    for (uint32_t k = 0; k < p.corner_count; ++k) {
+      lo = glm::min(lo, p.corners[k]);
+      hi = glm::max(hi, p.corners[k]);
+    }
+  const double contact = 1e-6 * glm::length(hi - lo);
+  auto same_corners = [&](const solver::Patch& a, const solver::Patch& b) {
+    if (a.corner_count != b.corner_count) return false;
+    for (uint32_t i = 0; i < a.corner_count; ++i) {
+      bool found = false;
+      for (uint32_t j = 0; j < b.corner_count && !found; ++j) found = glm::length(a.corners[i] - b.corners[j]) <= contact;
+      if (!found) return false;
+    }
+    return true;
+  };
+  // The patch's polygon (convex, as patches are) holds x, which lies in its plane of normal n.
+  auto holds = [](const solver::Patch& p, const glm::dvec3& n, const glm::dvec3& x) {
+    for (uint32_t k = 0; k < p.corner_count; ++k) {
+      const glm::dvec3& a = p.corners[k];
+      const glm::dvec3& b = p.corners[(k + 1) % p.corner_count];
+      if (glm::dot(glm::cross(b - a, x - a), n) < 0.0) return false;
+    }
+    return true;
+  };
+  parallel(points.size(), 0, [&](size_t i) {
+    SurfacePoint& sp = points[i];
+    sp.pressed = false;
+    for (uint32_t q = 0; q < scene.patches.size() && !sp.pressed; ++q) {
+      if (q == sp.patch) continue;
+      const solver::Patch& p = scene.patches[q];
+      glm::dvec3 n = glm::cross(p.corners[1] - p.corners[0], p.corners[2] - p.corners[0]);
+      const double len = glm::length(n);
+      if (len <= 0.0) continue;
+      n /= len;
+      if (glm::dot(n, sp.normal) > -0.999 || std::abs(glm::dot(sp.position - p.corners[0], n)) > contact) continue;
+      if (!holds(p, n, sp.position) || same_corners(p, scene.patches[sp.patch])) continue;
+      sp.pressed = true;
+    }
+  });
+}
+
 double plane_slack(const solver::Mesh& baked) {
   if (baked.positions.empty()) return 0.0;
   glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
@@ -211,14 +254,36 @@ DisplayError displayed_error(const std::vector<SurfacePoint>& points, const solv
     bake_sum += channel_sum(shown[i]);
     out.errors[i] = std::abs(channel_sum(shown[i]) - ref) / denom;
   }
-  std::vector<double> sorted = out.errors;
-  std::sort(sorted.begin(), sorted.end());
-  auto quantile = [&](double q) { return sorted[std::min(sorted.size() - 1, static_cast<size_t>(q * sorted.size()))]; };
-  out.median = quantile(0.5);
-  out.p90 = quantile(0.9);
-  out.max = sorted.back();
+  auto summary = [&](auto&& take) {
+    ErrorSummary s;
+    std::vector<double> sorted;
+    double bake = 0.0, ref = 0.0;
+    for (size_t i = 0; i < points.size(); ++i) {
+      if (!take(i)) continue;
+      sorted.push_back(out.errors[i]);
+      bake += channel_sum(shown[i]);
+      ref += channel_sum(points[i].reference);
+    }
+    if (sorted.empty()) return s;
+    std::sort(sorted.begin(), sorted.end());
+    auto quantile = [&](double q) { return sorted[std::min(sorted.size() - 1, static_cast<size_t>(q * sorted.size()))]; };
+    s.points = static_cast<uint32_t>(sorted.size());
+    s.median = quantile(0.5);
+    s.p90 = quantile(0.9);
+    s.max = sorted.back();
+    s.mean_ratio = ref > 0.0 ? bake / ref : 0.0;
+    return s;
+  };
+  const ErrorSummary all = summary([](size_t) { return true; });
+  out.median = all.median;
+  out.p90 = all.p90;
+  out.max = all.max;
   out.mean_ratio = ref_sum > 0.0 ? bake_sum / ref_sum : 0.0;
   out.missed_light = ref_sum > 0.0 ? out.missed_light / ref_sum : 0.0;
+  out.hidden.assign(points.size(), 0);
+  for (size_t i = 0; i < points.size(); ++i)
+    out.hidden[i] = channel_sum(points[i].reference) == 0.0 && (points[i].pressed || !hit[i]);
+  out.seen = summary([&](size_t i) { return !out.hidden[i]; });
   return out;
 }
 

@@ -21,6 +21,7 @@ struct SurfacePoint {
   glm::dvec3 reference{0.0};  ///< path-traced radiosity
   double std_error = 0.0;     ///< of the reference's channel sum
   uint32_t samples = 0;       ///< paths traced for it
+  bool pressed = false;       ///< against a surface that faces it (mark_pressed)
 };
 
 struct ReferenceOptions {
@@ -42,6 +43,22 @@ std::vector<SurfacePoint> reference_points(const solver::Scene& scene, const Ref
 /// and read them at a fraction of their light).
 void trace_reference(const solver::Scene& scene, std::vector<SurfacePoint>& points, const ReferenceOptions& options);
 
+/// Marks the points pressed against a surface that faces them: in contact, within 1e-6 of the
+/// scene's diagonal, with another patch facing the other way whose polygon holds the point (a
+/// box's bottom on a floor, a ceiling over a wall's top, the floor under a wall). The other side
+/// of a double-sided patch (the same corners) is no such surface. Two one-sided plates back to back
+/// look the same here; displayed_error tells them apart by the reference's light.
+void mark_pressed(const solver::Scene& scene, std::vector<SurfacePoint>& points);
+
+/// The error over some of the points.
+struct ErrorSummary {
+  uint32_t points = 0;
+  double median = 0.0;
+  double p90 = 0.0;
+  double max = 0.0;
+  double mean_ratio = 0.0;  ///< sum of bake / sum of reference over them
+};
+
 struct DisplayError {
   double median = 0.0;   ///< relative error of the channel sum, |bake - reference| / max(reference, floor)
   double p90 = 0.0;
@@ -50,7 +67,13 @@ struct DisplayError {
   double worst_std_error = 0.0;  ///< largest relative standard error of the reference
   uint32_t missed = 0;   ///< points no baked triangle covers (shown as 0: an unwritten closed mesh's inside)
   double missed_light = 0.0;  ///< the reference's light on those, as a share of its light on all points
+  /// Over the points a viewer can see: all but those with no light at all in the reference that
+  /// are pressed against a surface (mark_pressed) or that no baked triangle covers (the inside of a
+  /// closed mesh, which the writer leaves out). The fields above count every point; the points no
+  /// one sees pull their median toward 0, and a bake that lights them gets errors no one sees.
+  ErrorSummary seen;
   std::vector<double> errors;  ///< per point, in the order of the points
+  std::vector<uint8_t> hidden;  ///< per point: left out of `seen`
 };
 
 /// The error of `baked` (triangles in world space with per-vertex radiosity, as read_baked_mesh

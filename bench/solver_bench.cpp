@@ -155,7 +155,7 @@ struct Run {
 // Run::kRegions - 1), or -1 for none.
 using RegionOf = std::function<int(const hemibake::bench::SurfacePoint&)>;
 
-// The per-region figures of `shown` at `points` into `out` (Run::region_*).
+// The per-region figures of `shown` at the points a viewer sees into `out` (Run::region_*).
 void region_figures(const std::vector<hemibake::bench::SurfacePoint>& points, const Mesh& mesh,
                     const hemibake::bench::DisplayError& shown, RegionOf region, Run& out) {
   std::vector<double> errors[Run::kRegions];
@@ -163,7 +163,7 @@ void region_figures(const std::vector<hemibake::bench::SurfacePoint>& points, co
   const double slack = hemibake::bench::plane_slack(mesh);
   for (size_t i = 0; i < points.size(); ++i) {
     const int r = region(points[i]);
-    if (r < 0 || r >= Run::kRegions) continue;
+    if (r < 0 || r >= Run::kRegions || shown.hidden[i]) continue;
     glm::dvec3 v(0.0);
     hemibake::bench::displayed_value(mesh, points[i].position, points[i].normal, slack, v);
     errors[r].push_back(shown.errors[i]);
@@ -214,9 +214,9 @@ Run run_method(const Scene& scene, const std::string& method, uint32_t threads, 
         if (samples > 0) out.error = error_of(scene, mesh, samples);
         if (points != nullptr) {
           const hemibake::bench::DisplayError shown = hemibake::bench::displayed_error(*points, mesh);
-          out.shown_median = shown.median;
-          out.shown_p90 = shown.p90;
-          out.shown_max = shown.max;
+          out.shown_median = shown.seen.median;
+          out.shown_p90 = shown.seen.p90;
+          out.shown_max = shown.seen.max;
           if (region != nullptr) region_figures(*points, mesh, shown, region, out);
         }
         return out;
@@ -286,11 +286,14 @@ void sweep(const Scene& scene, const char* title, const std::vector<hemibake::be
               100.0 * target, time_to("aa"), time_to("hr"), time_to("hr") / time_to("aa"));
 }
 
-// The points of the displayed-error measure and their reference, once per scene.
+// The points of the displayed-error measure and their reference, once per scene; the tables give
+// the error over the points a viewer can see (DisplayError::seen).
 std::vector<hemibake::bench::SurfacePoint> points_of(const Scene& scene, uint32_t count) {
   hemibake::bench::ReferenceOptions options;
   options.points = count;
-  return hemibake::bench::reference_points(scene, options);
+  auto points = hemibake::bench::reference_points(scene, options);
+  hemibake::bench::mark_pressed(scene, points);
+  return points;
 }
 
 }  // namespace

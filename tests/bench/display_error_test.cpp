@@ -67,6 +67,77 @@ TEST(DisplayedError, ClosedBoxShowsItsClosedForm) {
   EXPECT_NEAR(displayed_error(again, solve(lit)).mean_ratio, 1.0, 0.02);
 }
 
+Scene room_with_lamp(double gap, bool double_sided, uint32_t& ceiling);
+
+// A box resting on the floor of a lit room presses its bottom against the floor: no viewer sees
+// either there, and the path tracer finds no light at them. A box floating 2 cm over the floor and
+// a double-sided plate (two patches, the same corners) press on nothing.
+TEST(DisplayedError, PointsPressedUnderABoxAreLeftOutOfWhatIsSeen) {
+  uint32_t ceiling = 0;
+  Scene scene = room_with_lamp(0.1, false, ceiling);
+  const uint32_t floor = 0;  // facing up over x, z in [-2, 2]
+  const uint32_t resting = static_cast<uint32_t>(scene.patches.size());
+  solver::add_box(scene, dvec3(-1.5, 0.0, -1.5), dvec3(-0.5, 0.5, -0.5), dvec3(0.5), dvec3(0.0), 2);
+  const uint32_t resting_bottom = resting + 1;  // add_box's second face looks down
+  solver::add_box(scene, dvec3(0.5, 0.02, 0.5), dvec3(1.5, 0.5, 1.5), dvec3(0.5), dvec3(0.0), 2);
+  const uint32_t plate = static_cast<uint32_t>(scene.patches.size());
+  const dvec3 a(0.5, 1.0, -1.5), b(1.5, 1.0, -1.5), c(1.5, 1.0, -0.5), d(0.5, 1.0, -0.5);
+  solver::add_quad(scene, a, d, c, b, dvec3(0.5), dvec3(0.0), 3);  // facing up
+  solver::add_quad(scene, a, b, c, d, dvec3(0.5), dvec3(0.0), 3);  // its other side
+  ASSERT_EQ(solver::validate(scene), "");
+
+  // A grid over the floor, and points on the resting box's bottom and the plate's top.
+  std::vector<SurfacePoint> points;
+  auto add = [&](uint32_t patch, const dvec3& x, const dvec3& n) {
+    SurfacePoint sp;
+    sp.patch = patch;
+    sp.position = x;
+    sp.normal = n;
+    points.push_back(sp);
+  };
+  for (double x = -1.95; x < 2.0; x += 0.1)
+    for (double z = -1.95; z < 2.0; z += 0.1) add(floor, dvec3(x, 0.0, z), dvec3(0.0, 1.0, 0.0));
+  for (double x = -1.45; x < -0.5; x += 0.2) add(resting_bottom, dvec3(x, 0.0, -1.0), dvec3(0.0, -1.0, 0.0));
+  for (double x = 0.55; x < 1.5; x += 0.2) add(plate, dvec3(x, 1.0, -1.0), dvec3(0.0, 1.0, 0.0));
+  mark_pressed(scene, points);
+  auto under_resting = [](const dvec3& x) { return x.x > -1.5 && x.x < -0.5 && x.z > -1.5 && x.z < -0.5; };
+  uint32_t pressed = 0;
+  for (const SurfacePoint& sp : points) {
+    const bool expected = sp.patch == resting_bottom || (sp.patch == floor && under_resting(sp.position));
+    EXPECT_EQ(sp.pressed, expected) << "patch " << sp.patch << " at " << sp.position.x << ", " << sp.position.z;
+    pressed += sp.pressed;
+  }
+  EXPECT_EQ(pressed, 100u + 5u);  // 10 x 10 grid points under the box, 5 on its bottom
+
+  // The path tracer sees no light at the pressed points, and light wherever no box is over them.
+  ReferenceOptions options;
+  options.max_samples = 4096;
+  trace_reference(scene, points, options);
+  auto lit = [](const SurfacePoint& sp) { return sp.reference.x + sp.reference.y + sp.reference.z > 0.0; };
+  auto under_floating = [](const dvec3& x) { return x.x > 0.5 && x.x < 1.5 && x.z > 0.5 && x.z < 1.5; };
+  for (const SurfacePoint& sp : points) {
+    if (sp.pressed) {
+      EXPECT_FALSE(lit(sp)) << "patch " << sp.patch << " at " << sp.position.x << ", " << sp.position.z;
+    } else if (!under_floating(sp.position)) {
+      EXPECT_TRUE(lit(sp)) << "patch " << sp.patch << " at " << sp.position.x << ", " << sp.position.z;
+    }
+  }
+
+  // What is seen leaves them out; the figures over every point keep them.
+  const solver::Mesh mesh = solve(scene);
+  const DisplayError e = displayed_error(points, mesh);
+  EXPECT_EQ(e.seen.points, points.size() - pressed);
+  for (size_t i = 0; i < points.size(); ++i) EXPECT_EQ(e.hidden[i] != 0, points[i].pressed);
+  EXPECT_EQ(e.missed, 0u);
+  // A bake that covers nothing misses every point: those with no light are no one's to see, the
+  // others are the whole of their light wrong.
+  const DisplayError none = displayed_error(points, solver::Mesh{});
+  EXPECT_EQ(none.missed, points.size());
+  EXPECT_EQ(none.seen.points, static_cast<size_t>(std::count_if(points.begin(), points.end(), lit)));
+  EXPECT_DOUBLE_EQ(none.seen.median, 1.0);
+  EXPECT_DOUBLE_EQ(none.seen.mean_ratio, 0.0);
+}
+
 // A 4 x 3 x 4 room (one-sided walls facing in) with a 1 m lamp under its ceiling, `gap` below it,
 // facing down; `double_sided` adds the lamp's upward side (as exporters write a double-sided
 // emissive quad), which lights the ceiling above it.
