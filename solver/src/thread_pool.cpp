@@ -26,14 +26,20 @@ inline void cpu_relax() {
 #endif
 }
 
-// Spins until done() or kSpin has passed; returns done().
+// Spins until done() or kSpin has passed; returns done(). Every 64 turns it yields the core, so
+// that where more threads want to run than there are cores (two solves at once, a build beside a
+// bake) a waiting thread gives way to one with work: two Cornell boxes solved at once on two cores
+// with two threads each took 1.44 times as long as with one thread each while they only spun.
 template <class Done>
 bool spin_until(Done&& done) {
   const auto until = std::chrono::steady_clock::now() + kSpin;
   for (uint32_t i = 1;; ++i) {
     if (done()) return true;
     cpu_relax();
-    if (i % 64 == 0 && std::chrono::steady_clock::now() > until) return done();
+    if (i % 64 == 0) {
+      if (std::chrono::steady_clock::now() > until) return done();
+      std::this_thread::yield();
+    }
   }
 }
 }  // namespace
