@@ -6,10 +6,15 @@
 #include "hemibake/protocol/gltf.h"
 #include "hemibake/protocol/job.h"
 
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
+
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -21,7 +26,8 @@ void usage() {
                "  --points N          random surface points, area-weighted over non-emitting patches (300)\n"
                "  --seed N            their seed (1)\n"
                "  --max-se X          trace each point until its standard error is at most X of its value (0.015)\n"
-               "  --reference FILE    read the reference points from FILE if it exists, else trace and write them\n"
+               "  --reference FILE    read the reference points from FILE if it exists (they must lie on this\n"
+               "                      scene's patches), else trace and write them\n"
                "  --per-point FILE    write each point's patch, position, reference, displayed value, error and\n"
                "                      whether no viewer sees it (first bake)\n"
                "  --sky R,G,B         the uniform sky the bakes had (a job parameter, not in the file; 0)\n");
@@ -35,6 +41,26 @@ bool read_points(const std::string& path, std::vector<hemibake::bench::SurfacePo
          p.reference.x >> p.reference.y >> p.reference.z >> p.std_error >> p.samples)
     out.push_back(p);
   return !out.empty();
+}
+
+// Whether every point names a patch of `scene` and lies in its plane (a file traced for another
+// scene, or for another reading of this one, does not).
+bool fits(const hemibake::solver::Scene& scene, const std::vector<hemibake::bench::SurfacePoint>& points) {
+  glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
+  for (const auto& p : scene.patches)
+    for (uint32_t k = 0; k < p.corner_count; ++k) {
+      lo = glm::min(lo, p.corners[k]);
+      hi = glm::max(hi, p.corners[k]);
+    }
+  const double tolerance = 1e-5 * glm::length(hi - lo);
+  for (const auto& sp : points) {
+    if (sp.patch >= scene.patches.size()) return false;
+    const auto& p = scene.patches[sp.patch];
+    const glm::dvec3 n = glm::cross(p.corners[1] - p.corners[0], p.corners[2] - p.corners[0]);
+    const double len = glm::length(n);
+    if (len <= 0.0 || std::abs(glm::dot(sp.position - p.corners[0], n)) > tolerance * len) return false;
+  }
+  return true;
 }
 
 void write_points(const std::string& path, const std::vector<hemibake::bench::SurfacePoint>& points) {
@@ -99,14 +125,21 @@ int main(int argc, char** argv) {
   std::vector<bench::SurfacePoint> points;
   solver::Scene lit = protocol::scene_of(*scene.document);
   if (sky != glm::dvec3(0.0)) lit.sky = sky;
-  if (reference_file.empty() || !read_points(reference_file, points)) {
+  if (!reference_file.empty() && read_points(reference_file, points) && !fits(lit, points)) {
+    std::fprintf(stderr,
+                 "hemibake-accuracy: %s: its points do not lie on %s's patches (traced for another scene?); "
+                 "name another file to trace this scene's\n",
+                 reference_file.c_str(), files[0].c_str());
+    return 1;
+  }
+  if (points.empty()) {
     const auto t0 = std::chrono::steady_clock::now();
     points = bench::reference_points(lit, options);
     std::fprintf(stderr, "reference: %zu points traced in %.1f s\n", points.size(),
                  std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     if (!reference_file.empty()) write_points(reference_file, points);
   }
-  bench::mark_pressed(lit, points);
+  bench::mark_pressed(lit, points);  // the file keeps no such mark
   std::printf("| bake | median | p90 | max | bake/reference | missed | reference s.e. (worst) | seen | seen: median | p90 "
               "| max | bake/reference |\n");
   std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
@@ -117,10 +150,14 @@ int main(int argc, char** argv) {
       return 1;
     }
     const bench::DisplayError err = bench::displayed_error(points, baked);
-    std::printf("| %s | %.1f %% | %.1f %% | %.0f %% | %.3f | %u | %.1f %% | %u | %.1f %% | %.1f %% | %.0f %% | %.3f |\n",
-                files[f].c_str(), 100.0 * err.median, 100.0 * err.p90, 100.0 * err.max, err.mean_ratio, err.missed,
-                100.0 * err.worst_std_error, err.seen.points, 100.0 * err.seen.median, 100.0 * err.seen.p90,
-                100.0 * err.seen.max, err.seen.mean_ratio);
+    std::printf("| %s | %.1f %% | %.1f %% | %.0f %% | %.3f | %u | %.1f %% | %u | ", files[f].c_str(), 100.0 * err.median,
+                100.0 * err.p90, 100.0 * err.max, err.mean_ratio, err.missed, 100.0 * err.worst_std_error,
+                err.seen.points);
+    if (err.seen.points == 0)
+      std::printf("- | - | - | - |\n");
+    else
+      std::printf("%.1f %% | %.1f %% | %.0f %% | %.3f |\n", 100.0 * err.seen.median, 100.0 * err.seen.p90,
+                  100.0 * err.seen.max, err.seen.mean_ratio);
     if (f == 1 && !per_point_file.empty()) {
       std::FILE* out = std::fopen(per_point_file.c_str(), "w");
       if (out == nullptr) continue;

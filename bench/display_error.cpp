@@ -17,6 +17,11 @@ namespace {
 
 double channel_sum(const glm::dvec3& v) { return v.x + v.y + v.z; }
 
+// mark_pressed: in contact within this share of the scene's diagonal, facing the other way within
+// this cosine (2.6 degrees).
+constexpr double kContact = 1e-6;
+constexpr double kFacing = 0.999;
+
 // Runs fn(i) for i in [0, n) on `threads` threads (0 = all cores).
 template <typename Fn>
 void parallel(size_t n, uint32_t threads, Fn&& fn) {
@@ -81,6 +86,7 @@ std::vector<SurfacePoint> reference_points(const solver::Scene& scene, const Ref
     points.push_back(sp);
   }
   trace_reference(scene, points, options);
+  mark_pressed(scene, points);
   return points;
 }
 
@@ -126,12 +132,14 @@ void mark_pressed(const solver::Scene& scene, std::vector<SurfacePoint>& points)
       lo = glm::min(lo, p.corners[k]);
       hi = glm::max(hi, p.corners[k]);
     }
-  const double contact = 1e-6 * glm::length(hi - lo);
+  // In contact: as close as single-precision positions of a scene's size put two faces that touch.
+  const double contact = kContact * glm::length(hi - lo);
   auto same_corners = [&](const solver::Patch& a, const solver::Patch& b) {
     if (a.corner_count != b.corner_count) return false;
     for (uint32_t i = 0; i < a.corner_count; ++i) {
       bool found = false;
-      for (uint32_t j = 0; j < b.corner_count && !found; ++j) found = glm::length(a.corners[i] - b.corners[j]) <= contact;
+      for (uint32_t j = 0; j < b.corner_count && !found; ++j)
+        found = glm::length(a.corners[i] - b.corners[j]) <= contact;
       if (!found) return false;
     }
     return true;
@@ -155,7 +163,7 @@ void mark_pressed(const solver::Scene& scene, std::vector<SurfacePoint>& points)
       const double len = glm::length(n);
       if (len <= 0.0) continue;
       n /= len;
-      if (glm::dot(n, sp.normal) > -0.999 || std::abs(glm::dot(sp.position - p.corners[0], n)) > contact) continue;
+      if (glm::dot(n, sp.normal) > -kFacing || std::abs(glm::dot(sp.position - p.corners[0], n)) > contact) continue;
       if (!holds(p, n, sp.position) || same_corners(p, scene.patches[sp.patch])) continue;
       sp.pressed = true;
     }
@@ -239,7 +247,7 @@ DisplayError displayed_error(const std::vector<SurfacePoint>& points, const solv
   const double slack = plane_slack(baked);
   parallel(points.size(), 0,
            [&](size_t i) { hit[i] = displayed_value(baked, points[i].position, points[i].normal, slack, shown[i]); });
-  double bake_sum = 0.0, ref_sum = 0.0;
+  double ref_sum = 0.0;
   for (size_t i = 0; i < points.size(); ++i) {
     const double ref = channel_sum(points[i].reference), denom = std::max(ref, floor);
     out.worst_std_error = std::max(out.worst_std_error, points[i].std_error / denom);
@@ -251,7 +259,6 @@ DisplayError displayed_error(const std::vector<SurfacePoint>& points, const solv
       ++out.missed;
       out.missed_light += ref;
     }
-    bake_sum += channel_sum(shown[i]);
     out.errors[i] = std::abs(channel_sum(shown[i]) - ref) / denom;
   }
   auto summary = [&](auto&& take) {
@@ -266,7 +273,9 @@ DisplayError displayed_error(const std::vector<SurfacePoint>& points, const solv
     }
     if (sorted.empty()) return s;
     std::sort(sorted.begin(), sorted.end());
-    auto quantile = [&](double q) { return sorted[std::min(sorted.size() - 1, static_cast<size_t>(q * sorted.size()))]; };
+    auto quantile = [&](double q) {
+      return sorted[std::min(sorted.size() - 1, static_cast<size_t>(q * sorted.size()))];
+    };
     s.points = static_cast<uint32_t>(sorted.size());
     s.median = quantile(0.5);
     s.p90 = quantile(0.9);
@@ -278,7 +287,7 @@ DisplayError displayed_error(const std::vector<SurfacePoint>& points, const solv
   out.median = all.median;
   out.p90 = all.p90;
   out.max = all.max;
-  out.mean_ratio = ref_sum > 0.0 ? bake_sum / ref_sum : 0.0;
+  out.mean_ratio = all.mean_ratio;
   out.missed_light = ref_sum > 0.0 ? out.missed_light / ref_sum : 0.0;
   out.hidden.assign(points.size(), 0);
   for (size_t i = 0; i < points.size(); ++i)

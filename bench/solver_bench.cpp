@@ -291,9 +291,7 @@ void sweep(const Scene& scene, const char* title, const std::vector<hemibake::be
 std::vector<hemibake::bench::SurfacePoint> points_of(const Scene& scene, uint32_t count) {
   hemibake::bench::ReferenceOptions options;
   options.points = count;
-  auto points = hemibake::bench::reference_points(scene, options);
-  hemibake::bench::mark_pressed(scene, points);
-  return points;
+  return hemibake::bench::reference_points(scene, options);
 }
 
 }  // namespace

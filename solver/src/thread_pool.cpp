@@ -17,6 +17,9 @@ constexpr size_t kMinParallelItems = 64;
 // call on a virtual machine. Threads spin this long for the next loop (or for the last chunk of
 // this one) before they sleep.
 constexpr auto kSpin = std::chrono::microseconds(200);
+// Spins between looks at the clock and yields of the core: a yield is a system call, not a thing to
+// do every turn.
+constexpr uint32_t kSpinTurns = 64;
 
 inline void cpu_relax() {
 #if defined(__x86_64__) || defined(__i386__)
@@ -26,7 +29,7 @@ inline void cpu_relax() {
 #endif
 }
 
-// Spins until done() or kSpin has passed; returns done(). Every 64 turns it yields the core, so
+// Spins until done() or kSpin has passed; returns done(). Every kSpinTurns it yields the core, so
 // that where more threads want to run than there are cores (two solves at once, a build beside a
 // bake) a waiting thread gives way to one with work: two Cornell boxes solved at once on two cores
 // with two threads each took 1.44 times as long as with one thread each while they only spun.
@@ -36,7 +39,7 @@ bool spin_until(Done&& done) {
   for (uint32_t i = 1;; ++i) {
     if (done()) return true;
     cpu_relax();
-    if (i % 64 == 0) {
+    if (i % kSpinTurns == 0) {
       if (std::chrono::steady_clock::now() > until) return done();
       std::this_thread::yield();
     }
