@@ -49,7 +49,7 @@ void trace_reference(const solver::Scene& scene, std::vector<SurfacePoint>& poin
 /// wall box). The other side of a double-sided patch (the same corners) is no such surface. Two
 /// one-sided plates back to back look the same here; displayed_error tells them apart by the
 /// reference's light. reference_points calls it; points read back from a file need it again. Every
-/// point against every patch: about 40 M pairs for the atrium at 400 points, well under a second.
+/// point against every patch: about 40 M pairs for the atrium at 400 points.
 /// Points must name a patch of `scene`.
 void mark_pressed(const solver::Scene& scene, std::vector<SurfacePoint>& points);
 
