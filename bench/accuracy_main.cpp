@@ -6,7 +6,6 @@
 #include "hemibake/protocol/gltf.h"
 #include "hemibake/protocol/job.h"
 
-#include <glm/common.hpp>
 #include <glm/geometric.hpp>
 
 #include <chrono>
@@ -14,7 +13,6 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
-#include <limits>
 #include <string>
 #include <vector>
 
@@ -46,13 +44,7 @@ bool read_points(const std::string& path, std::vector<hemibake::bench::SurfacePo
 // Whether every point names a patch of `scene` and lies in its plane (a file traced for another
 // scene, or for another reading of this one, does not).
 bool fits(const hemibake::solver::Scene& scene, const std::vector<hemibake::bench::SurfacePoint>& points) {
-  glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
-  for (const auto& p : scene.patches)
-    for (uint32_t k = 0; k < p.corner_count; ++k) {
-      lo = glm::min(lo, p.corners[k]);
-      hi = glm::max(hi, p.corners[k]);
-    }
-  const double tolerance = 1e-5 * glm::length(hi - lo);
+  const double tolerance = 1e-5 * hemibake::bench::scene_diagonal(scene);
   for (const auto& sp : points) {
     if (sp.patch >= scene.patches.size()) return false;
     const auto& p = scene.patches[sp.patch];

@@ -125,15 +125,20 @@ void trace_reference(const solver::Scene& scene, std::vector<SurfacePoint>& poin
   });
 }
 
-void mark_pressed(const solver::Scene& scene, std::vector<SurfacePoint>& points) {
+double scene_diagonal(const solver::Scene& scene) {
+  if (scene.patches.empty()) return 0.0;
   glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
   for (const auto& p : scene.patches)
     for (uint32_t k = 0; k < p.corner_count; ++k) {
       lo = glm::min(lo, p.corners[k]);
       hi = glm::max(hi, p.corners[k]);
     }
+  return glm::length(hi - lo);
+}
+
+void mark_pressed(const solver::Scene& scene, std::vector<SurfacePoint>& points) {
   // In contact: as close as single-precision positions of a scene's size put two faces that touch.
-  const double contact = kContact * glm::length(hi - lo);
+  const double contact = kContact * scene_diagonal(scene);
   auto same_corners = [&](const solver::Patch& a, const solver::Patch& b) {
     if (a.corner_count != b.corner_count) return false;
     for (uint32_t i = 0; i < a.corner_count; ++i) {

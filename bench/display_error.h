@@ -43,6 +43,9 @@ std::vector<SurfacePoint> reference_points(const solver::Scene& scene, const Ref
 /// and read them at a fraction of their light).
 void trace_reference(const solver::Scene& scene, std::vector<SurfacePoint>& points, const ReferenceOptions& options);
 
+/// The length of the diagonal of the box around every patch's corners (0 for no patch).
+double scene_diagonal(const solver::Scene& scene);
+
 /// Marks the points pressed against a surface that faces them: in contact, within 1e-6 of the
 /// scene's diagonal, with another patch facing the other way (within 2.6 degrees) whose polygon
 /// holds the point (a box's bottom on a floor, a ceiling over a wall box's top, the floor under a
