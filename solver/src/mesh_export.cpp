@@ -24,12 +24,24 @@ namespace hemibake::solver {
 // reach (gap_covered) the small elements along the cabinet's outline counted as open, and the
 // wall's vertices beside them 10 to 20 cm inside the gap showed their light. `m` holds the mesh's elements
 // (in the order of `leaves`) and loops, and the radiosity of the solver's own vertices.
-void Solver::Impl::show_uncovered_light(const std::vector<uint32_t>& sorted, Mesh& m) const {
+//
+// The elements covered all over keep their own light at such a vertex (the mean of theirs around
+// it): the gap is seen too, past its opening at a slant. With the open side's light there, a 2 cm
+// slot behind a bookshelf showed the lit wall's light fading over the 37 cm element inside its
+// end, where the path tracer finds none past the first centimetres. An element reaching out of
+// the gap (a shelf's back panel, its centre behind a book and its top above it) shows the open
+// light as before: its open part is seen head-on. The returned side says which elements are
+// covered all over and that light, per vertex (split_covered_side).
+constexpr double kCornerInset = 0.02;  // corners pulled this share towards the centre
+
+Solver::Impl::CoveredSide Solver::Impl::show_uncovered_light(const std::vector<uint32_t>& sorted, Mesh& m) const {
   const size_t n = vpos.size();
+  CoveredSide side;
   std::vector<uint32_t> patch(n, kNone);
   for (uint32_t e : sorted)
     for (uint32_t k = 0; k < corner_count(e); ++k) patch[e_corner[e][k]] = e_patch[e];
   std::vector<char> hidden(n, 0), leaf_hidden(sorted.size(), 0);
+  side.leaf.assign(sorted.size(), 0);
   bool any = false;
   const double gap = kCoverGap * prep.diagonal;
   for (size_t v = 0; v < n; ++v)
@@ -40,16 +52,29 @@ void Solver::Impl::show_uncovered_light(const std::vector<uint32_t>& sorted, Mes
     leaf_hidden[i] = 1;
     for (uint32_t a = m.elements[i].boundary_begin; a < m.elements[i].boundary_end; ++a)
       if (m.boundary[a] < n) hidden[m.boundary[a]] = any = true;
+    // Covered all over: its corners too, pulled a little towards its centre (those on the outline
+    // of what covers it lie on its edge).
+    bool whole = true;
+    for (uint32_t k = 0; k < corner_count(e) && whole; ++k) {
+      const glm::dvec3& x = vpos[e_corner[e][k]];
+      whole = covered(e_patch[e], x + kCornerInset * (e_centre[e] - x), gap, true);
+    }
+    side.leaf[i] = whole;
   }
-  if (!any) return;
-  std::vector<glm::dvec3> sum(n, glm::dvec3(0.0));
+  if (!any) return side;
+  std::vector<glm::dvec3> sum(n, glm::dvec3(0.0)), covered_sum(n, glm::dvec3(0.0));
   std::vector<uint32_t> count(n, 0);
+  std::vector<double> covered_area(n, 0.0);
   for (size_t i = 0; i < sorted.size(); ++i) {
-    if (leaf_hidden[i]) continue;
     const Mesh::Element& el = m.elements[i];
     for (uint32_t a = el.boundary_begin; a < el.boundary_end; ++a) {
       const uint32_t v = m.boundary[a];
       if (v >= n || !hidden[v]) continue;
+      if (side.leaf[i]) {
+        covered_sum[v] += el.radiosity * el.area;
+        covered_area[v] += el.area;
+      }
+      if (leaf_hidden[i]) continue;
       for (uint32_t b = el.boundary_begin; b < el.boundary_end; ++b) {
         const uint32_t u = m.boundary[b];
         if (u >= n || hidden[u]) continue;
@@ -58,8 +83,12 @@ void Solver::Impl::show_uncovered_light(const std::vector<uint32_t>& sorted, Mes
       }
     }
   }
-  for (size_t v = 0; v < n; ++v)
-    if (count[v] > 0) m.radiosity[v] = sum[v] / static_cast<double>(count[v]);
+  for (size_t v = 0; v < n; ++v) {
+    if (count[v] == 0) continue;
+    if (covered_area[v] > 0.0) side.light.emplace(static_cast<uint32_t>(v), covered_sum[v] / covered_area[v]);
+    m.radiosity[v] = sum[v] / static_cast<double>(count[v]);
+  }
+  return side;
 }
 
 // Per vertex of the solver's own: whether it lies on its surface's outline, where the angles of
@@ -185,6 +214,57 @@ std::vector<std::array<uint32_t, 2>> Solver::Impl::standing_on(const std::vector
   return out;
 }
 
+namespace {
+
+// Extra vertices: points of other surfaces on an element's edge, which take the light of the
+// element's own surface there, linear along the edge: (1 - w) B(a) + w B(b).
+struct Lerp {
+  uint32_t a, b;
+  double w;
+};
+
+// The covered elements (`covered_leaf`, per element of the mesh) take a copy of each vertex on their loops
+// that shows the open side's light, at the same place with the covered side's light, and a copy of
+// each extra vertex between such vertices, interpolated between the copies. Light then steps at a
+// cover's outline, as it does across a gap's opening. `covered_light`: per vertex that shows the
+// open side's light, the covered side's (show_uncovered_light). `own` is the count of the
+// solver's own vertices; extra vertex own + i interpolates as lerp_from[i].
+void split_covered_side(const std::vector<char>& covered_leaf, const std::unordered_map<uint32_t, glm::dvec3>& covered_light,
+                        const std::vector<Lerp>& lerp_from, size_t own, Mesh& m) {
+  if (covered_light.empty()) return;
+  std::unordered_map<uint32_t, uint32_t> copy;
+  std::function<uint32_t(uint32_t)> covered_copy = [&](uint32_t v) -> uint32_t {
+    if (auto it = copy.find(v); it != copy.end()) return it->second;
+    glm::dvec3 b(0.0);
+    if (v < own) {
+      const auto it = covered_light.find(v);
+      if (it == covered_light.end()) return v;
+      b = it->second;
+    } else {
+      const Lerp& l = lerp_from[v - own];
+      const uint32_t a = covered_copy(l.a), c = covered_copy(l.b);
+      if (a == l.a && c == l.b) return v;
+      b = (1.0 - l.w) * m.radiosity[a] + l.w * m.radiosity[c];
+    }
+    const uint32_t out = static_cast<uint32_t>(m.positions.size());
+    const glm::dvec3 x = m.positions[v];
+    const uint8_t interpolated = m.interpolated[v];
+    m.positions.push_back(x);
+    m.radiosity.push_back(b);
+    m.interpolated.push_back(interpolated);
+    copy.emplace(v, out);
+    return out;
+  };
+  for (size_t i = 0; i < m.elements.size(); ++i) {
+    if (!covered_leaf[i]) continue;
+    Mesh::Element& el = m.elements[i];
+    for (uint32_t a = el.boundary_begin; a < el.boundary_end; ++a) m.boundary[a] = covered_copy(m.boundary[a]);
+    for (uint32_t k = 0; k < el.corner_count; ++k) el.corners[k] = covered_copy(el.corners[k]);
+  }
+}
+
+}  // namespace
+
 // See Solver::mesh: an element's gathered corners may differ from its shot radiosity by this
 // factor where the gather's budget left it unchecked for a split, by kCheckedMismatch where it
 // was checked.
@@ -219,12 +299,6 @@ Mesh Solver::mesh(bool ambient) const {
   };
   std::unordered_set<glm::dvec3, PosHash> positions(s.vpos.begin(), s.vpos.end());
   m.positions = s.vpos;
-  // Extra vertices: points of other surfaces on an element's edge, which take the light of the
-  // element's own surface there, linear along the edge: (1 - w) B(a) + w B(b).
-  struct Lerp {
-    uint32_t a, b;
-    double w;
-  };
   std::vector<Lerp> lerp_from;                   // per extra vertex, in the order made
   std::unordered_map<uint64_t, uint32_t> extra;  // edge key -> extra vertex
 
@@ -494,7 +568,7 @@ Mesh Solver::mesh(bool ambient) const {
     fixed[v] = weight_open[v] != weight[v] || (gathered(static_cast<uint32_t>(v)) && !keep_mean[v]);
   }
   s.extrapolate_to_outline(leaves, fixed, m);
-  s.show_uncovered_light(leaves, m);
+  const Impl::CoveredSide covered_side = s.show_uncovered_light(leaves, m);
   // Extra vertices were created in order, each from an earlier vertex pair.
   for (size_t i = 0; i < lerp_from.size(); ++i) {
     const auto [a, b, w] = lerp_from[i];
@@ -502,6 +576,7 @@ Mesh Solver::mesh(bool ambient) const {
   }
   m.interpolated.assign(m.positions.size(), 0);
   std::fill(m.interpolated.begin() + static_cast<std::ptrdiff_t>(s.vpos.size()), m.interpolated.end(), 1);
+  split_covered_side(covered_side.leaf, covered_side.light, lerp_from, s.vpos.size(), m);
   return m;
 }
 

@@ -526,8 +526,13 @@ struct Solver::Impl {
   bool find_pools();
   bool near_emitter(uint32_t e) const;
   bool gap_covered(uint32_t p, const glm::dvec3& x, double radius) const;
-  // mesh_export.cpp: covered vertices show the light of their uncovered neighbours.
-  void show_uncovered_light(const std::vector<uint32_t>& leaves, Mesh& m) const;
+  // mesh_export.cpp: covered vertices show the light of their uncovered neighbours; the covered
+  // elements around a vertex that does so keep their own light there (CoveredSide).
+  struct CoveredSide {
+    std::vector<char> leaf;  // per element of the mesh: covered
+    std::unordered_map<uint32_t, glm::dvec3> light;  // vertex -> the covered elements' mean light
+  };
+  CoveredSide show_uncovered_light(const std::vector<uint32_t>& leaves, Mesh& m) const;
   std::vector<char> outline_vertices(const Mesh& m) const;
   void extrapolate_to_outline(const std::vector<uint32_t>& leaves, const std::vector<char>& fixed, Mesh& m) const;
   std::vector<std::array<uint32_t, 2>> standing_on(const std::vector<uint32_t>& leaves) const;
