@@ -944,12 +944,14 @@ TEST(Solver, VolumeClustersOfGlowingBoxesLightTheRoomAsTheirFacesAlone) {
     add_box(scene, lo, hi, rho, e, 2);
   }
   ASSERT_EQ(validate(scene), "");
-  Solver volume(scene, {});
+  Params params;
+  params.resolution = 50;  // the shares of light do not depend on it; the time does
+  Solver volume(scene, params);
   ASSERT_TRUE(volume.run().converged);
-  Params by_orientation;
+  Params by_orientation = params;
   by_orientation.cluster_volume = false;
   const Solver oriented(scene, by_orientation);
-  Params alone_params;
+  Params alone_params = params;
   alone_params.cluster_size = 0.0;
   Solver alone(scene, alone_params);
   ASSERT_TRUE(alone.run().converged);
@@ -977,9 +979,11 @@ TEST(Solver, VolumeClustersOfGlowingBoxesLightTheRoomAsTheirFacesAlone) {
 TEST(Solver, ClustersOfASphereRestingOnAFloorLightItAsItsFacetsAlone) {
   const Scene scene = make_sphere_room(12, 24);
   ASSERT_EQ(validate(scene), "");
-  Solver clustered(scene, {});
+  Params params;
+  params.resolution = 50;  // the shares of light do not depend on it; the time does
+  Solver clustered(scene, params);
   ASSERT_TRUE(clustered.run().converged);
-  Params alone_params;
+  Params alone_params = params;
   alone_params.cluster_size = 0.0;
   Solver alone(scene, alone_params);
   ASSERT_TRUE(alone.run().converged);
@@ -1023,10 +1027,11 @@ TEST(Solver, CurvedSurfacesClusterByOrientationAndLightAsTheirFacetsAlone) {
       add_quad(scene, rim(k, r), rim(k, r + 1), rim(k + 1, r + 1), rim(k + 1, r), V(0.5), none, 6);
   const uint32_t curved = static_cast<uint32_t>(scene.patches.size()) - patches_before;
   ASSERT_EQ(validate(scene), "");
-  const Params params;  // clusters up to 0.15 of the room's diagonal (1.06 m)
+  Params params;  // clusters up to 0.15 of the room's diagonal (1.06 m)
+  params.resolution = 50;  // the shares of light do not depend on it; the time does
   Solver clustered(scene, params);
   ASSERT_TRUE(clustered.run().converged);
-  Params alone_params;
+  Params alone_params = params;
   alone_params.cluster_size = 0.0;
   Solver alone(scene, alone_params);
   ASSERT_TRUE(alone.run().converged);
