@@ -259,6 +259,24 @@ double grey_mean_reference(const std::vector<SurfacePoint>& points) {
 // split at the settings of the tests below, as in a cluttered room; 4 m: one quad each, as exporters
 // write a room), four lamps 1 cm under its ceiling, and a cabinet (a box without a bottom,
 // 1.2 x 1.9 x 0.5 m) standing 5 cm in front of the wall at z = 2.
+// `count` points on patch `patch` (facing `normal`), uniform over the parallelogram at `corner`
+// spanned by `a` and `b`, seeded.
+std::vector<SurfacePoint> points_on(uint32_t patch, const dvec3& corner, const dvec3& a, const dvec3& b, const dvec3& normal,
+                                    int count, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  std::vector<SurfacePoint> out;
+  for (int i = 0; i < count; ++i) {
+    SurfacePoint p;
+    p.patch = patch;
+    const double u = uni(rng), v = uni(rng);
+    p.position = corner + u * a + v * b;
+    p.normal = normal;
+    out.push_back(p);
+  }
+  return out;
+}
+
 Scene room_with_cabinet(double tile = 0.25) {
   Scene s;
   auto grid = [&](dvec3 o, dvec3 u, dvec3 v, const dvec3& rho, uint32_t m, double cell) {
@@ -360,16 +378,9 @@ TEST(CoverNearSurface, FloorAtTheFootOfABottomlessCabinetIsLitToItsOutline) {
   uint32_t floor_patch = 0;
   for (uint32_t i = 0; i < scene.patches.size(); ++i)
     if (scene.patches[i].corners[0].y == 0.0 && scene.patches[i].corners[2].y == 0.0 && scene.patches[i].reflectance.x == 0.7) floor_patch = i;
-  std::mt19937_64 rng(13);
-  std::uniform_real_distribution<double> uni(0.0, 1.0);
-  std::vector<SurfacePoint> front;
-  for (int i = 0; i < 60; ++i) {
-    SurfacePoint p;
-    p.patch = floor_patch;
-    p.position = dvec3(-0.55 + uni(rng) * 1.1, 0.0, 1.42 + uni(rng) * 0.025);  // the cabinet's front is at z = 1.45
-    p.normal = dvec3(0.0, 1.0, 0.0);
-    front.push_back(p);
-  }
+  // 0.5 to 3 cm in front of the cabinet's front (z = 1.45)
+  std::vector<SurfacePoint> front = points_on(floor_patch, dvec3(-0.55, 0.0, 1.42), dvec3(1.1, 0.0, 0.0), dvec3(0.0, 0.0, 0.025),
+                                              dvec3(0.0, 1.0, 0.0), 60, 13);
   ReferenceOptions options;
   trace_reference(scene, front, options);
   glm::dvec3 shown(0.0);
@@ -394,20 +405,13 @@ std::pair<double, double> error_at(const Scene& scene, const solver::Mesh& mesh,
 TEST(CoverNearSurface, CabinetBackFiveCentimetresFromAWholeWallStaysDark) {
   const Scene scene = room_with_cabinet(4.0);
   const solver::Mesh mesh = solve(scene);
-  std::mt19937_64 rng(17);
-  std::uniform_real_distribution<double> uni(0.0, 1.0);
   uint32_t back = solver::kNone;  // the cabinet's back, at z = 1.95 facing the wall
   for (uint32_t i = 0; i < scene.patches.size(); ++i)
     if (scene.patches[i].corners[0].z == 1.95 && scene.patches[i].corners[2].z == 1.95) back = i;
   ASSERT_NE(back, solver::kNone);
-  std::vector<SurfacePoint> points;
-  for (int i = 0; i < 40; ++i) {
-    SurfacePoint p;
-    p.patch = back;
-    p.position = dvec3(-0.45 + uni(rng) * 0.9, 0.1 + uni(rng) * 1.6, 1.95);  // 15 cm and more inside the outline
-    p.normal = dvec3(0.0, 0.0, 1.0);
-    points.push_back(p);
-  }
+  // 15 cm and more inside the outline
+  std::vector<SurfacePoint> points = points_on(back, dvec3(-0.45, 0.1, 1.95), dvec3(0.9, 0.0, 0.0), dvec3(0.0, 1.6, 0.0),
+                                               dvec3(0.0, 0.0, 1.0), 40, 17);
   ReferenceOptions options;
   options.points = 200;
   const auto room_points = reference_points(scene, options);
@@ -464,16 +468,9 @@ TEST(CoverNearSurface, WallInTheStudysSlotBehindItsBookshelfStaysDark) {
   ASSERT_NE(wall, solver::kNone);
   solver::Mesh baked;
   ASSERT_NO_FATAL_FAILURE(bake_written_and_read_back(*r.document, protocol::JobSpec{}, "study-default.glb", baked));
-  std::mt19937_64 rng(23);
-  std::uniform_real_distribution<double> uni(0.0, 1.0);
-  std::vector<SurfacePoint> points;
-  for (int i = 0; i < 40; ++i) {
-    SurfacePoint p;
-    p.patch = wall;
-    p.position = dvec3(0.65 + uni(rng) * 1.3, 0.1 + uni(rng) * 1.7, -4.0);  // the slot: x 0.43 to 2.17, up to 2 m
-    p.normal = dvec3(0.0, 0.0, 1.0);
-    points.push_back(p);
-  }
+  // The slot runs over x 0.43 to 2.17, up to 2 m.
+  std::vector<SurfacePoint> points = points_on(wall, dvec3(0.65, 0.1, -4.0), dvec3(1.3, 0.0, 0.0), dvec3(0.0, 1.7, 0.0),
+                                               dvec3(0.0, 0.0, 1.0), 40, 23);
   ReferenceOptions options;
   options.points = 200;
   const double room_mean = grey_mean_reference(reference_points(scene, options));
@@ -481,7 +478,7 @@ TEST(CoverNearSurface, WallInTheStudysSlotBehindItsBookshelfStaysDark) {
   std::printf("study's wall in the slot behind the bookshelf: reference %.3f, mean error %.3f (room mean %.3f)\n", reference,
               error, room_mean);
   EXPECT_LT(reference, 0.01 * room_mean);  // the slot is dark
-  EXPECT_LT(error, 0.03 * room_mean);
+  EXPECT_LT(error, 0.02 * room_mean);  // 1.2 of 161; before the two fixes, 5.6
 }
 
 // A wall of stacked boxes (a lower box, a narrower one above it pressed on its top), lit by a lamp
