@@ -223,12 +223,12 @@ struct Lerp {
   double w;
 };
 
-// The covered elements (`covered_leaf`, per element of the mesh) take a copy of each vertex on their loops
-// that shows the open side's light, at the same place with the covered side's light, and a copy of
-// each extra vertex between such vertices, interpolated between the copies. Light then steps at a
-// cover's outline, as it does across a gap's opening. `covered_light`: per vertex that shows the
-// open side's light, the covered side's (show_uncovered_light). `own` is the count of the
-// solver's own vertices; extra vertex own + i interpolates as lerp_from[i].
+// The covered elements (`covered_leaf`, per element of the mesh) take a copy of each vertex on
+// their loops that shows the open side's light, at the same place with the covered side's light,
+// and a copy of each extra vertex between such vertices, interpolated between the copies. Light
+// then steps at a cover's outline, as it does across a gap's opening. `covered_light`: per vertex
+// that shows the open side's light, the covered side's (show_uncovered_light). `own` is the count
+// of the solver's own vertices; extra vertex own + i interpolates as lerp_from[i].
 void split_covered_side(const std::vector<char>& covered_leaf, const std::unordered_map<uint32_t, glm::dvec3>& covered_light,
                         const std::vector<Lerp>& lerp_from, size_t own, Mesh& m) {
   if (covered_light.empty()) return;
