@@ -102,7 +102,7 @@ inline constexpr const char* kOpenApi = R"json({
     "/v1/jobs/{id}/preview": {
       "parameters": [{"$ref": "#/components/parameters/id"}],
       "get": {"summary": "The current, unconverged state of a running job as GLB (with the ambient term), made between two shots",
-        "responses": {"200": {"description": "A preview", "content": {"model/gltf-binary": {"schema": {"type": "string", "format": "binary"}}}},
+        "responses": {"200": {"description": "A preview; Server-Timing write;dur= says how many milliseconds the worker took to write it", "content": {"model/gltf-binary": {"schema": {"type": "string", "format": "binary"}}}},
                       "404": {"description": "No such job"}, "409": {"description": "The job is not running"},
                       "503": {"$ref": "#/components/responses/StoreUnavailable"}}}
     },

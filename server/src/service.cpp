@@ -1121,6 +1121,7 @@ bool Service::take_preview_request(const std::string& id) {
   auto it = active_.find(id);
   if (it == active_.end() || !it->second.preview_wanted) return false;
   it->second.preview_wanted = false;
+  it->second.preview_taken = std::chrono::steady_clock::now();
   return true;
 }
 
@@ -1129,10 +1130,12 @@ bool Service::take_preview_request(const std::string& id) {
 void Service::give_preview(const std::string& id, const std::vector<uint8_t>& glb, const std::string& failure) {
   std::vector<PreviewWait> waits;
   bool remote = false;
+  std::chrono::steady_clock::duration writing{};
   {
     std::lock_guard lock(mutex_);
     auto it = active_.find(id);
     if (it == active_.end()) return;
+    writing = std::chrono::steady_clock::now() - it->second.preview_taken;
     waits = std::move(it->second.waits);
     it->second.waits.clear();
     it->second.preview_wanted = false;
@@ -1149,6 +1152,10 @@ void Service::give_preview(const std::string& id, const std::vector<uint8_t>& gl
     r.body.assign(glb.begin(), glb.end());
     r.content_type = "model/gltf-binary";
     r.headers.emplace_back("Cache-Control", "no-store");
+    // What the preview cost the worker, apart from the wait for its shot: a page paces its
+    // requests by it.
+    const double ms = std::chrono::duration<double, std::milli>(writing).count();
+    r.headers.emplace_back("Server-Timing", "write;dur=" + std::to_string(std::lround(ms)));
   }
   for (auto& w : waits) w.reply(r);
 }

@@ -270,10 +270,19 @@ TEST(Server, PreviewOfARunningJob) {
   const std::string id = posted.js()["id"];
   for (int i = 0; i < 100 && request(server.port(), http::verb::get, "/v1/jobs/" + id).js()["state"] != "running"; ++i)
     std::this_thread::sleep_for(20ms);
+  const auto asked = std::chrono::steady_clock::now();
   const Reply preview = request(server.port(), http::verb::get, "/v1/jobs/" + id + "/preview");
+  const double round_trip_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - asked).count();
   ASSERT_EQ(preview.status, 200) << preview.body;
   EXPECT_EQ(preview.headers.at("content-type"), "model/gltf-binary");
   EXPECT_EQ(preview.body.substr(0, 4), "glTF");
+  // The worker's writing time, which a page paces its requests by: part of the request's time.
+  ASSERT_TRUE(preview.headers.count("server-timing"));
+  const std::string timing = preview.headers.at("server-timing");
+  ASSERT_EQ(timing.rfind("write;dur=", 0), 0u) << timing;
+  const double write_ms = std::stod(timing.substr(10));
+  EXPECT_GE(write_ms, 0.0);
+  EXPECT_LE(write_ms, round_trip_ms + 1.0) << timing;
   request(server.port(), http::verb::delete_, "/v1/jobs/" + id);
   EXPECT_EQ(wait_finished(server.port(), id)["state"], "cancelled");
   EXPECT_EQ(request(server.port(), http::verb::get, "/v1/jobs/" + id + "/preview").status, 409);

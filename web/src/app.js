@@ -494,7 +494,7 @@ async function previewLoop(current) {
   const signal = current.controller.signal;
   while (job === current && !kFinal.has(current.state)) {
     const phase = current.progress?.phase;
-    const started = performance.now();
+    let cost = 0;
     if (!viewer) {
       $('view-caption').textContent = viewerFailed;
     } else if (current.state === 'running' && phase === 'shooting') {
@@ -511,11 +511,14 @@ async function previewLoop(current) {
           signal.removeEventListener('abort', stop);
           current.previewRequest = null;
         }
+        const received = performance.now();
         const buffer = await response.arrayBuffer();
         if (job !== current || kFinal.has(current.state)) return;
         current.preview = buffer;
         const shown = await viewer.show(buffer, current.id);
         if (job !== current) return;
+        // The wait for the worker's next shot costs nothing; writing, sending and drawing do.
+        cost = writeMilliseconds(response) + (performance.now() - received);
         const p = current.progress;
         $('view-caption').textContent = `Preview${p ? ` after ${p.shots} shot${p.shots === 1 ? '' : 's'}, ${formatFraction(p.unshot_fraction)} unshot` : ''}: ` +
           `${shown.triangles.toLocaleString('en')} triangles (not converged; the ambient term stands in for the unshot light)`;
@@ -532,8 +535,14 @@ async function previewLoop(current) {
       $('view-caption').textContent = phase ? `No preview in the ${phase} phase.` : 'Starting…';
     }
     // A large scene's preview takes a while to write, send and draw: then the page asks less often.
-    await sleep(Math.max(kPreviewSeconds * 1000, 2 * (performance.now() - started)), signal);
+    await sleep(Math.max(kPreviewSeconds * 1000, 2 * cost), signal);
   }
+}
+
+// The worker's time to write a preview, from the server's Server-Timing header (0 without one).
+function writeMilliseconds(response) {
+  const match = /(?:^|,)\s*write;dur=([\d.]+)/.exec(response.headers.get('Server-Timing') ?? '');
+  return match ? Number(match[1]) : 0;
 }
 
 async function loadResult(current) {

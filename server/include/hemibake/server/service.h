@@ -185,6 +185,7 @@ class Service {
     solver::CancelToken* token = nullptr;
     bool previews = true;  // false while no displayable solution exists (hr, reference tracing)
     bool preview_wanted = false;
+    std::chrono::steady_clock::time_point preview_taken;  // when the worker began writing one
     bool remote_wanted = false;  // another node asked (a shared store): the preview goes to the store
     std::vector<PreviewWait> waits;
   };
