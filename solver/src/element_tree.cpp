@@ -26,6 +26,7 @@ uint32_t Solver::Impl::add_element(uint32_t patch, uint32_t parent,
   e_patch.push_back(patch);
   HEMIBAKE_DCHECK(prep.occlusion_group[patch] < kCoveredBit);
   e_group.push_back(prep.occlusion_group[patch]);
+  e_cover.push_back(kNone);
   e_parent.push_back(parent);
   e_child.push_back(kNone);
   e_corner.push_back(corners);
@@ -39,7 +40,7 @@ uint32_t Solver::Impl::add_element(uint32_t patch, uint32_t parent,
   e_centre.push_back(centre);
   e_radius.push_back(radius);
   e_under.push_back(under_foot(id));
-  set_covered(id, covered_at_centre(id) != 0);
+  set_covered(id, cover_at_centre(id));
   e_b.push_back(b);
   e_unshot.push_back(unshot);
   f_begin.push_back(0);

@@ -402,11 +402,13 @@ glm::dvec3 Solver::Impl::gather_at(const GatherPoint& point, GatherWorker& w, ui
   // Fragments carry the node's place in the list.
   w.frags.clear();
   w.group_of.resize(w.list.size());
+  w.cover_of.resize(w.list.size());
   Corners poly{};
   for (uint32_t i = 0; i < w.list.size(); ++i) {
     const uint32_t el = w.list[i];
     const uint32_t p = e_patch[el];
     w.group_of[i] = e_group[el];
+    w.cover_of[i] = e_cover[el];
     const double facing = glm::dot(prep.normal[p], x - patches[p].corners[0]);
     const bool solid_seen_inside = prep.solid[p] != kNone && w.inside[prep.solid[p]];
     if (std::abs(facing) <= ahead || (facing < 0.0 && prep.back_hidden[p] && !solid_seen_inside)) continue;
@@ -414,7 +416,7 @@ glm::dvec3 Solver::Impl::gather_at(const GatherPoint& point, GatherWorker& w, ui
     corners_of(el, poly);
     project_side(w.cube, el, i, poly, facing, true, w.scratch, w.frags);
   }
-  detail::resolve(w.frags, w.cube.pixel_count(), params.method, w.group_of, covered_bit(), prep.adjacency,
+  detail::resolve(w.frags, w.cube.pixel_count(), params.method, w.group_of, covered_bit(), w.cover_of, prep.adjacency,
                   w.inline_pool, w.order, w.pixel_start);
   const auto& dff = w.cube.delta_form_factors();
   w.seen.assign(w.list.size(), 0.0);

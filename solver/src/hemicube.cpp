@@ -750,8 +750,9 @@ uint64_t tile_side(uint64_t side, const GroupAdjacency::Link& link) {
 class PixelResolver {
  public:
   PixelResolver(std::span<Fragment> fragments, std::span<const uint32_t> order,
-                std::span<const uint32_t> group_of, uint32_t covered_bit, const GroupAdjacency& adjacency)
-      : fragments_(fragments), order_(order), group_of_(group_of), covered_bit_(covered_bit),
+                std::span<const uint32_t> group_of, uint32_t covered_bit, std::span<const uint32_t> cover_of,
+                const GroupAdjacency& adjacency)
+      : fragments_(fragments), order_(order), group_of_(group_of), cover_of_(cover_of), covered_bit_(covered_bit),
         group_mask_(~covered_bit), adjacency_(adjacency) {
     thread_local std::vector<Slot> slots;
     thread_local uint32_t stamp = 0;
@@ -799,7 +800,8 @@ class PixelResolver {
   void order_standing();
   void sum_groups(uint32_t lo, uint32_t hi);
   bool merge_neighbours();
-  void order_layers(bool any_back);
+  void order_layers(bool any_back, uint32_t lo, uint32_t hi);
+  void order_covers(uint32_t lo, uint32_t hi);
   void share_pixel(bool any_back);
   uint32_t root(uint32_t i) {
     while (groups_[i].root != i) i = groups_[i].root = groups_[groups_[i].root].root;
@@ -820,10 +822,20 @@ class PixelResolver {
   bool covered(uint32_t element) const {
     return !(element & kBackFace) && (group_of_[element] & covered_bit_) != 0;
   }
+  // The surface id (as surface_of) of covered element's cover (cover_of), or kNoSurface.
+  static constexpr uint64_t kNoSurface = ~uint64_t{0};
+  uint64_t cover_surface(uint32_t element) const {
+    const uint32_t cover = cover_of_[element];
+    if (cover == kNone) return kNoSurface;
+    return (cover & kBackFaceCover) ? (uint64_t{1} << 32) | (cover & ~kBackFaceCover) : cover;
+  }
+  int cover_order(uint32_t lo, uint32_t hi, uint64_t g0, uint64_t g1) const;
+  bool covered_by_another(uint32_t lo, uint32_t hi, uint64_t surface) const;
 
   std::span<Fragment> fragments_;
   std::span<const uint32_t> order_;
   std::span<const uint32_t> group_of_;
+  std::span<const uint32_t> cover_of_;
   uint32_t covered_bit_, group_mask_;
   bool saw_covered_ = false;  // a rule's pass over this pixel met a covered fragment
   const GroupAdjacency& adjacency_;
@@ -846,6 +858,7 @@ class PixelResolver {
   std::vector<uint32_t> layers_;
   std::vector<uint32_t> rank_;  // per group root: its place in `layers_`
   std::vector<double> fold_cap_;  // per group root: the most a fold leaves it (share_pixel)
+  std::vector<float> behind_cover_;  // order_covers: per group root, the farthest cover's 1/depth
   std::vector<std::pair<uint32_t, uint32_t>> folds_;  // pairs of the pixel's groups folded one behind the other
   std::vector<std::pair<uint32_t, uint32_t>> tiles_;  // pairs of the pixel's groups side by side
   std::vector<uint64_t> fold_mask_;  // merge_neighbours: per root, the roots folded against it
@@ -964,6 +977,8 @@ bool PixelResolver::two_surfaces(uint32_t lo, uint32_t hi) {
     sum1 += f.area;
     depth_sum1 += static_cast<double>(f.area) * f.inv_depth;
   }
+  // A covered fragment's cover may lie behind its surface's mean depth (order_covers).
+  const int cover_first = saw_covered_ && g1 != g0 && !cover_of_.empty() ? cover_order(lo, hi, g0, g1) : 0;
   const float depth0 = mean_depth(depth_sum0, sum0), depth1 = mean_depth(depth_sum1, sum1);
   float trans0, trans1;
   const Meet how = g1 == g0 ? Meet::kTile : meet(g0, g1);
@@ -974,7 +989,10 @@ bool PixelResolver::two_surfaces(uint32_t lo, uint32_t hi) {
     // Nearest first; ties go to the lower id (a back face's is higher: front faces win). One
     // standing on the other goes by that (GroupAdjacency::add_standing).
     const int stand = how == Meet::kApart ? standing_order(g0, g1) : 0;
-    const bool first_near = stand != 0 ? stand < 0 : depth0 != depth1 ? depth0 > depth1 : g0 < g1;
+    const bool first_near = cover_first != 0 ? cover_first < 0
+                            : stand != 0     ? stand < 0
+                            : depth0 != depth1 ? depth0 > depth1
+                                               : g0 < g1;
     const double near_sum = first_near ? sum0 : sum1, far_sum = first_near ? sum1 : sum0;
     const float near_trans = static_cast<float>(near_sum > 1.0 ? 1.0 / near_sum : 1.0);
     double t = 1.0 - std::min(near_sum, 1.0);
@@ -1007,6 +1025,8 @@ bool PixelResolver::front_covers(uint32_t lo, uint32_t hi) {
       depth = f.inv_depth;
     }
   }
+  // order_covers may move it behind its fragments' cover.
+  if (saw_covered_ && !cover_of_.empty() && covered_by_another(lo, hi, front)) return false;
   // Its coverage and mean depth, summed in the order sum_groups sums them.
   double area = 0.0, depth_sum = 0.0;
   for (uint32_t k = lo; k < hi; ++k) {
@@ -1089,7 +1109,7 @@ void PixelResolver::open_share(uint32_t lo, uint32_t hi) {
 void PixelResolver::layers(uint32_t lo, uint32_t hi) {
   sum_groups(lo, hi);
   const bool any_fold = merge_neighbours();
-  order_layers(any_fold);
+  order_layers(any_fold, lo, hi);
   share_pixel(any_fold);
   for (uint32_t i = 0; i < groups_.size(); ++i) groups_[i].trans = groups_[root(i)].trans;
   for (uint32_t k = lo; k < hi; ++k) fragments_[order_[k]].trans = groups_[group_at_[k - lo]].trans;
@@ -1224,7 +1244,7 @@ bool PixelResolver::merge_neighbours() {
 
 // The merged groups' roots as layers, nearest first; ties go to the lower group id so the order is
 // deterministic.
-void PixelResolver::order_layers(bool any_fold) {
+void PixelResolver::order_layers(bool any_fold, uint32_t lo, uint32_t hi) {
   layers_.clear();
   for (uint32_t i = 0; i < groups_.size(); ++i) {
     const uint32_t r = root(i);
@@ -1237,6 +1257,7 @@ void PixelResolver::order_layers(bool any_fold) {
     }
   }
   if (adjacency_.any_standing()) order_standing();
+  if (saw_covered_ && !cover_of_.empty()) order_covers(lo, hi);
   std::sort(layers_.begin(), layers_.end(), [&](uint32_t a, uint32_t b) {
     if (groups_[a].inv_depth != groups_[b].inv_depth) return groups_[a].inv_depth > groups_[b].inv_depth;
     return groups_[a].group < groups_[b].group;
@@ -1277,6 +1298,65 @@ void PixelResolver::order_standing() {
   }
 }
 
+// A surface's fragments covered by a surface just in front of them (kCoverGap) lie behind that
+// cover, whatever the two surfaces' mean depths say: in a pixel on a rug's edge, 3 mm over a floor
+// and seen from across the room, the floor's mean is the pixel's centre and the rug's the centre of
+// its part, often farther. Put in front, the floor took the whole pixel, its elements under the
+// rug included (lit 15 where the path tracer has 0), and the rug none of it. So a surface goes just
+// behind the farthest of its covered fragments' covers in the pixel; open_share then gives its
+// share to its uncovered fragments. Only the cover itself: a surface that merely lies near in
+// depth (the far inner side of a box standing on a table, over the table's covered part) is none.
+// Of a pixel's two surfaces: 1 where g1 covers fragments of g0 (g1 goes first), -1 the other way
+// round, else 0.
+int PixelResolver::cover_order(uint32_t lo, uint32_t hi, uint64_t g0, uint64_t g1) const {
+  for (uint32_t k = lo; k < hi; ++k) {
+    const uint32_t e = fragments_[order_[k]].element;
+    if (!covered(e)) continue;
+    const uint64_t s = surface_of(e), c = cover_surface(e);
+    if (s == g0 && c == g1) return 1;
+    if (s == g1 && c == g0) return -1;
+  }
+  return 0;
+}
+
+// Whether a covered fragment of `surface` has its cover in the pixel.
+bool PixelResolver::covered_by_another(uint32_t lo, uint32_t hi, uint64_t surface) const {
+  uint64_t asked = kNoSurface;
+  for (uint32_t k = lo; k < hi; ++k) {
+    const uint32_t e = fragments_[order_[k]].element;
+    if (!covered(e) || surface_of(e) != surface) continue;
+    const uint64_t c = cover_surface(e);
+    if (c == kNoSurface || c == asked) continue;
+    asked = c;
+    for (uint32_t j = lo; j < hi; ++j)
+      if (surface_of(fragments_[order_[j]].element) == c) return true;
+  }
+  return false;
+}
+
+void PixelResolver::order_covers(uint32_t lo, uint32_t hi) {
+  constexpr float kNoCover = std::numeric_limits<float>::max();
+  behind_cover_.assign(groups_.size(), kNoCover);
+  uint64_t asked = kNoSurface;
+  int64_t at = -1;
+  for (uint32_t k = lo; k < hi; ++k) {
+    const Fragment& f = fragments_[order_[k]];
+    if (!covered(f.element)) continue;
+    const uint64_t cover = cover_surface(f.element);
+    if (cover == kNoSurface) continue;
+    if (cover != asked) {
+      asked = cover;
+      at = index_of(cover);
+    }
+    if (at < 0) continue;
+    const uint32_t s = root(group_at_[k - lo]), r = root(static_cast<uint32_t>(at));
+    if (r != s) behind_cover_[s] = std::min(behind_cover_[s], groups_[r].inv_depth);
+  }
+  for (uint32_t s : layers_)
+    if (behind_cover_[s] != kNoCover && groups_[s].inv_depth >= behind_cover_[s])
+      groups_[s].inv_depth = std::nextafter(behind_cover_[s], std::numeric_limits<float>::lowest());
+}
+
 // Each layer's transmission: what nearer layers left of the pixel (the paper's 1 - f_{k-1}).
 void PixelResolver::share_pixel(bool any_fold) {
   // A layer folded behind a nearer one that shares an edge with it (two_surfaces) shows only where
@@ -1304,8 +1384,9 @@ void PixelResolver::share_pixel(bool any_fold) {
 }  // namespace
 
 void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
-             std::span<const uint32_t> group_of, uint32_t covered_bit, const GroupAdjacency& adjacency,
-             ThreadPool& pool, std::vector<uint32_t>& order, std::vector<uint32_t>& pixel_start) {
+             std::span<const uint32_t> group_of, uint32_t covered_bit, std::span<const uint32_t> cover_of,
+             const GroupAdjacency& adjacency, ThreadPool& pool, std::vector<uint32_t>& order,
+             std::vector<uint32_t>& pixel_start) {
   // Counting sort of fragment indices by pixel (stable: ties keep projection order).
   pixel_start.assign(static_cast<size_t>(pixel_count) + 1, 0);
   for (const Fragment& f : fragments) ++pixel_start[f.pixel + 1];
@@ -1316,7 +1397,8 @@ void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
     for (uint32_t i = 0; i < fragments.size(); ++i) order[cursor[fragments[i].pixel]++] = i;
   }
   pool.parallel_for(pixel_count, [&](size_t begin, size_t end, size_t) {
-    PixelResolver pixel(fragments, order, group_of, covered_bit, adjacency);
+    PixelResolver pixel(fragments, order, group_of, covered_bit, covered_bit != 0 ? cover_of : std::span<const uint32_t>{},
+                        adjacency);
     for (size_t p = begin; p < end; ++p) {
       const uint32_t lo = pixel_start[p], hi = pixel_start[p + 1];
       if (lo == hi) continue;
@@ -1449,7 +1531,7 @@ std::vector<double> visible_shares(const detail::Hemicube& cube, const glm::dvec
   }
   detail::ThreadPool pool(1);
   std::vector<uint32_t> order, starts;
-  detail::resolve(frags, cube.pixel_count(), method, group_of, 0, adjacency, pool, order, starts);
+  detail::resolve(frags, cube.pixel_count(), method, group_of, 0, {}, adjacency, pool, order, starts);
   std::vector<double> ff(polygons.size(), 0.0);
   const auto& dff = cube.delta_form_factors();
   for (const auto& f : frags) ff[f.element] += static_cast<double>(f.area) * f.trans * dff[f.pixel];

@@ -36,6 +36,8 @@ static_assert(sizeof(Fragment) == 16);
 /// Its fragments form layers of their own (never merged with front-facing neighbours, whose
 /// projections do not tile with it) and lose depth ties to front faces.
 inline constexpr uint32_t kBackFace = 0x80000000u;
+/// In resolve()'s cover_of: the cover is seen from its back (a one-sided surface facing the element).
+inline constexpr uint32_t kBackFaceCover = 0x80000000u;
 /// A back face's 1/depth is scaled by this, so that a front face at the same depth (a surface
 /// lying on another's back) stays in front of it.
 inline constexpr float kBackDepthScale = 1.0f - 1e-5f;
@@ -246,9 +248,13 @@ class Hemicube {
 /// their surface too, apart from its front-facing fragments. With a `covered_bit` (0: none), that
 /// bit of `group_of[element]` marks elements with a surface on them or just in front of them (a
 /// box's bottom on a floor): where something nearer took part of a pixel, their surface's share of
-/// it goes to its fragments that are not covered. `order` and `pixel_start` are scratch.
+/// it goes to its fragments that are not covered. `cover_of[element]` (empty: none known) is the
+/// occlusion group of the surface that covers a covered element as seen from the element's side
+/// (with kBackFaceCover: that group's back faces), or kNone: where both are in a pixel, the
+/// covered element's surface lies behind it. `order` and `pixel_start` are scratch.
 void resolve(std::span<Fragment> fragments, uint32_t pixel_count, Method method,
-             std::span<const uint32_t> group_of, uint32_t covered_bit, const GroupAdjacency& adjacency,
-             ThreadPool& pool, std::vector<uint32_t>& order, std::vector<uint32_t>& pixel_start);
+             std::span<const uint32_t> group_of, uint32_t covered_bit, std::span<const uint32_t> cover_of,
+             const GroupAdjacency& adjacency, ThreadPool& pool, std::vector<uint32_t>& order,
+             std::vector<uint32_t>& pixel_start);
 
 }  // namespace hemibake::solver::detail

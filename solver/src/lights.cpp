@@ -243,8 +243,8 @@ void Solver::Impl::project_light_view(LightView& v, std::span<const uint32_t> el
     }
   });
   join_chunks(elements, v.begin, v.end, v.frags);
-  detail::resolve(v.frags, v.cube->pixel_count(), params.method, e_group, covered_bit(), prep.adjacency, pool, order,
-                  pixel_start);
+  detail::resolve(v.frags, v.cube->pixel_count(), params.method, e_group, covered_bit(), e_cover, prep.adjacency, pool,
+                  order, pixel_start);
   stats.peak_fragments = std::max<uint64_t>(stats.peak_fragments, v.frags.size());
 }
 

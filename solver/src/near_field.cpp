@@ -189,13 +189,19 @@ bool Solver::Impl::absorber_close(const Piece& piece) const {
 // the ceiling above it from the room as well as its front would). `by` chooses whether any surface
 // counts or only those that emit nothing.
 bool Solver::Impl::covered(uint32_t p, const glm::dvec3& x, double gap, bool any_facing, Cover by) const {
+  return cover_at(p, x, gap, any_facing, by) != kNone;
+}
+
+// covered(), naming the surface that covers x: the first patch found, or kNone.
+uint32_t Solver::Impl::cover_at(uint32_t p, const glm::dvec3& x, double gap, bool any_facing, Cover by) const {
   const glm::dvec3& n = prep.normal[p];
   const double eps = kCloseFacingLength * prep.diagonal;
   const double reach = std::max(eps, gap);
   auto near = [&](const glm::dvec3& lo, const glm::dvec3& hi) {
     return !glm::any(glm::lessThan(x, lo - reach)) && !glm::any(glm::greaterThan(x, hi + reach));
   };
-  return find_patch(near, [&](uint32_t q) {
+  uint32_t found = kNone;
+  find_patch(near, [&](uint32_t q) {
     const double facing = glm::dot(prep.normal[q], n);
     if (prep.twin[q] == p || q == p || (facing > -1.0 + 1e-9 && !(any_facing && facing >= 1.0 - 1e-9))) return false;
     if (by == Cover::kNonEmitters && channel_sum(patches[q].emission) > 0.0) return false;
@@ -208,8 +214,10 @@ bool Solver::Impl::covered(uint32_t p, const glm::dvec3& x, double gap, bool any
       const glm::dvec3& b = pq.corners[(k + 1) % pq.corner_count];
       if (glm::dot(glm::cross(b - a, x - a), prep.normal[q]) <= eps * glm::length(b - a)) return false;
     }
+    found = q;
     return true;
   });
+  return found;
 }
 
 // Whether point x of patch p, on a piece or element of this radius, is covered by a surface just

@@ -103,13 +103,24 @@ void Solver::Impl::find_standing() {
 
 // Whether a surface lies on element e or just in front of it, over its centre (gap_covered): 0
 // before the patch tree is built (mark_covered marks the first elements).
-uint8_t Solver::Impl::covered_at_centre(uint32_t e) const {
-  return !tree.empty() && gap_covered(e_patch[e], e_centre[e], e_radius[e]) ? 1 : 0;
+// The surface covering element e at its centre (gap_covered), or kNone.
+uint32_t Solver::Impl::cover_at_centre(uint32_t e) const {
+  if (tree.empty()) return kNone;
+  return cover_at(e_patch[e], e_centre[e], std::min(e_radius[e], kCoverGap * prep.diagonal), true, Cover::kAny);
+}
+
+// Cover patch q of a point on patch p, as the hemicubes on p's side see it: its occlusion group,
+// or its other side's when it faces p (a double-sided rug's underside over a floor: the rug's top
+// is what they see), or its back face's (detail::kBackFaceCover) when it has none.
+uint32_t Solver::Impl::seen_cover(uint32_t p, uint32_t q) const {
+  if (glm::dot(prep.normal[q], prep.normal[p]) > 0.0) return prep.occlusion_group[q];
+  if (prep.twin[q] != kNone) return prep.occlusion_group[prep.twin[q]];
+  return prep.occlusion_group[q] | detail::kBackFaceCover;
 }
 
 void Solver::Impl::mark_covered() {
   any_covered = false;
-  for (uint32_t e = 0; e < e_patch.size(); ++e) set_covered(e, covered_at_centre(e) != 0);
+  for (uint32_t e = 0; e < e_patch.size(); ++e) set_covered(e, cover_at_centre(e));
 }
 
 // The one-sided surface standing on element e's patch (find_standing) that e lies under: the

@@ -183,7 +183,7 @@ void Solver::Impl::project(std::span<const uint32_t> elements, std::span<const u
   for (uint32_t el : receivers) e_recv_slot[el] = 0;
   join_chunks(elements, f_begin, f_end, frags);
   for (uint32_t el : elements) HEMIBAKE_DCHECK(f_begin[el] <= f_end[el] && f_end[el] <= frags.size());
-  detail::resolve(frags, cube->pixel_count(), params.method, e_group, covered_bit(), prep.adjacency, pool, order,
+  detail::resolve(frags, cube->pixel_count(), params.method, e_group, covered_bit(), e_cover, prep.adjacency, pool, order,
                   pixel_start);
   stats.peak_fragments = std::max<uint64_t>(stats.peak_fragments, frags.size());
   stats.seconds_projecting += seconds_since(t0);

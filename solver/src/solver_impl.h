@@ -415,7 +415,7 @@ struct Solver::Impl {
   void build_patch_bvh();
   void find_standing();
   uint32_t under_foot(uint32_t e) const;
-  uint8_t covered_at_centre(uint32_t e) const;
+  uint32_t cover_at_centre(uint32_t e) const;
   void mark_covered();
   void build_patch_tree(uint32_t node, uint32_t begin, uint32_t end);
   void patches_meeting(const detail::Shaft& shaft, std::vector<uint32_t>& out);
@@ -505,6 +505,7 @@ struct Solver::Impl {
   enum class Cover : uint8_t { kAny, kNonEmitters };
   bool covered(uint32_t p, const glm::dvec3& x, double gap = 0.0, bool any_facing = false,
                Cover by = Cover::kAny) const;
+  uint32_t cover_at(uint32_t p, const glm::dvec3& x, double gap, bool any_facing, Cover by) const;
   void split_along_cover_outlines();
   bool contact_crosses(uint32_t e) const;
   void find_point_contacts();
@@ -644,13 +645,18 @@ struct Solver::Impl {
   // box's bottom on a floor, a wall box's end against another wall's face, a lamp hung 1 mm under a
   // ceiling, a rug over a floor), and whether any does. Where something nearer shares a pixel with
   // them, hemicubes give their share of it to their surface's uncovered elements (resolve).
-  // The flag is kept in e_group, as resolve() reads it.
+  // The flag is kept in e_group, as resolve() reads it. e_cover: the surface that covers it as
+  // hemicubes on its side see it (detail::resolve's cover_of), or kNone.
   static constexpr uint32_t kCoveredBit = 1u << 30;
   bool any_covered = false;
-  void set_covered(uint32_t e, bool is_covered) {
+  std::vector<uint32_t> e_cover;
+  void set_covered(uint32_t e, uint32_t cover_patch) {
+    const bool is_covered = cover_patch != kNone;
     e_group[e] = is_covered ? e_group[e] | kCoveredBit : e_group[e] & ~kCoveredBit;
+    e_cover[e] = is_covered ? seen_cover(e_patch[e], cover_patch) : kNone;
     any_covered = any_covered || is_covered;
   }
+  uint32_t seen_cover(uint32_t p, uint32_t cover_patch) const;
   uint32_t covered_bit() const { return any_covered ? kCoveredBit : 0u; }
   std::vector<std::array<uint32_t, 4>> e_corner;
   std::vector<double> e_area;
@@ -833,7 +839,7 @@ struct Solver::Impl::GatherWorker {
   detail::ThreadPool inline_pool;
   detail::ProjectScratch scratch;
   std::vector<Fragment> frags;
-  std::vector<uint32_t> list, stack, group_of, order, pixel_start;
+  std::vector<uint32_t> list, stack, group_of, cover_of, order, pixel_start;
   std::vector<uint8_t> inside;  // per solid: its box holds the point
   std::vector<double> seen, open;  // per listed node: visible and unoccluded share of the view
 };
